@@ -1,0 +1,3 @@
+//! imucal firmware core (work in progress).
+#![cfg_attr(not(test), no_std)]
+#![forbid(unsafe_code)]

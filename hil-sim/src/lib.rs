@@ -1,0 +1,2 @@
+//! Simulated imucal board (work in progress).
+#![forbid(unsafe_code)]

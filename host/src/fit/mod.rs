@@ -1,0 +1,156 @@
+//! Calibration fitting: one file per method, each citing its equations and source.
+//!
+//! Convention everywhere: a calibrated reading is `y = A·(x − b)`, with `x` in the units the
+//! data was read in and `y` in output units (m/s², rad/s, µT, or normalised to the reference
+//! magnitude). For the accelerometer and magnetometer the norm model `|A·(x − b)| = ref` does
+//! not determine a rotation of the output, so norm-model fits fix the gauge by taking `A`
+//! upper-triangular (9 unknowns); see `ARCHITECTURE.md`, "The fitting problems, precisely".
+
+use nalgebra::{DMatrix, Matrix3, Vector3};
+
+/// 3-vector of f64.
+pub type Vec3 = Vector3<f64>;
+/// 3×3 matrix of f64.
+pub type Mat3 = Matrix3<f64>;
+
+/// One static hold: statistics of the samples taken while the board was still.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pose {
+    /// Mean reading per axis, in the data's units.
+    pub mean: Vec3,
+    /// Within-pose variance per axis of the individual samples (not of the mean).
+    pub var: Vec3,
+    /// Number of samples averaged.
+    pub n: usize,
+    /// Label from the recording (`pose` column), if any.
+    pub label: Option<i64>,
+}
+
+impl Pose {
+    /// Variance of the pose mean per axis (`var / n`).
+    pub fn var_of_mean(&self) -> Vec3 {
+        self.var / (self.n.max(1) as f64)
+    }
+}
+
+/// A calibration of one sensor: `y = A·(x − b)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Calibration {
+    /// Scale, cross-axis and (for the magnetometer) soft-iron matrix.
+    pub a: Mat3,
+    /// Offset (bias / hard iron), in the data's units.
+    pub b: Vec3,
+}
+
+impl Calibration {
+    /// The identity calibration.
+    pub fn identity() -> Self {
+        Self { a: Mat3::identity(), b: Vec3::zeros() }
+    }
+
+    /// Apply the calibration to one reading.
+    pub fn apply(&self, x: &Vec3) -> Vec3 {
+        self.a * (x - self.b)
+    }
+}
+
+/// One-sigma uncertainties of a calibration's entries (zero where an entry is fixed by the gauge).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationStd {
+    /// Standard deviation of each entry of `A`.
+    pub a: Mat3,
+    /// Standard deviation of each entry of `b`.
+    pub b: Vec3,
+}
+
+/// The result of a fit.
+#[derive(Debug, Clone)]
+pub struct Fit {
+    /// Which method produced it.
+    pub method: Method,
+    /// The fitted parameters.
+    pub cal: Calibration,
+    /// Residual per pose or sample. Norm-model fits: `(|A(x−b)| − ref) / ref` (relative);
+    /// vector fits (six-position, gyro bias): the norm of the vector error, in output units
+    /// divided by `ref` where a reference exists.
+    pub residuals: Vec<f64>,
+    /// Root mean square of `residuals`.
+    pub rms: f64,
+    /// Leave-one-pose-out RMS (static-pose fits only): each pose predicted by a fit without it.
+    pub loo_rms: Option<f64>,
+    /// Parameter covariance from the Gauss–Newton normal matrix, with the noise taken from the
+    /// within-pose variance; order documented by `param_names`.
+    pub covariance: Option<DMatrix<f64>>,
+    /// Names of the parameters in `covariance` order (e.g. `"A11"`, `"b1"`).
+    pub param_names: Vec<String>,
+    /// One-sigma uncertainties mapped back onto `A` and `b`.
+    pub std: Option<CalibrationStd>,
+    /// Condition number of the (weighted) Jacobian or design matrix at the solution.
+    pub condition_number: f64,
+    /// Iterations used (0 for closed-form methods).
+    pub iterations: usize,
+    /// Reference magnitude the fit was normalised to (g, field strength, or 1).
+    pub reference: f64,
+}
+
+/// Every fitting method the library implements.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// Gyroscope bias by averaging still data (seed 000 eq. 9; seed 004).
+    GyroBias,
+    /// Min/max six-face bias and scale (seed 004).
+    MinMax,
+    /// Axis-aligned ellipsoid by linear least squares (seed 004).
+    AxisAligned,
+    /// Six-position linear least squares by SVD (seed 000 eq. 11–15).
+    SixPosition,
+    /// Chen et al.: six-position coarse model, then twelve-position iteration on the norm model (seed 003).
+    Chen,
+    /// General ellipsoid fit after Li & Griffiths with the `M^½` construction (seed 000 eq. 17–29).
+    Li,
+    /// Levenberg–Marquardt on the measurement residual `|A(x−b)| − ref` (the default).
+    Lm,
+    /// Plain Gauss–Newton in the manner of Frosio et al. (seed 000 Table 1–2).
+    Frosio,
+    /// Merayo's ellipsoid method (seed 000 Table 1–2).
+    Merayo,
+}
+
+impl Method {
+    /// Stable name used on the command line and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::GyroBias => "gyro-bias",
+            Method::MinMax => "minmax",
+            Method::AxisAligned => "axis-aligned",
+            Method::SixPosition => "six-position",
+            Method::Chen => "chen",
+            Method::Li => "li",
+            Method::Lm => "lm",
+            Method::Frosio => "frosio",
+            Method::Merayo => "merayo",
+        }
+    }
+}
+
+/// Why a fit was refused or failed. Every variant reads as a sentence a user can act on.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    /// The data cannot determine the parameters; the message says what is missing
+    /// (e.g. "no pose with −Z up", "all poses lie within 20° of a plane").
+    #[error("the data cannot determine the calibration: {0}")]
+    Underdetermined(String),
+    /// Input contained NaN or infinite values.
+    #[error("input contains a non-finite value ({0})")]
+    NonFinite(String),
+    /// An iterative method did not converge.
+    #[error("{method} did not converge after {iterations} iterations ({detail})")]
+    NotConverged {
+        /// Method name.
+        method: &'static str,
+        /// Iterations spent.
+        iterations: usize,
+        /// What went wrong.
+        detail: String,
+    },
+}
