@@ -1,0 +1,226 @@
+//! Typed errors: error replies carried on the wire ([`ErrorCode`]) and local errors of framing
+//! and batching.
+
+use core::fmt;
+
+use serde::{Deserialize, Serialize};
+
+/// Why a device rejected a calibration parameter set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum InvalidParamsReason {
+    /// A value is NaN or infinite.
+    NonFinite,
+    /// A matrix `A` is singular or its condition number exceeds the device's bound.
+    IllConditioned,
+    /// An offset `b` lies outside the sensor's full-scale range.
+    OffsetOutOfRange,
+    /// A matrix `A` scales readings implausibly far from 1.
+    GainOutOfRange,
+    /// A temperature, non-linearity or g-sensitivity term is implausibly large.
+    ExtendedTermOutOfRange,
+    /// The set's `format_version` is not understood by this firmware.
+    UnsupportedFormat,
+}
+
+impl InvalidParamsReason {
+    /// A sentence for the user: what is wrong and what to try.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Self::NonFinite => {
+                "the parameter set contains NaN or infinite values; refit the calibration from new data"
+            }
+            Self::IllConditioned => {
+                "a calibration matrix is singular or badly conditioned; check the fit (enough distinct poses?) and refit"
+            }
+            Self::OffsetOutOfRange => {
+                "an offset lies outside the sensor's range; check the units of the data used for the fit"
+            }
+            Self::GainOutOfRange => {
+                "a calibration matrix scales readings implausibly; check the units and reference magnitudes of the fit"
+            }
+            Self::ExtendedTermOutOfRange => {
+                "a temperature, non-linearity or g-sensitivity term is implausibly large; refit without that effect"
+            }
+            Self::UnsupportedFormat => {
+                "the firmware does not understand this parameter format version; update the firmware or the host tool"
+            }
+        }
+    }
+}
+
+/// An error reply from the device, in place of the expected response body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum ErrorCode {
+    /// The host's protocol major version differs from the device's.
+    VersionMismatch {
+        /// The device's protocol major version.
+        device_major: u16,
+        /// The device's protocol minor version.
+        device_minor: u16,
+    },
+    /// The request decoded far enough to read its sequence id, but its kind is unknown to this
+    /// firmware (sent by a host with a newer minor version).
+    UnknownRequest,
+    /// The request could not be decoded.
+    Malformed,
+    /// A request field is out of range (for example a decimation of zero).
+    InvalidArgument,
+    /// The device is busy with another operation (for example a pose capture).
+    Busy,
+    /// A sensor needed for the request is not fitted on this board.
+    SensorMissing,
+    /// The board did not stay still long enough within the timeout.
+    NotStill,
+    /// The operation did not finish within its timeout.
+    Timeout,
+    /// A sensor reading hit its full-scale limit during the capture.
+    Saturated,
+    /// The CRC sent with a parameter set or commit does not match the set.
+    CrcMismatch {
+        /// The CRC given in the request.
+        received: u32,
+        /// The CRC of the set as the device computed or holds it.
+        computed: u32,
+    },
+    /// A commit was requested but no parameter set is staged.
+    NothingStaged,
+    /// The parameter set failed validation.
+    InvalidParams(InvalidParamsReason),
+    /// Writing or erasing the parameter flash failed.
+    FlashError,
+}
+
+impl ErrorCode {
+    /// A sentence the host can print: the cause and what to try.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Self::VersionMismatch { .. } => {
+                "the device speaks a different protocol major version; update the firmware or the host tool so they match"
+            }
+            Self::UnknownRequest => {
+                "the firmware does not know this request; it is older than the host tool, so update the firmware"
+            }
+            Self::Malformed => {
+                "the device could not decode the request; check that nothing else is writing to the serial port"
+            }
+            Self::InvalidArgument => "a request argument is out of range; check the command's options",
+            Self::Busy => {
+                "the device is busy with another operation; wait for it to finish or stop the stream, then retry"
+            }
+            Self::SensorMissing => "the board has no such sensor; leave that sensor out of the command",
+            Self::NotStill => {
+                "the board was not held still long enough; rest it on a firm surface and retry"
+            }
+            Self::Timeout => "the operation timed out; retry, or allow a longer timeout",
+            Self::Saturated => {
+                "a sensor reached its full-scale limit; move more gently or away from magnets, then retry"
+            }
+            Self::CrcMismatch { .. } => {
+                "the parameter set arrived damaged or changed; write it again"
+            }
+            Self::NothingStaged => "no parameter set is staged; write the parameters before committing",
+            Self::InvalidParams(reason) => reason.describe(),
+            Self::FlashError => {
+                "writing the parameter flash failed; retry, and if it persists the flash may be worn or faulty"
+            }
+        }
+    }
+}
+
+impl fmt::Display for ErrorCode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::VersionMismatch {
+                device_major,
+                device_minor,
+            } => write!(
+                f,
+                "device protocol {device_major}.{device_minor}: {}",
+                self.describe()
+            ),
+            Self::CrcMismatch { received, computed } => write!(
+                f,
+                "CRC {received:#010x} sent, {computed:#010x} computed: {}",
+                self.describe()
+            ),
+            _ => f.write_str(self.describe()),
+        }
+    }
+}
+
+impl core::error::Error for ErrorCode {}
+
+/// Why a received frame was dropped. The decoder resynchronises at the next delimiter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FrameError {
+    /// The frame was longer than the decoder's buffer (or a delimiter was lost).
+    Overflow,
+    /// The COBS encoding is invalid.
+    Cobs,
+    /// The frame is too short to hold a CRC.
+    TooShort,
+    /// The CRC does not match the payload.
+    Crc,
+    /// The payload is not a valid postcard encoding of the expected type.
+    Decode,
+}
+
+impl fmt::Display for FrameError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Overflow => "frame longer than the receive buffer",
+            Self::Cobs => "invalid COBS encoding",
+            Self::TooShort => "frame shorter than its CRC",
+            Self::Crc => "CRC mismatch",
+            Self::Decode => "payload does not decode as the expected message",
+        })
+    }
+}
+
+impl core::error::Error for FrameError {}
+
+/// Why a message could not be encoded into a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EncodeError {
+    /// The output buffer is too small for the encoded frame.
+    BufferFull,
+    /// The message cannot be serialised (a length is not known in advance, for example).
+    Serialize,
+}
+
+impl fmt::Display for EncodeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::BufferFull => "output buffer too small for the frame",
+            Self::Serialize => "message cannot be serialised",
+        })
+    }
+}
+
+impl core::error::Error for EncodeError {}
+
+/// Why a sample could not be added to a batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BatchError {
+    /// The batch holds its maximum number of samples.
+    Full,
+    /// The batch's tick is zero, so no time offset can be expressed.
+    ZeroTick,
+    /// The sample's time is before the batch's start time.
+    BeforeStart,
+    /// The sample's time is more than `u16::MAX` ticks after the batch's start time.
+    SpanExceeded,
+}
+
+impl fmt::Display for BatchError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Full => "batch is full",
+            Self::ZeroTick => "batch tick is zero",
+            Self::BeforeStart => "sample time before batch start",
+            Self::SpanExceeded => "sample time too far after batch start",
+        })
+    }
+}
+
+impl core::error::Error for BatchError {}

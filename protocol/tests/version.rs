@@ -1,0 +1,133 @@
+//! The Hello/Welcome version rule, as applied by both ends.
+
+mod common;
+
+use common::*;
+use imucal_protocol::*;
+
+fn v(major: u16, minor: u16) -> ProtocolVersion {
+    ProtocolVersion { major, minor }
+}
+
+#[test]
+fn equal_majors_are_compatible_and_use_the_smaller_minor() {
+    assert_eq!(check_hello(v(1, 3), v(1, 5)), Ok(v(1, 3)));
+    assert_eq!(check_hello(v(1, 5), v(1, 3)), Ok(v(1, 3)));
+    assert_eq!(
+        check_hello(PROTOCOL_VERSION, PROTOCOL_VERSION),
+        Ok(PROTOCOL_VERSION)
+    );
+}
+
+#[test]
+fn different_majors_fail_with_the_device_version_either_way() {
+    let expected = Err(ErrorCode::VersionMismatch {
+        device_major: 2,
+        device_minor: 7,
+    });
+    assert_eq!(check_hello(v(2, 7), v(1, 0)), expected);
+    assert_eq!(check_hello(v(2, 7), v(3, 0)), expected);
+}
+
+#[test]
+fn hello_constructor_carries_this_crate_version() {
+    assert_eq!(
+        RequestBody::hello(),
+        RequestBody::Hello {
+            protocol_major: PROTOCOL_MAJOR,
+            protocol_minor: PROTOCOL_MINOR,
+        }
+    );
+}
+
+/// A device's Hello handling written against the public API: decode, check, reply.
+fn device_answer(request_frame: &[u8], device: ProtocolVersion) -> Vec<u8> {
+    let mut decoder: FrameDecoder = FrameDecoder::new();
+    let mut replies = Vec::new();
+    decoder.feed::<HostMessage>(request_frame, |msg| {
+        let Ok(Request {
+            seq,
+            body:
+                RequestBody::Hello {
+                    protocol_major,
+                    protocol_minor,
+                },
+        }) = msg
+        else {
+            panic!("expected a Hello, got {msg:?}");
+        };
+        let body = match check_hello(device, v(protocol_major, protocol_minor)) {
+            Ok(_) => ResponseBody::Pong(0),
+            Err(e) => ResponseBody::Error(e),
+        };
+        replies.extend(frame(&DeviceMessage::Response(Response { seq, body })));
+    });
+    replies
+}
+
+#[test]
+fn device_answers_hello_of_another_major_with_version_mismatch_echoing_seq() {
+    let hello = frame(&Request {
+        seq: 9,
+        body: RequestBody::Hello {
+            protocol_major: PROTOCOL_MAJOR + 1,
+            protocol_minor: 0,
+        },
+    });
+    let reply = decode_all::<DeviceMessage>(&device_answer(&hello, PROTOCOL_VERSION));
+    let expected = DeviceMessage::Response(Response {
+        seq: 9,
+        body: ResponseBody::Error(ErrorCode::VersionMismatch {
+            device_major: PROTOCOL_MAJOR,
+            device_minor: PROTOCOL_MINOR,
+        }),
+    });
+    assert_eq!(reply, vec![Ok(expected)]);
+}
+
+#[test]
+fn host_detects_incompatible_welcome() {
+    let welcome_version = v(PROTOCOL_MAJOR + 1, 2);
+    let err = check_hello(welcome_version, PROTOCOL_VERSION).unwrap_err();
+    assert!(err
+        .to_string()
+        .contains(&format!("{}.2", PROTOCOL_MAJOR + 1)));
+    assert!(err.describe().contains("update"));
+}
+
+#[test]
+fn every_error_code_has_a_distinct_actionable_description() {
+    let codes = [
+        ErrorCode::VersionMismatch {
+            device_major: 1,
+            device_minor: 0,
+        },
+        ErrorCode::UnknownRequest,
+        ErrorCode::Malformed,
+        ErrorCode::InvalidArgument,
+        ErrorCode::Busy,
+        ErrorCode::SensorMissing,
+        ErrorCode::NotStill,
+        ErrorCode::Timeout,
+        ErrorCode::Saturated,
+        ErrorCode::CrcMismatch {
+            received: 1,
+            computed: 2,
+        },
+        ErrorCode::NothingStaged,
+        ErrorCode::InvalidParams(InvalidParamsReason::NonFinite),
+        ErrorCode::InvalidParams(InvalidParamsReason::IllConditioned),
+        ErrorCode::InvalidParams(InvalidParamsReason::OffsetOutOfRange),
+        ErrorCode::InvalidParams(InvalidParamsReason::GainOutOfRange),
+        ErrorCode::InvalidParams(InvalidParamsReason::ExtendedTermOutOfRange),
+        ErrorCode::InvalidParams(InvalidParamsReason::UnsupportedFormat),
+        ErrorCode::FlashError,
+    ];
+    let descriptions: std::collections::HashSet<_> = codes.iter().map(|c| c.describe()).collect();
+    assert_eq!(descriptions.len(), codes.len());
+    for d in descriptions {
+        // Each sentence names a cause and, after a separator, what to do.
+        assert!(d.contains(';') || d.contains(','), "no remedy in: {d}");
+        assert!(d.len() > 30, "too terse: {d}");
+    }
+}
