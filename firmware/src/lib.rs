@@ -1,5 +1,16 @@
-//! imucal firmware core (work in progress).
+//! imucal firmware core: sampling, stillness detection, pose capture, applying the calibration,
+//! the parameter store and the protocol dispatch of an IMU board, independent of any chip or MCU.
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod apply;
+pub mod device;
 pub mod imu;
+mod log;
+pub mod lsm9ds1;
+mod math;
+pub mod pose;
+pub mod ram_flash;
+pub mod stillness;
+pub mod store;
+pub mod validate;
