@@ -1,0 +1,325 @@
+//! Schedules a person following the calibration prompts would produce.
+//!
+//! - `twelve`: the twelve positions of seed 003 (Chen et al. 2012, §2.2): the six faces up, then
+//!   the XY, YZ and XZ planes at 45° and 135° to the horizontal; each held for a few seconds.
+//! - `tumble`: a slow turn through all directions for the magnetometer; the field direction in
+//!   the body frame follows a spiral from pole to pole (Rakhmanov, Saff & Zhou 1994 spacing), so
+//!   it covers the sphere.
+//! - `sweep`: the twelve positions repeated while the temperature goes up and down.
+//!
+//! People are imprecise: every hold is placed a few degrees off its nominal attitude and at a
+//! random heading, and may carry hand tremor (a slow sway near 0.3 Hz of a few tenths of a degree
+//! and physiological tremor near 10 Hz of a few thousandths of a degree). Everything is drawn
+//! from the seed, so a schedule is reproducible.
+
+use std::f64::consts::PI;
+
+use nalgebra::{Unit, UnitQuaternion, Vector3};
+use rand::Rng;
+use rand_chacha::rand_core::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{require_non_negative, require_positive, SimError};
+use crate::world::{
+    EarthField, TemperatureProfile, Trajectory, TrajectoryBuilder, Tremor, TremorComponent,
+};
+
+/// Which schedule to produce.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScheduleKind {
+    /// Twelve static positions.
+    Twelve,
+    /// Slow tumble through all directions.
+    Tumble,
+    /// Twelve positions repeated over a temperature cycle.
+    Sweep,
+}
+
+impl std::str::FromStr for ScheduleKind {
+    type Err = SimError;
+
+    fn from_str(s: &str) -> Result<Self, SimError> {
+        match s {
+            "twelve" => Ok(ScheduleKind::Twelve),
+            "tumble" => Ok(ScheduleKind::Tumble),
+            "sweep" => Ok(ScheduleKind::Sweep),
+            other => Err(SimError::UnknownSchedule(other.to_string())),
+        }
+    }
+}
+
+impl ScheduleKind {
+    /// Name as used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            ScheduleKind::Twelve => "twelve",
+            ScheduleKind::Tumble => "tumble",
+            ScheduleKind::Sweep => "sweep",
+        }
+    }
+}
+
+/// How the person moves.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoserOptions {
+    /// Length of each static hold, s.
+    pub hold_s: f64,
+    /// Whether holds carry hand tremor.
+    pub tremor: bool,
+    /// Largest deviation of a hold from its nominal attitude, degrees.
+    pub placement_error_deg: f64,
+    /// Largest change of heading between holds, degrees (either way).
+    pub heading_spread_deg: f64,
+    /// Peak turning rate between holds, °/s.
+    pub turn_peak_rate_dps: f64,
+    /// Peak turning rate while tumbling, °/s.
+    pub tumble_peak_rate_dps: f64,
+    /// Number of spiral waypoints of the tumble.
+    pub tumble_waypoints: usize,
+    /// Temperature of the twelve-position and tumble schedules, °C.
+    pub ambient_c: f64,
+    /// How many times the sweep repeats the twelve positions.
+    pub sweep_repeats: usize,
+    /// Number of full temperature cycles of the sweep.
+    pub sweep_cycles: usize,
+    /// Lowest temperature of the sweep, °C.
+    pub sweep_low_c: f64,
+    /// Highest temperature of the sweep, °C.
+    pub sweep_high_c: f64,
+}
+
+impl Default for PoserOptions {
+    fn default() -> Self {
+        Self {
+            hold_s: 4.0,
+            tremor: true,
+            placement_error_deg: 3.0,
+            heading_spread_deg: 30.0,
+            turn_peak_rate_dps: 150.0,
+            tumble_peak_rate_dps: 60.0,
+            tumble_waypoints: 48,
+            ambient_c: 25.0,
+            sweep_repeats: 6,
+            sweep_cycles: 2,
+            sweep_low_c: 5.0,
+            sweep_high_c: 45.0,
+        }
+    }
+}
+
+impl PoserOptions {
+    fn validate(&self) -> Result<(), SimError> {
+        require_positive("hold duration (s)", self.hold_s)?;
+        require_non_negative("placement error (degrees)", self.placement_error_deg)?;
+        require_non_negative("heading spread (degrees)", self.heading_spread_deg)?;
+        require_positive("turn peak rate (°/s)", self.turn_peak_rate_dps)?;
+        require_positive("tumble peak rate (°/s)", self.tumble_peak_rate_dps)?;
+        require_positive("tumble waypoints", self.tumble_waypoints as f64)?;
+        require_positive("sweep repeats", self.sweep_repeats as f64)?;
+        require_positive("sweep cycles", self.sweep_cycles as f64)?;
+        crate::error::require_finite("ambient temperature (°C)", self.ambient_c)?;
+        crate::error::require_finite("sweep low temperature (°C)", self.sweep_low_c)?;
+        crate::error::require_finite("sweep high temperature (°C)", self.sweep_high_c)?;
+        Ok(())
+    }
+}
+
+/// A motion and the temperature it happens at.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Schedule {
+    /// Which schedule this is.
+    pub kind: ScheduleKind,
+    /// The board's motion.
+    pub trajectory: Trajectory,
+    /// Die temperature over time.
+    pub temperature: TemperatureProfile,
+}
+
+/// The body-frame direction that points up in each of the twelve positions of seed 003: the six
+/// faces (+Z, −Z, +X, −X, +Y, −Y up), then the XY, YZ and XZ planes at 45° and 135°.
+pub fn twelve_position_up_directions() -> [Vector3<f64>; 12] {
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    [
+        Vector3::new(0.0, 0.0, 1.0),
+        Vector3::new(0.0, 0.0, -1.0),
+        Vector3::new(1.0, 0.0, 0.0),
+        Vector3::new(-1.0, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        Vector3::new(0.0, -1.0, 0.0),
+        Vector3::new(h, h, 0.0),
+        Vector3::new(-h, h, 0.0),
+        Vector3::new(0.0, h, h),
+        Vector3::new(0.0, -h, h),
+        Vector3::new(h, 0.0, h),
+        Vector3::new(-h, 0.0, h),
+    ]
+}
+
+/// Orientation (body to world) that puts body direction `up` along world +Z, then turns it by
+/// `heading` about the vertical.
+pub fn orientation_with_up(up: &Vector3<f64>, heading_rad: f64) -> UnitQuaternion<f64> {
+    let tilt = UnitQuaternion::rotation_between(up, &Vector3::z()).unwrap_or_else(|| {
+        // `up` is straight down: any half-turn about a horizontal axis brings it up.
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI)
+    });
+    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading_rad) * tilt
+}
+
+/// A random unit vector, uniform on the sphere.
+fn random_unit(rng: &mut ChaCha8Rng) -> Vector3<f64> {
+    let z: f64 = rng.gen_range(-1.0..=1.0);
+    let phi: f64 = rng.gen_range(0.0..2.0 * PI);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    Vector3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Hand tremor for one hold: one slow sway and one physiological tremor component.
+fn hand_tremor(rng: &mut ChaCha8Rng) -> Tremor {
+    let mut component = |amplitude_deg: (f64, f64), frequency_hz: (f64, f64)| TremorComponent {
+        axis: random_unit(rng).into(),
+        amplitude_rad: rng
+            .gen_range(amplitude_deg.0..=amplitude_deg.1)
+            .to_radians(),
+        frequency_hz: rng.gen_range(frequency_hz.0..=frequency_hz.1),
+        phase_rad: rng.gen_range(0.0..2.0 * PI),
+    };
+    let sway = component((0.1, 0.3), (0.2, 0.5));
+    let physiological = component((0.002, 0.006), (8.0, 12.0));
+    Tremor {
+        components: vec![sway, physiological],
+        edge_ramp_s: 0.3,
+    }
+}
+
+/// Minimum-jerk turn length for a peak rate: the peak of `ṡ` is 1.875 times the mean.
+fn turn_duration_s(from: &UnitQuaternion<f64>, to: &UnitQuaternion<f64>, peak_dps: f64) -> f64 {
+    let angle = from.angle_to(to);
+    (1.875 * angle / peak_dps.to_radians()).max(0.6)
+}
+
+/// Append the twelve positions (turning to each, then holding) to `builder`.
+fn twelve_positions(
+    mut builder: TrajectoryBuilder,
+    options: &PoserOptions,
+    rng: &mut ChaCha8Rng,
+    first: bool,
+) -> Result<TrajectoryBuilder, SimError> {
+    let mut heading: f64 = rng.gen_range(-PI..PI);
+    for (i, up) in twelve_position_up_directions().iter().enumerate() {
+        heading += rng.gen_range(-1.0..=1.0) * options.heading_spread_deg.to_radians();
+        let error =
+            random_unit(rng) * rng.gen_range(0.0..=1.0) * options.placement_error_deg.to_radians();
+        let target = UnitQuaternion::from_scaled_axis(error) * orientation_with_up(up, heading);
+        if !(first && i == 0) {
+            let duration = turn_duration_s(&builder.current(), &target, options.turn_peak_rate_dps);
+            builder = builder.turn_to(target, duration)?;
+        } else {
+            builder = TrajectoryBuilder::new(target);
+        }
+        let tremor = options.tremor.then(|| hand_tremor(rng));
+        builder = builder.hold(options.hold_s, tremor)?;
+    }
+    Ok(builder)
+}
+
+/// Waypoints whose body-frame field direction follows a pole-to-pole spiral.
+fn tumble_waypoints(count: usize, field: &EarthField) -> Vec<UnitQuaternion<f64>> {
+    let field_world = field.world_vector_ut();
+    let field_dir = if field_world.norm() > 0.0 {
+        field_world.normalize()
+    } else {
+        Vector3::new(0.5, 0.0, -(3.0_f64.sqrt()) / 2.0)
+    };
+    // W maps body +Z onto the field direction.
+    let w = UnitQuaternion::rotation_between(&Vector3::z(), &field_dir)
+        .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI));
+    let axis = Unit::new_normalize(field_dir);
+    let n = count.max(2);
+    let mut azimuth: f64 = 0.0;
+    (0..n)
+        .map(|k| {
+            // Rakhmanov–Saff–Zhou spiral, kept slightly off the poles.
+            let h = -0.98 + 1.96 * k as f64 / (n - 1) as f64;
+            let polar = h.acos();
+            if k > 0 {
+                azimuth += 3.6 / ((n as f64) * (1.0 - h * h)).sqrt();
+            }
+            // S maps +Z to the wanted body direction u; then R = W·Sᵀ gives Rᵀ·ĥ = u.
+            let s = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), azimuth)
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), polar);
+            // A slow twist about the field varies gravity's direction too.
+            let twist = UnitQuaternion::from_axis_angle(&axis, 0.3 * k as f64);
+            twist * w * s.inverse()
+        })
+        .collect()
+}
+
+/// Build the schedule `kind` with `seed`. `field` orients the tumble so that the field sweeps the
+/// body sphere.
+pub fn build_schedule(
+    kind: ScheduleKind,
+    options: &PoserOptions,
+    field: &EarthField,
+    seed: u64,
+) -> Result<Schedule, SimError> {
+    options.validate()?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(2);
+    let ambient = TemperatureProfile::Constant {
+        temp_c: options.ambient_c,
+    };
+    match kind {
+        ScheduleKind::Twelve => {
+            let builder = twelve_positions(
+                TrajectoryBuilder::new(UnitQuaternion::identity()),
+                options,
+                &mut rng,
+                true,
+            )?;
+            Ok(Schedule {
+                kind,
+                trajectory: builder.build()?,
+                temperature: ambient,
+            })
+        }
+        ScheduleKind::Tumble => {
+            let waypoints = tumble_waypoints(options.tumble_waypoints, field);
+            let start = waypoints
+                .first()
+                .copied()
+                .unwrap_or_else(UnitQuaternion::identity);
+            let still = 2.0;
+            let mut builder = TrajectoryBuilder::new(start).hold(still, None)?;
+            for target in waypoints.iter().skip(1) {
+                let duration =
+                    turn_duration_s(&builder.current(), target, options.tumble_peak_rate_dps);
+                builder = builder.turn_to(*target, duration)?;
+            }
+            builder = builder.hold(still, None)?;
+            Ok(Schedule {
+                kind,
+                trajectory: builder.build()?,
+                temperature: ambient,
+            })
+        }
+        ScheduleKind::Sweep => {
+            let mut builder = TrajectoryBuilder::new(UnitQuaternion::identity());
+            for repeat in 0..options.sweep_repeats {
+                builder = twelve_positions(builder, options, &mut rng, repeat == 0)?;
+            }
+            let trajectory = builder.build()?;
+            let period_s = trajectory.duration_s() / options.sweep_cycles as f64;
+            Ok(Schedule {
+                kind,
+                trajectory,
+                temperature: TemperatureProfile::Sweep {
+                    low_c: options.sweep_low_c,
+                    high_c: options.sweep_high_c,
+                    period_s,
+                },
+            })
+        }
+    }
+}
