@@ -1,0 +1,278 @@
+//! Instruction-count bench of the firmware's hot paths, run under QEMU with the counting plugin of
+//! `cargo xtask firmware bench`.
+//!
+//! Each measured region lies between calls of [`imucal_bench_start`] and [`imucal_bench_stop`];
+//! the plugin prints the instructions executed in between. The regions run in the order of
+//! [`REGIONS`], each for [`ITERATIONS`] iterations: an empty loop (the loop's own overhead), the
+//! calibration `Correction::apply` with a plain `A·(x − b)` set and with every extended term, and
+//! `Device::poll` taking one sample per call while streaming calibrated batches into a RAM sink.
+//! Per-sample costs are (region − empty) / ITERATIONS.
+#![no_std]
+#![no_main]
+
+use core::convert::Infallible;
+use core::hint::black_box;
+
+use cortex_m_rt::entry;
+use defmt_semihosting as _;
+use imucal_board_qemu_mps2_an386::{exit, ram_flash::RamNorFlash, ram_flash::SLOT_SIZE};
+use imucal_firmware::apply::Correction;
+use imucal_firmware::device::{Clock, Device, DeviceInfo};
+use imucal_firmware::imu::Imu;
+use imucal_firmware::store::ParamStore;
+use imucal_protocol::{
+    encode_frame, BiasTemperature, CalibrationSet, DeviceId, FirmwareVersion, Nonlinearity,
+    RawSample, Request, RequestBody, SensorCalibration, SensorScales, SensorSet, StreamKind,
+};
+
+/// Names of the measured regions, in the order they run (the bench driver reads the same list).
+pub const REGIONS: [&str; 4] = ["empty", "apply-plain", "apply-extended", "poll-streaming"];
+/// Iterations per region; a multiple of the calibrated batch size (10) so batches are whole.
+pub const ITERATIONS: u32 = 200;
+
+/// An LSM9DS1 at ±4 g, ±500 °/s, ±8 gauss and 119 Hz (sensitivities from its datasheet).
+const SCALES: SensorScales = SensorScales {
+    accel_mps2_per_count: 0.122e-3 * 9.806_65,
+    gyro_rads_per_count: 17.5e-3 * core::f32::consts::PI / 180.0,
+    mag_ut_per_count: 0.029,
+    temp_c_per_count: 1.0 / 16.0,
+    temp_offset_c: 25.0,
+    accel_range_mps2: 4.0 * 9.806_65,
+    gyro_range_rads: 500.0 * core::f32::consts::PI / 180.0,
+    mag_range_ut: 800.0,
+    sample_rate_hz: 119.0,
+};
+
+/// Start of a measured region; the plugin matches this function's first instruction.
+#[no_mangle]
+#[inline(never)]
+pub extern "C" fn imucal_bench_start() {
+    cortex_m::asm::nop();
+}
+
+/// End of a measured region; a different body from the start marker so the linker cannot merge them.
+#[no_mangle]
+#[inline(never)]
+pub extern "C" fn imucal_bench_stop() {
+    cortex_m::asm::nop();
+    cortex_m::asm::nop();
+}
+
+/// A calibration with full matrices and offsets, non-trivial so nothing folds away.
+fn plain_set() -> CalibrationSet {
+    let sensor = |scale: f32, offset: f32| SensorCalibration {
+        a: [
+            [scale, 0.01, -0.02],
+            [0.003, scale * 0.98, 0.015],
+            [-0.01, 0.02, scale * 1.03],
+        ],
+        b: [offset, -offset * 0.5, offset * 0.25],
+        ..SensorCalibration::identity()
+    };
+    CalibrationSet {
+        accel: sensor(1.01, 0.12),
+        gyro: sensor(0.99, 0.004),
+        mag: sensor(1.05, 12.0),
+        ..CalibrationSet::identity()
+    }
+}
+
+/// The plain set plus every extended term: cubic bias temperature, scale temperature,
+/// non-linearity on every sensor, and gyro g-sensitivity.
+fn extended_set() -> CalibrationSet {
+    let mut set = plain_set();
+    for (sensor, unit) in [
+        (&mut set.accel, 1.0e-3),
+        (&mut set.gyro, 1.0e-5),
+        (&mut set.mag, 1.0e-2),
+    ] {
+        sensor.bias_temp = Some(BiasTemperature {
+            t_ref_c: 25.0,
+            coeffs: [[unit; 3], [unit * 1.0e-2; 3], [unit * 1.0e-4; 3]],
+        });
+        sensor.scale_temp = Some([1.0e-4, -2.0e-4, 1.5e-4]);
+        sensor.nonlinearity = Some(Nonlinearity {
+            quadratic: [1.0e-5; 3],
+            cubic: [1.0e-7; 3],
+        });
+    }
+    set.gyro_g_sensitivity = Some([[1.0e-4, 0.0, 0.0], [0.0, 1.0e-4, 0.0], [0.0, 0.0, 1.0e-4]]);
+    set
+}
+
+/// A sample that varies every iteration, so the compiler cannot hoist the work out of the loop.
+fn sample(i: u32) -> RawSample {
+    let v = (i % 97) as i16;
+    RawSample {
+        accel: [120 + v, -340 - v, 8190 + v],
+        gyro: [12 - v, 7 + v, -3],
+        mag: [1500 + v, -800, 400 - v],
+        temp: 80 + v,
+    }
+}
+
+/// The bench's IMU: a new sample on every read.
+struct CountingImu(u32);
+
+impl Imu for CountingImu {
+    type Error = Infallible;
+
+    fn scales(&self) -> SensorScales {
+        SCALES
+    }
+
+    fn read(&mut self) -> Result<RawSample, Infallible> {
+        self.0 = self.0.wrapping_add(1);
+        Ok(sample(self.0))
+    }
+}
+
+/// A clock that advances one sample period per reading, so every `poll()` takes a sample.
+struct SteppingClock {
+    now_us: u64,
+    step_us: u64,
+}
+
+impl Clock for SteppingClock {
+    fn now_us(&mut self) -> u64 {
+        self.now_us += self.step_us;
+        self.now_us
+    }
+}
+
+/// A link whose input is one pre-encoded request and whose output is counted, not sent.
+struct SinkLink {
+    input: [u8; 32],
+    input_len: usize,
+    read_at: usize,
+    bytes_out: u32,
+}
+
+impl embedded_io::ErrorType for SinkLink {
+    type Error = Infallible;
+}
+
+impl embedded_io::ReadReady for SinkLink {
+    fn read_ready(&mut self) -> Result<bool, Infallible> {
+        Ok(self.read_at < self.input_len)
+    }
+}
+
+impl embedded_io::Read for SinkLink {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
+        let rest = self.input.get(self.read_at..self.input_len).unwrap_or(&[]);
+        let n = rest.len().min(buf.len());
+        buf[..n].copy_from_slice(&rest[..n]);
+        self.read_at += n;
+        Ok(n)
+    }
+}
+
+impl embedded_io::Write for SinkLink {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
+        self.bytes_out = self.bytes_out.wrapping_add(buf.len() as u32);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
+fn measure_apply(correction: &Correction) {
+    imucal_bench_start();
+    for i in 0..ITERATIONS {
+        black_box(correction.apply(black_box(&sample(i))));
+    }
+    imucal_bench_stop();
+}
+
+#[entry]
+fn main() -> ! {
+    // Empty region: the loop and the sample generation without the work.
+    imucal_bench_start();
+    for i in 0..ITERATIONS {
+        black_box(sample(i));
+    }
+    imucal_bench_stop();
+
+    for set in [plain_set(), extended_set()] {
+        match Correction::new(&set, &SCALES) {
+            Ok(correction) => measure_apply(&correction),
+            Err(_) => {
+                defmt::error!("the bench calibration set was rejected by validation");
+                exit(false)
+            }
+        }
+    }
+
+    // The main loop with a calibrated stream running: one sample per poll, batches sent.
+    let Some((flash, _)) = RamNorFlash::take() else {
+        exit(false)
+    };
+    let Ok(store) = ParamStore::new(flash, 0, SLOT_SIZE as u32) else {
+        exit(false)
+    };
+    let mut link = SinkLink {
+        input: [0; 32],
+        input_len: 0,
+        read_at: 0,
+        bytes_out: 0,
+    };
+    let start_stream = Request {
+        seq: 1,
+        body: RequestBody::StartStream {
+            kind: StreamKind::Calibrated,
+            decimation: 1,
+        },
+    };
+    let Ok(len) = encode_frame(&start_stream, &mut link.input) else {
+        exit(false)
+    };
+    link.input_len = len;
+    let info = DeviceInfo {
+        device_id: DeviceId::from_u64(1),
+        firmware_version: FirmwareVersion {
+            major: 0,
+            minor: 1,
+            patch: 0,
+        },
+        sensors: SensorSet {
+            accel: true,
+            gyro: true,
+            mag: true,
+            temp: true,
+        },
+    };
+    let clock = SteppingClock {
+        now_us: 0,
+        step_us: (1.0e6 / SCALES.sample_rate_hz) as u64 + 1,
+    };
+    let Ok(mut device) = Device::<_, _, _, _>::new(CountingImu(0), link, store, clock, info) else {
+        exit(false)
+    };
+    // The first poll takes the StartStream request and its Ack; measure steady streaming after it.
+    device.poll();
+    imucal_bench_start();
+    for _ in 0..ITERATIONS {
+        device.poll();
+    }
+    imucal_bench_stop();
+    let (_, link, _, _) = device.into_parts();
+    // Each calibrated sample carries ten f32 values, so a running stream sends at least 40 bytes
+    // per sample; fewer means the stream never started and the figure would be meaningless.
+    if link.bytes_out < ITERATIONS * 40 {
+        defmt::error!(
+            "only {=u32} bytes streamed: the calibrated stream did not start",
+            link.bytes_out
+        );
+        exit(false)
+    }
+    defmt::info!("streamed {=u32} bytes", link.bytes_out);
+    exit(true)
+}
+
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    exit(false)
+}

@@ -1,0 +1,168 @@
+//! Building the board firmware and measuring its size.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Board crate, relative to the repository root.
+pub const BOARD_DIR: &str = "firmware/boards/qemu-mps2-an386";
+/// Flash budget of the release firmware (text + data), bytes.
+pub const FLASH_BUDGET: u64 = 48 * 1024;
+/// Static RAM budget of the release firmware (data + bss), bytes.
+pub const RAM_BUDGET: u64 = 16 * 1024;
+
+/// The release ELFs of the board.
+pub struct Elfs {
+    /// The firmware proper.
+    pub firmware: PathBuf,
+    /// The instruction-count bench.
+    pub bench: PathBuf,
+}
+
+/// The repository root (this crate's parent directory).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+}
+
+/// Builds the board's release ELFs with Debian's cargo (the rustup proxy ignores build-std).
+pub fn build() -> Result<Elfs, String> {
+    let board = repo_root().join(BOARD_DIR);
+    let cargo = Path::new("/usr/bin/cargo");
+    if !cargo.exists() {
+        return Err("/usr/bin/cargo not found; run scripts/setup-firmware-toolchain.sh".into());
+    }
+    println!("building release firmware in {}", board.display());
+    let status = Command::new(cargo)
+        .args(["build", "--release"])
+        .current_dir(&board)
+        // The outer `cargo xtask` exports its own toolchain settings; the board uses its own.
+        .env_remove("RUSTC")
+        .env_remove("RUSTUP_TOOLCHAIN")
+        .env_remove("CARGO_TARGET_DIR")
+        .env_remove("RUSTFLAGS")
+        .status()
+        .map_err(|e| format!("could not start /usr/bin/cargo: {e}"))?;
+    if !status.success() {
+        return Err(format!(
+            "the firmware build failed ({status}); see the compiler output above"
+        ));
+    }
+    let release = board.join("target/thumbv7em-none-eabihf/release");
+    let elfs = Elfs {
+        firmware: release.join("imucal-qemu"),
+        bench: release.join("imucal-qemu-bench"),
+    };
+    for elf in [&elfs.firmware, &elfs.bench] {
+        if !elf.exists() {
+            return Err(format!(
+                "the build succeeded but {} is missing",
+                elf.display()
+            ));
+        }
+    }
+    Ok(elfs)
+}
+
+/// Section sizes in the Berkeley sense: text (code + read-only data), data, bss (incl. no-init).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sizes {
+    /// Code and constants, bytes (in flash).
+    pub text: u64,
+    /// Initialised data, bytes (in flash and in RAM).
+    pub data: u64,
+    /// Zeroed and no-init data, bytes (in RAM).
+    pub bss: u64,
+}
+
+/// Parses the output of `size ELF` (Berkeley format: a header line, then text data bss ...).
+pub fn parse_size_output(output: &str) -> Result<Sizes, String> {
+    let line = output
+        .lines()
+        .nth(1)
+        .ok_or_else(|| format!("unexpected `size` output: {output:?}"))?;
+    let fields: Vec<u64> = line
+        .split_whitespace()
+        .take(3)
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("unexpected `size` output {line:?}: {e}"))?;
+    match fields.as_slice() {
+        [text, data, bss] => Ok(Sizes {
+            text: *text,
+            data: *data,
+            bss: *bss,
+        }),
+        _ => Err(format!("unexpected `size` output {line:?}")),
+    }
+}
+
+/// Prints the firmware's flash and RAM use and checks them against the budgets.
+pub fn size(elf: &Path) -> Result<(), String> {
+    let output = Command::new("size")
+        .arg(elf)
+        .output()
+        .map_err(|e| format!("could not run `size` (binutils): {e}"))?;
+    if !output.status.success() {
+        return Err(format!(
+            "`size {}` failed: {}",
+            elf.display(),
+            String::from_utf8_lossy(&output.stderr)
+        ));
+    }
+    let sizes = parse_size_output(&String::from_utf8_lossy(&output.stdout))?;
+    let flash = sizes.text + sizes.data;
+    let ram = sizes.data + sizes.bss;
+    println!("firmware {}", elf.display());
+    println!(
+        "  text {:>7} B   data {:>5} B   bss {:>6} B",
+        sizes.text, sizes.data, sizes.bss
+    );
+    println!(
+        "  flash {flash:>6} B ({:.1} KiB of {} KiB)   static RAM {ram:>6} B ({:.1} KiB of {} KiB; stack not included)",
+        flash as f64 / 1024.0,
+        FLASH_BUDGET / 1024,
+        ram as f64 / 1024.0,
+        RAM_BUDGET / 1024
+    );
+    let mut over = Vec::new();
+    if flash > FLASH_BUDGET {
+        over.push(format!("flash {flash} B exceeds {FLASH_BUDGET} B"));
+    }
+    if ram > RAM_BUDGET {
+        over.push(format!("static RAM {ram} B exceeds {RAM_BUDGET} B"));
+    }
+    if over.is_empty() {
+        println!("  within budget");
+        Ok(())
+    } else {
+        Err(format!(
+            "{}; see `nm -S --size-sort -C` for the largest symbols",
+            over.join(", ")
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn berkeley_size_output_is_parsed_into_text_data_bss() {
+        let out = "   text\t   data\t    bss\t    dec\t    hex\tfilename\n  39856\t      4\t   2072\t  41932\t   a3cc\tfw\n";
+        assert_eq!(
+            parse_size_output(out),
+            Ok(Sizes {
+                text: 39856,
+                data: 4,
+                bss: 2072
+            })
+        );
+    }
+
+    #[test]
+    fn malformed_size_output_is_an_error() {
+        assert!(parse_size_output("text data bss\n").is_err());
+        assert!(parse_size_output("h\nx y z\n").is_err());
+    }
+}
