@@ -5,12 +5,14 @@
 //! it); see [`physics`] for the full reading model and [`effects`] for the hidden effects.
 #![forbid(unsafe_code)]
 
+pub mod board;
 pub mod effects;
 pub mod error;
 pub mod lsm9ds1_chip;
 pub mod physics;
 pub mod poser;
 pub mod recording;
+pub mod serve;
 pub mod world;
 
 pub use error::SimError;

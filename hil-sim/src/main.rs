@@ -1,6 +1,7 @@
 //! `imucal-hil-sim`: the simulated imucal board on the command line.
 //!
 //! `record` writes a simulated recording (CSV) and its truth (JSON) without any serial link.
+//! `serve` (the default) runs the board behind a pseudo-terminal and prints its path.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -11,18 +12,27 @@ use imucal_hil_sim::effects::EffectRequest;
 use imucal_hil_sim::poser::ScheduleKind;
 use imucal_hil_sim::recording::{simulate_recording, write_csv_file, write_truth_file, SimConfig};
 use imucal_hil_sim::world::TemperatureProfile;
-use imucal_hil_sim::SimError;
 
 /// A simulated IMU board (LSM9DS1-like accelerometer, gyroscope, magnetometer and thermometer).
 #[derive(Debug, Parser)]
 #[command(name = "imucal-hil-sim", version)]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Run the board behind a pseudo-terminal (the default) and print the port path on stdout.
+    #[command(after_help = "\
+Example:
+  imucal-hil-sim serve --seed 7 --effect bias_temperature --speed 10
+  # prints e.g. /dev/pts/7; then, in another terminal: imucal info --port /dev/pts/7
+
+Stops at end of stdin (Ctrl-D), after --seconds, or on Ctrl-C. The simulated person holds each
+of twelve positions until the firmware has captured it (or --max-hold passes), tumbles for the
+magnetometer, then rests.")]
+    Serve(imucal_hil_sim::serve::ServeArgs),
     /// Simulate a person following a calibration schedule and write the uncalibrated recording.
     #[command(after_help = "\
 Example:
@@ -67,8 +77,9 @@ hold label during static holds and empty while moving.")]
     },
 }
 
-fn run(cli: Cli) -> Result<(), SimError> {
-    match cli.command {
+fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
+    match cli.command.unwrap_or_default() {
+        Command::Serve(args) => Ok(imucal_hil_sim::serve::run_command(&args)?),
         Command::Record {
             seed,
             schedule,
@@ -105,6 +116,12 @@ fn run(cli: Cli) -> Result<(), SimError> {
             );
             Ok(())
         }
+    }
+}
+
+impl Default for Command {
+    fn default() -> Self {
+        Self::Serve(imucal_hil_sim::serve::ServeArgs::default())
     }
 }
 

@@ -1,0 +1,317 @@
+//! The simulated person holding the board during a guided session: follows the prompts by
+//! watching the firmware, not a clock.
+//!
+//! Schedule of [`PersonSchedule::Guided`]:
+//! 1. The twelve positions of seed 003 (Chen et al. 2012, §2.2) in their fixed order, with the
+//!    placement errors, headings and hand tremor drawn by [`crate::poser::build_schedule`]
+//!    (`twelve`) from the seed. The first position is held, without a time limit, until the host
+//!    first asks for a pose. From then on each position is held until the firmware has sent a
+//!    `PoseStats` reply during that hold, or for at most `max_hold_s` (counted from the later of
+//!    the hold's start and the first request), then the person turns to the next one. A person
+//!    does not know the order the tool will prompt in; the host accepts poses in any order.
+//! 2. A slow tumble through the waypoints of the `tumble` schedule (the field direction sweeps the
+//!    body sphere), which does not wait for anything.
+//! 3. A rest in the first position, with the hand off the board (no tremor), until stopped: what
+//!    the host's at-rest verification needs.
+//!
+//! [`PersonSchedule::Rest`] keeps the board in the first position without tremor all the time.
+//!
+//! A hold ends smoothly: the tremor fades out over its edge ramp after the capture, so orientation
+//! and rate stay continuous and integrating the gyroscope between holds stays exact. The motion is
+//! a function of the seed and of when the firmware finishes each capture.
+
+use nalgebra::UnitQuaternion;
+use serde::{Deserialize, Serialize};
+
+use crate::error::SimError;
+use crate::poser::{build_schedule, PoserOptions, ScheduleKind};
+use crate::world::{EarthField, Motion, Segment, Trajectory, TrajectoryBuilder, Tremor};
+
+/// Length given to a hold that ends only on an observation, s (about 30 years).
+const OPEN_HOLD_S: f64 = 1.0e9;
+
+/// What the simulated person does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PersonSchedule {
+    /// Twelve positions as prompted, a tumble, then rest (see the module documentation).
+    #[default]
+    Guided,
+    /// Rest in the first position all the time.
+    Rest,
+}
+
+impl std::str::FromStr for PersonSchedule {
+    type Err = SimError;
+
+    fn from_str(s: &str) -> Result<Self, SimError> {
+        match s {
+            "guided" => Ok(Self::Guided),
+            "rest" => Ok(Self::Rest),
+            other => Err(SimError::UnknownSchedule(other.to_string())),
+        }
+    }
+}
+
+/// Where the person is in the schedule.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PersonPhase {
+    /// Holding position `index` (0–11) of the twelve.
+    Hold {
+        /// Position index.
+        index: usize,
+    },
+    /// Turning towards position `index` of the twelve.
+    TurnToHold {
+        /// Position index being approached.
+        index: usize,
+    },
+    /// Tumbling towards waypoint `index`.
+    Tumble {
+        /// Waypoint index.
+        index: usize,
+    },
+    /// Turning to the rest position or resting there.
+    Rest,
+}
+
+/// What the person sees of the firmware.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Prompts {
+    /// `CapturePose` requests seen so far.
+    pub capture_requests: u64,
+    /// `PoseStats` replies seen so far.
+    pub poses_captured: u64,
+}
+
+#[derive(Debug, Clone)]
+struct HoldPlan {
+    orientation: UnitQuaternion<f64>,
+    tremor: Option<Tremor>,
+}
+
+/// The person and the motion they produce.
+#[derive(Debug, Clone)]
+pub struct Person {
+    holds: Vec<HoldPlan>,
+    tumble: Vec<(UnitQuaternion<f64>, f64)>,
+    rest: UnitQuaternion<f64>,
+    turn_peak_rate_dps: f64,
+    max_hold_s: f64,
+    phase: PersonPhase,
+    /// The current motion segment, in time since `segment_start_s`.
+    segment: Trajectory,
+    segment_start_s: f64,
+    segment_end_s: f64,
+    /// `PoseStats` count when the current hold began; `None` once the hold is ending.
+    hold_captures_at_start: Option<u64>,
+    first_prompt_s: Option<f64>,
+}
+
+/// Minimum-jerk turn length for a peak rate: the peak of `ṡ` is 1.875 times the mean.
+fn turn_duration_s(from: &UnitQuaternion<f64>, to: &UnitQuaternion<f64>, peak_dps: f64) -> f64 {
+    (1.875 * from.angle_to(to) / peak_dps.to_radians()).max(0.6)
+}
+
+impl Person {
+    /// The person for `schedule`, drawing positions and tremor from `seed`.
+    pub fn new(
+        schedule: PersonSchedule,
+        options: &PoserOptions,
+        max_hold_s: f64,
+        field: &EarthField,
+        seed: u64,
+    ) -> Result<Self, SimError> {
+        crate::error::require_positive("maximum hold time (s)", max_hold_s)?;
+        let twelve = build_schedule(ScheduleKind::Twelve, options, field, seed)?;
+        let tumble = build_schedule(ScheduleKind::Tumble, options, field, seed)?;
+        let holds: Vec<HoldPlan> = twelve
+            .trajectory
+            .segments()
+            .iter()
+            .filter_map(|segment| match segment {
+                Segment::Hold {
+                    orientation,
+                    tremor,
+                    ..
+                } => Some(HoldPlan {
+                    orientation: *orientation,
+                    tremor: tremor.clone(),
+                }),
+                Segment::Turn { .. } => None,
+            })
+            .collect();
+        let mut waypoints = Vec::new();
+        for segment in tumble.trajectory.segments() {
+            match segment {
+                Segment::Hold { orientation, .. } if waypoints.is_empty() => {
+                    waypoints.push((*orientation, 0.0));
+                }
+                Segment::Turn { to, duration_s, .. } => waypoints.push((*to, *duration_s)),
+                Segment::Hold { .. } => {}
+            }
+        }
+        let first = holds.first().cloned().ok_or(SimError::EmptyTrajectory)?;
+        let rest = first.orientation;
+        let mut person = Self {
+            holds,
+            tumble: waypoints,
+            rest,
+            turn_peak_rate_dps: options.turn_peak_rate_dps,
+            max_hold_s,
+            phase: PersonPhase::Rest,
+            segment: TrajectoryBuilder::new(rest)
+                .hold(OPEN_HOLD_S, None)?
+                .build()?,
+            segment_start_s: 0.0,
+            segment_end_s: OPEN_HOLD_S,
+            hold_captures_at_start: None,
+            first_prompt_s: None,
+        };
+        if schedule == PersonSchedule::Guided {
+            person.begin_hold(0, 0.0, 0)?;
+        }
+        Ok(person)
+    }
+
+    /// Where the person is now.
+    pub fn phase(&self) -> PersonPhase {
+        self.phase
+    }
+
+    /// Nominal orientation (without tremor) of each of the twelve positions, body to world.
+    pub fn hold_orientations(&self) -> Vec<UnitQuaternion<f64>> {
+        self.holds.iter().map(|h| h.orientation).collect()
+    }
+
+    /// React to what the firmware did up to time `t_s`, moving on through the schedule.
+    pub fn observe(&mut self, t_s: f64, prompts: Prompts) -> Result<(), SimError> {
+        if prompts.capture_requests > 0 && self.first_prompt_s.is_none() {
+            self.first_prompt_s = Some(t_s);
+        }
+        if let (PersonPhase::Hold { .. }, Some(at_start)) =
+            (self.phase, self.hold_captures_at_start)
+        {
+            let captured = prompts.poses_captured > at_start;
+            let timed_out = self
+                .first_prompt_s
+                .is_some_and(|first| t_s - first.max(self.segment_start_s) >= self.max_hold_s);
+            if captured || timed_out {
+                self.end_hold(t_s)?;
+            }
+        }
+        // Segments may be shorter than a sample period; catch up through all that ended.
+        while t_s >= self.segment_end_s {
+            self.next_segment(prompts.poses_captured)?;
+        }
+        Ok(())
+    }
+
+    /// Orientation and body rate at `t_s` (call [`Self::observe`] first).
+    pub fn motion_at(&self, t_s: f64) -> Motion {
+        self.segment.motion_at(t_s - self.segment_start_s)
+    }
+
+    fn begin_hold(&mut self, index: usize, start_s: f64, captures: u64) -> Result<(), SimError> {
+        let Some(plan) = self.holds.get(index) else {
+            return self.begin_tumble(0, start_s);
+        };
+        self.segment = TrajectoryBuilder::new(plan.orientation)
+            .hold(OPEN_HOLD_S, plan.tremor.clone())?
+            .build()?;
+        self.phase = PersonPhase::Hold { index };
+        self.segment_start_s = start_s;
+        self.segment_end_s = start_s + OPEN_HOLD_S;
+        self.hold_captures_at_start = Some(captures);
+        Ok(())
+    }
+
+    /// Shorten the open hold so that it ends after the tremor has faded out from `t_s` on; the
+    /// motion before `t_s` is unchanged because the tremor window there is still 1.
+    fn end_hold(&mut self, t_s: f64) -> Result<(), SimError> {
+        let PersonPhase::Hold { index } = self.phase else {
+            return Ok(());
+        };
+        let Some(plan) = self.holds.get(index) else {
+            return Ok(());
+        };
+        let ramp = plan.tremor.as_ref().map_or(0.0, |t| t.edge_ramp_s);
+        let elapsed = (t_s - self.segment_start_s).max(0.0);
+        let duration = (elapsed + ramp).max(2.0 * ramp).max(1e-6);
+        self.segment = TrajectoryBuilder::new(plan.orientation)
+            .hold(duration, plan.tremor.clone())?
+            .build()?;
+        self.segment_end_s = self.segment_start_s + duration;
+        self.hold_captures_at_start = None;
+        Ok(())
+    }
+
+    fn next_segment(&mut self, captures: u64) -> Result<(), SimError> {
+        let start = self.segment_end_s;
+        match self.phase {
+            PersonPhase::Hold { index } => {
+                let from = self.holds.get(index).map_or(self.rest, |h| h.orientation);
+                match self.holds.get(index + 1) {
+                    Some(next) => {
+                        let to = next.orientation;
+                        self.turn(from, to, start)?;
+                        self.phase = PersonPhase::TurnToHold { index: index + 1 };
+                    }
+                    None => self.begin_tumble(0, start)?,
+                }
+            }
+            PersonPhase::TurnToHold { index } => self.begin_hold(index, start, captures)?,
+            PersonPhase::Tumble { index } => self.begin_tumble(index + 1, start)?,
+            PersonPhase::Rest => {
+                let here = self.segment.motion_at(self.segment.duration_s());
+                self.segment = TrajectoryBuilder::new(here.q_body_to_world)
+                    .hold(OPEN_HOLD_S, None)?
+                    .build()?;
+                self.segment_start_s = start;
+                self.segment_end_s = start + OPEN_HOLD_S;
+            }
+        }
+        Ok(())
+    }
+
+    /// Turn to tumble waypoint `index`, or to rest after the last one.
+    fn begin_tumble(&mut self, index: usize, start_s: f64) -> Result<(), SimError> {
+        let from = self
+            .segment
+            .motion_at(self.segment.duration_s())
+            .q_body_to_world;
+        match self.tumble.get(index).copied() {
+            // The first waypoint is reached by an ordinary turn; later ones keep the tumble's pace.
+            Some((to, _)) if index == 0 => self.turn(from, to, start_s)?,
+            Some((to, duration)) => {
+                self.segment = TrajectoryBuilder::new(from)
+                    .turn_to(to, duration)?
+                    .build()?;
+                self.segment_start_s = start_s;
+                self.segment_end_s = start_s + duration;
+            }
+            None => {
+                self.turn(from, self.rest, start_s)?;
+                self.phase = PersonPhase::Rest;
+                return Ok(());
+            }
+        }
+        self.phase = PersonPhase::Tumble { index };
+        Ok(())
+    }
+
+    fn turn(
+        &mut self,
+        from: UnitQuaternion<f64>,
+        to: UnitQuaternion<f64>,
+        start_s: f64,
+    ) -> Result<(), SimError> {
+        let duration = turn_duration_s(&from, &to, self.turn_peak_rate_dps);
+        self.segment = TrajectoryBuilder::new(from)
+            .turn_to(to, duration)?
+            .build()?;
+        self.segment_start_s = start_s;
+        self.segment_end_s = start_s + duration;
+        Ok(())
+    }
+}

@@ -1,0 +1,469 @@
+//! Serve a [`SimBoard`] on a pseudo-terminal, so that the host opens it with `serialport` like any
+//! board: start → [`SimHandle::port_path`] → [`SimHandle::stop`].
+//!
+//! A background thread owns the board and the pty's master side; the host opens the slave's path.
+//! Simulated time is paced against wall time: `t_sim = speed · t_wall` (speed 1 = real time). Each
+//! turn of the loop moves the host's bytes into the board, runs the board up to the simulated time
+//! now due (at most [`MAX_STEP_US`] at once, so I/O keeps flowing when the machine falls behind),
+//! writes the board's bytes to the pty without blocking (bytes the pty cannot take yet wait in the
+//! board's transmit buffer), then sleeps until the next sample is due (at most 1 ms).
+//!
+//! The thread keeps the slave side open itself, so the master never sees a hang-up while no host
+//! is connected and a host may close and reopen the port. Bytes the board sends while nobody reads
+//! wait in the pty, as they would on a real serial line.
+
+use std::io::{ErrorKind, Read, Write};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{self, Receiver, Sender};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use serialport::{SerialPort, TTYPort};
+use thiserror::Error;
+
+use crate::board::{BoardConfig, BoardError, PersonSchedule, SimBoard};
+use crate::effects::EffectRequest;
+use crate::error::SimError;
+use crate::recording::{write_truth_file, Truth};
+
+/// Largest simulated time run in one turn of the serving loop, µs (50 ms).
+pub const MAX_STEP_US: u64 = 50_000;
+/// Longest sleep of the serving loop, so host bytes are picked up within about a millisecond.
+const MAX_SLEEP: Duration = Duration::from_millis(1);
+/// Bytes moved per read or write on the pty.
+const CHUNK: usize = 4096;
+
+/// Why serving failed.
+#[derive(Debug, Error)]
+pub enum ServeError {
+    /// The board could not be built or run.
+    #[error(transparent)]
+    Board(#[from] BoardError),
+    /// No pseudo-terminal could be created.
+    #[error(
+        "could not create a pseudo-terminal ({0}); check that /dev/ptmx exists and is usable \
+         (in a container, mount devpts)"
+    )]
+    Pty(serialport::Error),
+    /// Reading or writing the pseudo-terminal failed.
+    #[error("the pseudo-terminal failed ({0}); restart the simulator")]
+    Io(std::io::Error),
+    /// The speed factor is not usable.
+    #[error("speed {0} is not usable; give a finite factor greater than zero (1 = real time)")]
+    InvalidSpeed(f64),
+    /// The serving thread is gone (it failed or was stopped).
+    #[error("the simulated board has stopped; start a new one")]
+    Stopped,
+    /// A setting is invalid or the truth file could not be written.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// The serving thread panicked.
+    #[error("the simulated board's thread panicked; this is a bug in the simulator")]
+    Panicked,
+}
+
+/// How to run a simulated board behind a pseudo-terminal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimOptions {
+    /// Seed of every random draw.
+    pub seed: u64,
+    /// Effects switched on without telling the host.
+    pub effects: Vec<EffectRequest>,
+    /// Simulated seconds per wall-clock second (1 = real time).
+    pub speed: f64,
+    /// What the person holding the board does.
+    pub schedule: PersonSchedule,
+    /// Every other setting of the board; its seed, effects and schedule are replaced by the
+    /// fields above.
+    pub board: BoardConfig,
+}
+
+impl SimOptions {
+    /// Real time, guided person, no effects, defaults of [`BoardConfig::new`].
+    pub fn new(seed: u64) -> Self {
+        Self {
+            seed,
+            effects: Vec::new(),
+            speed: 1.0,
+            schedule: PersonSchedule::Guided,
+            board: BoardConfig::new(seed),
+        }
+    }
+
+    /// The board configuration these options describe.
+    pub fn board_config(&self) -> BoardConfig {
+        let mut config = self.board.clone();
+        config.seed = self.seed;
+        config.effects = self.effects.clone();
+        config.schedule = self.schedule;
+        config
+    }
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        Self::new(1)
+    }
+}
+
+/// Counters of a serving run.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ServeStats {
+    /// Simulated time, s.
+    pub sim_time_s: f64,
+    /// Wall time since the start, s.
+    pub wall_time_s: f64,
+    /// Samples the board took.
+    pub samples: u64,
+    /// Bytes written to the pty (board to host).
+    pub bytes_to_host: u64,
+    /// Bytes read from the pty (host to board).
+    pub bytes_from_host: u64,
+    /// Messages the board dropped because its transmit buffer was full.
+    pub messages_refused: u64,
+    /// Largest lag of simulated time behind the paced target, s.
+    pub max_lag_s: f64,
+}
+
+enum Command {
+    Reboot(Sender<Result<(), BoardError>>),
+    CutPower(Option<u32>, Sender<()>),
+}
+
+struct Shared {
+    stop: AtomicBool,
+    sim_time_us: AtomicU64,
+    stats: Mutex<ServeStats>,
+}
+
+/// Starts simulated boards.
+#[derive(Debug, Clone, Copy)]
+pub struct SimServer;
+
+impl SimServer {
+    /// Build the board, create the pty and start serving in a background thread.
+    pub fn start(options: SimOptions) -> Result<SimHandle, ServeError> {
+        let speed = options.speed;
+        if !(speed.is_finite() && speed > 0.0) {
+            return Err(ServeError::InvalidSpeed(speed));
+        }
+        let board = SimBoard::new(options.board_config())?;
+        let truth = board.truth();
+        let (mut master, slave) = TTYPort::pair().map_err(ServeError::Pty)?;
+        master
+            .set_timeout(Duration::ZERO)
+            .map_err(ServeError::Pty)?;
+        let port_path = slave.name().ok_or_else(|| {
+            ServeError::Pty(serialport::Error::new(
+                serialport::ErrorKind::Unknown,
+                "the pseudo-terminal has no slave path",
+            ))
+        })?;
+        let shared = Arc::new(Shared {
+            stop: AtomicBool::new(false),
+            sim_time_us: AtomicU64::new(0),
+            stats: Mutex::new(ServeStats::default()),
+        });
+        let (commands, receiver) = mpsc::channel();
+        let thread_shared = Arc::clone(&shared);
+        let thread = std::thread::Builder::new()
+            .name("imucal-hil-sim".into())
+            .spawn(move || {
+                // The slave stays open for the thread's life (see the module documentation).
+                let _slave = slave;
+                serve(board, master, speed, &thread_shared, &receiver)
+            })
+            .map_err(ServeError::Io)?;
+        Ok(SimHandle {
+            port_path,
+            shared,
+            commands,
+            thread: Some(thread),
+            truth,
+        })
+    }
+}
+
+/// A running simulated board.
+pub struct SimHandle {
+    port_path: String,
+    shared: Arc<Shared>,
+    commands: Sender<Command>,
+    thread: Option<JoinHandle<Result<(), ServeError>>>,
+    truth: Truth,
+}
+
+impl std::fmt::Debug for SimHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SimHandle")
+            .field("port_path", &self.port_path)
+            .field("sim_time_s", &self.sim_time_s())
+            .finish_non_exhaustive()
+    }
+}
+
+impl SimHandle {
+    /// Path of the serial port to open (the pty's slave, e.g. `/dev/pts/7`).
+    pub fn port_path(&self) -> &str {
+        &self.port_path
+    }
+
+    /// Every true parameter of the board; `duration_s` is the simulated time so far.
+    pub fn truth(&self) -> Truth {
+        let mut truth = self.truth.clone();
+        truth.duration_s = self.sim_time_s();
+        truth
+    }
+
+    /// Simulated time, s.
+    pub fn sim_time_s(&self) -> f64 {
+        self.shared.sim_time_us.load(Ordering::Relaxed) as f64 * 1e-6
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> ServeStats {
+        *self
+            .shared
+            .stats
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Power-cycle the board (the flash keeps its content); returns once it has rebooted.
+    pub fn reboot(&self) -> Result<(), ServeError> {
+        let (reply, answer) = mpsc::channel();
+        self.commands
+            .send(Command::Reboot(reply))
+            .map_err(|_| ServeError::Stopped)?;
+        answer.recv().map_err(|_| ServeError::Stopped)??;
+        Ok(())
+    }
+
+    /// Cut the power at flash step `step` from now (see [`SimBoard::cut_power_at_flash_step`]).
+    pub fn cut_power_at_flash_step(&self, step: Option<u32>) -> Result<(), ServeError> {
+        let (reply, answer) = mpsc::channel();
+        self.commands
+            .send(Command::CutPower(step, reply))
+            .map_err(|_| ServeError::Stopped)?;
+        answer.recv().map_err(|_| ServeError::Stopped)
+    }
+
+    /// Whether the serving thread is still running.
+    pub fn is_running(&self) -> bool {
+        self.thread.as_ref().is_some_and(|t| !t.is_finished())
+    }
+
+    /// Stop serving and return the final counters, or the error that ended serving early.
+    pub fn stop(mut self) -> Result<ServeStats, ServeError> {
+        self.shutdown()?;
+        Ok(self.stats())
+    }
+
+    fn shutdown(&mut self) -> Result<(), ServeError> {
+        self.shared.stop.store(true, Ordering::Relaxed);
+        match self.thread.take() {
+            Some(thread) => thread.join().map_err(|_| ServeError::Panicked)?,
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for SimHandle {
+    fn drop(&mut self) {
+        // Errors were the caller's to collect through `stop`.
+        let _ = self.shutdown();
+    }
+}
+
+fn is_not_ready(error: &std::io::Error) -> bool {
+    matches!(
+        error.kind(),
+        ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
+    )
+}
+
+/// The serving loop (see the module documentation).
+fn serve(
+    mut board: SimBoard,
+    mut master: TTYPort,
+    speed: f64,
+    shared: &Shared,
+    commands: &Receiver<Command>,
+) -> Result<(), ServeError> {
+    let start = Instant::now();
+    let sim_start_us = board.time_us();
+    let mut buffer = [0u8; CHUNK];
+    let mut stats = ServeStats::default();
+    while !shared.stop.load(Ordering::Relaxed) {
+        while let Ok(command) = commands.try_recv() {
+            match command {
+                Command::Reboot(reply) => {
+                    // The caller may have given up waiting; nothing to do then.
+                    let _ = reply.send(board.reboot());
+                }
+                Command::CutPower(step, reply) => {
+                    board.cut_power_at_flash_step(step);
+                    let _ = reply.send(());
+                }
+            }
+        }
+
+        loop {
+            match master.read(&mut buffer) {
+                Ok(0) => break,
+                Ok(count) => {
+                    let bytes = buffer.get(..count).unwrap_or_default();
+                    board.link().send_to_device(bytes);
+                    stats.bytes_from_host += count as u64;
+                }
+                Err(error) if is_not_ready(&error) => break,
+                Err(error) => return Err(ServeError::Io(error)),
+            }
+        }
+
+        let wall_s = start.elapsed().as_secs_f64();
+        let target_us = sim_start_us.saturating_add((wall_s * speed * 1e6) as u64);
+        let step_to = target_us.min(board.time_us().saturating_add(MAX_STEP_US));
+        board.advance_to(step_to)?;
+        let lag_s = target_us.saturating_sub(step_to) as f64 * 1e-6;
+
+        loop {
+            let count = board.link().peek_from_device(&mut buffer);
+            if count == 0 {
+                break;
+            }
+            match master.write(buffer.get(..count).unwrap_or_default()) {
+                Ok(0) => break,
+                Ok(written) => {
+                    board.link().consume_from_device(written);
+                    stats.bytes_to_host += written as u64;
+                }
+                Err(error) if is_not_ready(&error) => break,
+                Err(error) => return Err(ServeError::Io(error)),
+            }
+        }
+
+        shared.sim_time_us.store(board.time_us(), Ordering::Relaxed);
+        stats.sim_time_s = board.time_s();
+        stats.wall_time_s = wall_s;
+        stats.samples = board.samples_taken();
+        stats.messages_refused = board.link().observations().messages_refused;
+        stats.max_lag_s = stats.max_lag_s.max(lag_s);
+        *shared.stats.lock().unwrap_or_else(PoisonError::into_inner) = stats;
+
+        if lag_s == 0.0 {
+            let until_sample_us = board.next_sample_us().saturating_sub(board.time_us());
+            let wait = Duration::from_secs_f64(until_sample_us as f64 * 1e-6 / speed);
+            std::thread::sleep(wait.min(MAX_SLEEP));
+        }
+    }
+    Ok(())
+}
+
+/// Arguments of the `serve` command.
+#[derive(Debug, Clone, PartialEq, clap::Args)]
+pub struct ServeArgs {
+    /// Seed of every random draw (board errors, effects, noise, the person's positions).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Switch an effect on (repeatable): `[sensor.]name[=size]`.
+    #[arg(long = "effect")]
+    pub effects: Vec<EffectRequest>,
+    /// Simulated seconds per wall-clock second (1 = real time).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// What the person holding the board does: guided or rest.
+    #[arg(long, default_value = "guided")]
+    pub schedule: PersonSchedule,
+    /// Longest hold of a position once the host prompts, simulated s.
+    #[arg(long = "max-hold", default_value_t = 20.0)]
+    pub max_hold_s: f64,
+    /// Hold perfectly still (no hand tremor).
+    #[arg(long)]
+    pub no_tremor: bool,
+    /// Stop after this many wall-clock seconds.
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Keep running when stdin closes (for running in the background).
+    #[arg(long)]
+    pub ignore_stdin: bool,
+    /// Write every true parameter as JSON here at the start.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+}
+
+impl Default for ServeArgs {
+    /// The same values as the command line's defaults.
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            effects: Vec::new(),
+            speed: 1.0,
+            schedule: PersonSchedule::Guided,
+            max_hold_s: 20.0,
+            no_tremor: false,
+            seconds: None,
+            ignore_stdin: false,
+            truth: None,
+        }
+    }
+}
+
+impl ServeArgs {
+    /// The server options these arguments describe.
+    pub fn options(&self) -> SimOptions {
+        let mut options = SimOptions::new(self.seed);
+        options.effects = self.effects.clone();
+        options.speed = self.speed;
+        options.schedule = self.schedule;
+        options.board.max_hold_s = self.max_hold_s;
+        options.board.poser.tremor = !self.no_tremor;
+        options
+    }
+}
+
+/// Run the `serve` command: print the port path on stdout (one line, flushed), then serve until
+/// stdin reaches end of file, `--seconds` pass, or the process is interrupted.
+pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
+    let wall_limit = args
+        .seconds
+        .map(|s| crate::error::require_non_negative("--seconds", s).map(Duration::from_secs_f64))
+        .transpose()?;
+    let handle = SimServer::start(args.options())?;
+    if let Some(path) = &args.truth {
+        write_truth_file(&handle.truth(), path)?;
+    }
+    {
+        let mut stdout = std::io::stdout().lock();
+        writeln!(stdout, "{}", handle.port_path())
+            .and_then(|()| stdout.flush())
+            .map_err(ServeError::Io)?;
+    }
+    let (closed, stdin_closed) = mpsc::channel::<()>();
+    if !args.ignore_stdin {
+        std::thread::spawn(move || {
+            // Whatever is typed is ignored; only the end of input matters.
+            let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+            let _ = closed.send(());
+        });
+    }
+    let started = Instant::now();
+    while handle.is_running()
+        && stdin_closed.try_recv().is_err()
+        && wall_limit.is_none_or(|limit| started.elapsed() < limit)
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let stats = handle.stop()?;
+    eprintln!(
+        "simulated {:.1} s in {:.1} s; {} samples, {} bytes to the host, {} from it",
+        stats.sim_time_s,
+        stats.wall_time_s,
+        stats.samples,
+        stats.bytes_to_host,
+        stats.bytes_from_host
+    );
+    Ok(())
+}
