@@ -28,26 +28,7 @@ pub fn repo_root() -> PathBuf {
 /// Builds the board's release ELFs with Debian's cargo (the rustup proxy ignores build-std).
 pub fn build() -> Result<Elfs, String> {
     let board = repo_root().join(BOARD_DIR);
-    let cargo = Path::new("/usr/bin/cargo");
-    if !cargo.exists() {
-        return Err("/usr/bin/cargo not found; run scripts/setup-firmware-toolchain.sh".into());
-    }
-    println!("building release firmware in {}", board.display());
-    let status = Command::new(cargo)
-        .args(["build", "--release"])
-        .current_dir(&board)
-        // The outer `cargo xtask` exports its own toolchain settings; the board uses its own.
-        .env_remove("RUSTC")
-        .env_remove("RUSTUP_TOOLCHAIN")
-        .env_remove("CARGO_TARGET_DIR")
-        .env_remove("RUSTFLAGS")
-        .status()
-        .map_err(|e| format!("could not start /usr/bin/cargo: {e}"))?;
-    if !status.success() {
-        return Err(format!(
-            "the firmware build failed ({status}); see the compiler output above"
-        ));
-    }
+    cargo_build_release(&board)?;
     let release = board.join("target/thumbv7em-none-eabihf/release");
     let elfs = Elfs {
         firmware: release.join("imucal-qemu"),
@@ -62,6 +43,106 @@ pub fn build() -> Result<Elfs, String> {
         }
     }
     Ok(elfs)
+}
+
+/// A hardware board whose firmware `--board NAME` selects (the QEMU board is the default).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Board {
+    /// Name given to `--board`.
+    pub name: &'static str,
+    /// Board crate, relative to the repository root.
+    pub dir: &'static str,
+    /// Name of the firmware binary.
+    pub firmware_bin: &'static str,
+    /// Flash available to the firmware (text + data), bytes.
+    pub flash_budget: u64,
+    /// Static RAM budget (data + bss), bytes.
+    pub ram_budget: u64,
+}
+
+/// Hardware boards besides the QEMU one.
+pub const HARDWARE_BOARDS: [Board; 1] = [Board {
+    name: "nano33-ble-sense",
+    dir: "firmware/boards/nano33-ble-sense",
+    firmware_bin: "nano33-ble-sense",
+    // The FLASH region of its memory.x: 0x10000..0xFE000 behind the Arduino bootloader.
+    flash_budget: 0xEE000,
+    // 256 KiB of RAM less 64 KiB kept for the stack, where the firmware core's state lives.
+    ram_budget: 192 * 1024,
+}];
+
+/// Name of the QEMU board for `--board`.
+pub const QEMU_BOARD: &str = "qemu-mps2-an386";
+
+/// The hardware board called `name`, or an error listing the known boards.
+pub fn find_board(name: &str) -> Result<Board, String> {
+    HARDWARE_BOARDS
+        .iter()
+        .find(|board| board.name == name)
+        .copied()
+        .ok_or_else(|| {
+            let known: Vec<&str> = HARDWARE_BOARDS.iter().map(|b| b.name).collect();
+            format!(
+                "unknown board {name:?}; use {QEMU_BOARD} or one of {}",
+                known.join(", ")
+            )
+        })
+}
+
+/// Builds the release firmware of the board called `name` and returns its ELF.
+pub fn build_board(name: &str) -> Result<PathBuf, String> {
+    if name == QEMU_BOARD {
+        return build().map(|elfs| elfs.firmware);
+    }
+    let board = find_board(name)?;
+    let dir = repo_root().join(board.dir);
+    cargo_build_release(&dir)?;
+    let elf = dir
+        .join("target/thumbv7em-none-eabihf/release")
+        .join(board.firmware_bin);
+    if elf.exists() {
+        Ok(elf)
+    } else {
+        Err(format!(
+            "the build succeeded but {} is missing",
+            elf.display()
+        ))
+    }
+}
+
+/// Builds the board called `name` and prints its size against that board's budgets.
+pub fn size_board(name: &str) -> Result<(), String> {
+    if name == QEMU_BOARD {
+        return build().and_then(|elfs| size(&elfs.firmware));
+    }
+    let board = find_board(name)?;
+    let elf = build_board(name)?;
+    size_within(&elf, board.flash_budget, board.ram_budget)
+}
+
+/// Runs `cargo build --release` in a board directory, so its `.cargo/config.toml` applies.
+fn cargo_build_release(board: &Path) -> Result<(), String> {
+    let cargo = Path::new("/usr/bin/cargo");
+    if !cargo.exists() {
+        return Err("/usr/bin/cargo not found; run scripts/setup-firmware-toolchain.sh".into());
+    }
+    println!("building release firmware in {}", board.display());
+    let status = Command::new(cargo)
+        .args(["build", "--release"])
+        .current_dir(board)
+        // The outer `cargo xtask` exports its own toolchain settings; the board uses its own.
+        .env_remove("RUSTC")
+        .env_remove("RUSTUP_TOOLCHAIN")
+        .env_remove("CARGO_TARGET_DIR")
+        .env_remove("RUSTFLAGS")
+        .status()
+        .map_err(|e| format!("could not start /usr/bin/cargo: {e}"))?;
+    if !status.success() {
+        return Err(format!(
+            "the firmware build failed ({status}); see the compiler output above"
+        ));
+    }
+    Ok(())
 }
 
 /// Section sizes in the Berkeley sense: text (code + read-only data), data, bss (incl. no-init).
@@ -97,8 +178,13 @@ pub fn parse_size_output(output: &str) -> Result<Sizes, String> {
     }
 }
 
-/// Prints the firmware's flash and RAM use and checks them against the budgets.
+/// Prints the QEMU firmware's flash and RAM use and checks them against its budgets.
 pub fn size(elf: &Path) -> Result<(), String> {
+    size_within(elf, FLASH_BUDGET, RAM_BUDGET)
+}
+
+/// Prints a firmware's flash and RAM use and checks them against the given budgets, bytes.
+pub fn size_within(elf: &Path, flash_budget: u64, ram_budget: u64) -> Result<(), String> {
     let output = Command::new("size")
         .arg(elf)
         .output()
@@ -121,16 +207,16 @@ pub fn size(elf: &Path) -> Result<(), String> {
     println!(
         "  flash {flash:>6} B ({:.1} KiB of {} KiB)   static RAM {ram:>6} B ({:.1} KiB of {} KiB; stack not included)",
         flash as f64 / 1024.0,
-        FLASH_BUDGET / 1024,
+        flash_budget / 1024,
         ram as f64 / 1024.0,
-        RAM_BUDGET / 1024
+        ram_budget / 1024
     );
     let mut over = Vec::new();
-    if flash > FLASH_BUDGET {
-        over.push(format!("flash {flash} B exceeds {FLASH_BUDGET} B"));
+    if flash > flash_budget {
+        over.push(format!("flash {flash} B exceeds {flash_budget} B"));
     }
-    if ram > RAM_BUDGET {
-        over.push(format!("static RAM {ram} B exceeds {RAM_BUDGET} B"));
+    if ram > ram_budget {
+        over.push(format!("static RAM {ram} B exceeds {ram_budget} B"));
     }
     if over.is_empty() {
         println!("  within budget");
@@ -158,6 +244,15 @@ mod tests {
                 bss: 2072
             })
         );
+    }
+
+    #[test]
+    fn board_names_select_their_crate_and_unknown_names_list_the_choices() {
+        let nano = find_board("nano33-ble-sense").expect("a known board");
+        assert_eq!(nano.dir, "firmware/boards/nano33-ble-sense");
+        assert!(repo_root().join(nano.dir).join("Cargo.toml").exists());
+        let error = find_board("nano33").expect_err("not a board name");
+        assert!(error.contains("nano33-ble-sense") && error.contains(QEMU_BOARD));
     }
 
     #[test]
