@@ -65,6 +65,7 @@
 #![warn(missing_docs)]
 
 pub mod error;
+pub mod feed;
 pub mod frame;
 pub mod messages;
 pub mod params;
@@ -72,6 +73,7 @@ pub mod sample;
 pub mod version;
 
 pub use error::{BatchError, EncodeError, ErrorCode, FrameError, InvalidParamsReason};
+pub use feed::{FeedDecoder, FeedFrame, MAX_FEED_FRAME};
 pub use frame::{
     decode_payload, encode_frame, max_frame_len, FrameDecoder, Messages, CRC_BYTES, MAX_FRAME,
     MAX_PAYLOAD,

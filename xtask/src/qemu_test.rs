@@ -22,6 +22,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use imucal_protocol::feed::{self, FeedFrame, MAX_FEED_FRAME};
 use imucal_protocol::{
     encode_frame, CalibrationSet, DeviceMessage, Event, FrameDecoder, RawSample, Request,
     RequestBody, ResponseBody, SensorCalibration, SensorScales, StreamKind, MAX_FRAME,
@@ -29,7 +30,6 @@ use imucal_protocol::{
 };
 use serialport::{SerialPort, TTYPort};
 
-use crate::feed::{self, FeedFrame, MAX_FEED_FRAME};
 use crate::qemu;
 
 /// The emulated chip: an LSM9DS1 at ±4 g, ±500 °/s, ±8 gauss, 119 Hz (datasheet sensitivities).

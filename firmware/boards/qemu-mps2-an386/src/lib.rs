@@ -1,8 +1,9 @@
 //! Board support for imucal on the Arm MPS2 AN386 (Cortex-M4F) as emulated by QEMU.
 //!
 //! - UART0 ([`uart`]): the host link, the same protocol as on any imucal board.
-//! - UART1 ([`feed`], [`sensor`]): sensor samples from the simulator's world and sensor physics,
-//!   presented to the firmware core through its `Imu` trait, with the clock taken from the feed.
+//! - UART1 ([`sensor`]): sensor samples from the simulator's world and sensor physics, as
+//!   `imucal_protocol::feed` frames, presented to the firmware core through its `Imu` trait, with
+//!   the clock taken from the feed.
 //! - [`ram_flash`]: parameter storage in RAM that survives a soft reset (real boards use flash).
 //!
 //! `unsafe` is confined to register access in [`uart`], the retained RAM region in
@@ -11,7 +12,6 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 #![warn(missing_docs)]
 
-pub mod feed;
 pub mod ram_flash;
 pub mod sensor;
 pub mod uart;

@@ -10,9 +10,9 @@
 
 use core::cell::RefCell;
 
+use imucal_protocol::feed::{FeedDecoder, FeedFrame};
 use imucal_protocol::{RawSample, SensorScales};
 
-use crate::feed::{FeedDecoder, FeedFrame};
 use crate::uart::CmsdkUart;
 
 /// Receive state of the feed: the UART, the frame decoder and the newest values.

@@ -1,15 +1,16 @@
-//! Sensor feed on UART1: what the simulator's world and sensor physics send to the board.
+//! Sensor feed: how a simulated or recorded world drives an emulated IMU, one frame per sample.
 //!
-//! Each message is a [`FeedFrame`] in the protocol crate's frame format (postcard, CRC-32, COBS,
-//! 0x00 delimiter; see `imucal_protocol::frame`). A `Scales` frame comes first (the emulated chip's
-//! configuration; the firmware waits for it at boot as it would probe a chip), then one `Sample`
-//! frame per output-data-rate tick, stamped with the simulated world time. This file needs only
-//! `core`, serde and the protocol crate, so host-side feeders compile the very same definition.
+//! A board without a real sensor (the QEMU board reads it on its UART1) receives [`FeedFrame`]s
+//! in this crate's frame format (postcard, CRC-32, COBS, 0x00 delimiter; see [`crate::frame`]).
+//! A `Scales` frame comes first (the emulated chip's configuration; the firmware waits for it at
+//! boot as it would probe a chip), then one `Sample` frame per output-data-rate tick, stamped
+//! with the simulated world time. Feeders (the simulator, `xtask`'s QEMU test) and the board
+//! share this one definition. It is not part of the host ↔ device protocol and is versioned with
+//! the crate, not by [`crate::PROTOCOL_VERSION`].
 
-use imucal_protocol::{
-    encode_frame, EncodeError, FrameDecoder, FrameError, RawSample, SensorScales,
-};
 use serde::{Deserialize, Serialize};
+
+use crate::{encode_frame, EncodeError, FrameDecoder, FrameError, RawSample, SensorScales};
 
 /// One message of the sensor feed.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -53,6 +54,6 @@ impl FeedDecoder {
     pub fn push(&mut self, byte: u8) -> Option<Result<FeedFrame, FrameError>> {
         self.frames
             .push(byte)
-            .map(|payload| payload.and_then(imucal_protocol::decode_payload::<FeedFrame>))
+            .map(|payload| payload.and_then(crate::decode_payload::<FeedFrame>))
     }
 }
