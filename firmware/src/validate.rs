@@ -15,8 +15,10 @@
 //!   done in the wrong units (g vs m/s² is 9.8×, °/s vs rad/s is 57×).
 //! - **Offsets** `|b_i|` within the sensor's full-scale range: an offset beyond it would put
 //!   every reading on the rail.
-//! - **Extended terms** over the operating span `|ΔT| ≤` [`MAX_DELTA_T_C`]: the temperature bias
-//!   shift stays within the full-scale range, the temperature scale change within ±50 %, the
+//! - **Extended terms** over the operating span `|ΔT| ≤` [`MAX_DELTA_T_C`]: the reference
+//!   temperature of the bias polynomial lies in [`REFERENCE_TEMP_RANGE_C`] (without it a finite
+//!   but absurd `T_ref` such as 10³⁰ °C makes `ΔT³` overflow and the output NaN), the temperature
+//!   bias shift stays within the full-scale range, the temperature scale change within ±50 %, the
 //!   non-linearity at full scale within half the reading, and each g-sensitivity entry within
 //!   [`MAX_G_SENSITIVITY`]. Real parts are one to two orders of magnitude inside these.
 
@@ -39,6 +41,11 @@ pub const GAIN_LIMITS: [(f64, f64); 3] = [(0.5, 2.0), (0.5, 2.0), (0.005, 4.0)];
 /// Largest temperature excursion from the reference over which extended terms are checked, °C
 /// (the −40…85 °C industrial range).
 pub const MAX_DELTA_T_C: f32 = 125.0;
+
+/// Accepted reference temperature `T_ref` of a bias temperature polynomial, °C: the widest
+/// (military/automotive) die temperature range. A fit is always made at a temperature the part
+/// can have.
+pub const REFERENCE_TEMP_RANGE_C: (f32, f32) = (-55.0, 125.0);
 
 /// Largest accepted gyro g-sensitivity entry, rad/s per m/s² (≈ 5.6 °/s per g; MEMS gyros are
 /// specified at 0.01–0.2 °/s per g).
@@ -168,6 +175,8 @@ fn check_extended(sensor: &SensorCalibration, range: f32) -> Result<(), InvalidP
     let dt = MAX_DELTA_T_C;
     let mut plausible = true;
     if let Some(bias_temp) = sensor.bias_temp {
+        let (t_low, t_high) = REFERENCE_TEMP_RANGE_C;
+        plausible &= (t_low..=t_high).contains(&bias_temp.t_ref_c);
         for axis in 0..3 {
             let [c1, c2, c3] = bias_temp.coeffs.map(|degree| degree[axis].abs());
             let worst_shift = dt * (c1 + dt * (c2 + dt * c3));
