@@ -28,7 +28,7 @@
 use imucal_protocol::{CalibratedSample, CalibrationSet, InvalidParamsReason, SensorCalibration};
 
 use crate::imu::{RawSample, SensorScales};
-use crate::validate::validate;
+use crate::validate::{validate, MAX_DELTA_T_C};
 
 type Vec3 = [f32; 3];
 type Mat3 = [[f32; 3]; 3];
@@ -220,7 +220,9 @@ impl SensorCorrection {
     #[inline(always)]
     fn apply(&self, counts: [i16; 3], temp_c: f32) -> Vec3 {
         let c = counts.map(f32::from);
-        let dt = temp_c - self.t_ref_c;
+        // Validation bounds the extended terms over |ΔT| ≤ MAX_DELTA_T_C; clamping keeps a reading
+        // on the thermometer's rail inside that checked span.
+        let dt = (temp_c - self.t_ref_c).clamp(-MAX_DELTA_T_C, MAX_DELTA_T_C);
         let offset = self.offset_at(dt);
         let mut y = match self.nonlinearity {
             None => {
