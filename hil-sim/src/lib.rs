@@ -8,6 +8,8 @@
 pub mod board;
 pub mod effects;
 pub mod error;
+pub mod feed;
+pub mod link_faults;
 pub mod lsm9ds1_chip;
 pub mod physics;
 pub mod poser;

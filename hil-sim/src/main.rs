@@ -33,6 +33,15 @@ Stops at end of stdin (Ctrl-D), after --seconds, or on Ctrl-C. The simulated per
 of twelve positions until the firmware has captured it (or --max-hold passes), tumbles for the
 magnetometer, then rests.")]
     Serve(imucal_hil_sim::serve::ServeArgs),
+    /// Feed an emulated board's sensor UART (a unix socket served by QEMU) with timed holds.
+    #[command(after_help = "\
+Example:
+  imucal-hil-sim feed --socket /tmp/uart1.sock --seed 7 --speed 2 --truth truth.json
+
+The person waits --lead-in feed seconds in the first position, holds each of the twelve
+positions for --hold feed seconds (they cannot see the board, so holds are timed), tumbles for
+the magnetometer, then rests until the emulator closes the socket or --seconds pass.")]
+    Feed(imucal_hil_sim::feed::FeedArgs),
     /// Simulate a person following a calibration schedule and write the uncalibrated recording.
     #[command(after_help = "\
 Example:
@@ -80,6 +89,7 @@ hold label during static holds and empty while moving.")]
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     match cli.command.unwrap_or_default() {
         Command::Serve(args) => Ok(imucal_hil_sim::serve::run_command(&args)?),
+        Command::Feed(args) => Ok(imucal_hil_sim::feed::run_command(&args)?),
         Command::Record {
             seed,
             schedule,

@@ -12,6 +12,7 @@
 
 mod bench;
 mod build;
+mod calibrate_e2e;
 mod qemu;
 mod qemu_test;
 // The Nano 33 BLE Sense's timer extension depends only on core; its tests run here.

@@ -2,27 +2,33 @@
 //!
 //! UART0 is a pseudo-terminal owned by this program (`TTYPort::pair`, QEMU opens the slave), the
 //! same kind of serial port the host tool uses. UART1 is a unix socket served by QEMU, to which a
-//! feeder thread writes the board's sensor feed: a `Scales` frame (repeated, so a rebooted
-//! firmware finds it), then samples at the announced rate whose magnetometer x count is the
-//! sample's index, so every streamed sample can be matched to the one fed. A second unix socket
-//! carries QEMU's monitor, used for `system_reset` (a soft reset that keeps RAM).
+//! feeder thread writes the simulator's sensor feed (`imucal_hil_sim::feed`): the simulated
+//! world, the board's true sensor errors and noise, and a person with timed holds. Every fed
+//! sample is logged with its feed time, so every streamed sample can be matched to the one fed.
+//! A second unix socket carries QEMU's monitor, used for `system_reset` (a soft reset that keeps
+//! RAM).
 //!
-//! Checks, in order: Hello/Welcome (version, announced scales), Ping, raw stream equal to the
-//! feed, write/commit/read-back of a parameter set, calibrated stream equal to `A·(σ·c − b)`
-//! computed here, soft reset with the set still active, and a power cycle (new QEMU) that
-//! starts on identity. The end-to-end calibration with `imucal calibrate` and the simulator's
-//! world model is not run yet; the summary says so.
+//! Protocol checks (the person waits at rest): Hello/Welcome (version, announced scales), Ping,
+//! raw stream equal to the feed, write/commit/read-back of a parameter set, calibrated stream
+//! equal to `A·(σ·c − b)` computed here, soft reset with the set still active, and a power cycle
+//! (new QEMU) that starts on identity. Then the end-to-end calibration (see
+//! [`crate::calibrate_e2e`]): `imucal calibrate` against a fresh QEMU while the person goes
+//! through the twelve positions, the tumble and the rest; its parameters against the simulated
+//! truth, its verification, its errors at rest against the targets, and a soft reset that keeps
+//! the calibrated set.
 
 use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use imucal_protocol::feed::{self, FeedFrame, MAX_FEED_FRAME};
+use imucal_hil_sim::feed::{
+    connect_feed_socket, run_feed, FeedControl, FeedOptions, FeedStats, FeedWorld,
+};
+use imucal_hil_sim::Truth;
 use imucal_protocol::{
     encode_frame, CalibrationSet, DeviceMessage, Event, FrameDecoder, RawSample, Request,
     RequestBody, ResponseBody, SensorCalibration, SensorScales, StreamKind, MAX_FRAME,
@@ -30,56 +36,80 @@ use imucal_protocol::{
 };
 use serialport::{SerialPort, TTYPort};
 
+use crate::calibrate_e2e::{self, Relay, ACCEL_TARGET_MG, MAG_TARGET_PCT};
 use crate::qemu;
 
-/// The emulated chip: an LSM9DS1 at ±4 g, ±500 °/s, ±8 gauss, 119 Hz (datasheet sensitivities).
-const SCALES: SensorScales = SensorScales {
-    accel_mps2_per_count: 0.122e-3 * 9.806_65,
-    gyro_rads_per_count: 17.5e-3 * std::f32::consts::PI / 180.0,
-    mag_ut_per_count: 0.029,
-    temp_c_per_count: 1.0 / 16.0,
-    temp_offset_c: 25.0,
-    accel_range_mps2: 4.0 * 9.806_65,
-    gyro_range_rads: 500.0 * std::f32::consts::PI / 180.0,
-    mag_range_ut: 800.0,
-    sample_rate_hz: 119.0,
-};
-/// Sample period of the feed, µs (119 Hz rounded as the firmware rounds it).
-const PERIOD_US: u64 = 8403;
-/// A `Scales` frame is repeated every this many samples.
-const SCALES_EVERY: u64 = 32;
+/// Seed of the simulated board and person.
+const SEED: u64 = 7;
+/// Feed seconds per wall second during the end-to-end calibration (QEMU keeps up with this on
+/// two shared cores; see the lag figure printed with the results).
+const E2E_SPEED: f64 = 2.0;
+/// Feed seconds each of the twelve positions is held: the host needs about 0.8 s of stillness,
+/// a request round trip and a 1.5 s capture, so 6 s leaves room for a slow host.
+const E2E_HOLD_S: f64 = 6.0;
+/// Longest wall time of `imucal calibrate`.
+const E2E_LIMIT: Duration = Duration::from_secs(240);
 
-/// The fed sample with index `i`: a board lying flat, with the index in the magnetometer x count.
-fn fed_sample(i: u64) -> RawSample {
-    let wobble = (i % 7) as i16 - 3;
-    RawSample {
-        accel: [40 + wobble, -25, 8190 - wobble],
-        gyro: [3, -2 + wobble, 1],
-        mag: [(i % 30_000) as i16, -800 + wobble, 400],
-        temp: 64 + wobble,
-    }
-}
+/// Every sample fed, indexed by feed time / period.
+type FedLog = Arc<Mutex<Vec<RawSample>>>;
 
-/// Writes the feed to QEMU's UART1 socket until told to stop.
+/// Writes the simulator's feed to QEMU's UART1 socket until told to stop.
 struct Feeder {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<Result<(), String>>>,
+    control: Arc<FeedControl>,
+    thread: Option<JoinHandle<Result<FeedStats, String>>>,
+    log: FedLog,
+    period_us: u64,
+    scales: SensorScales,
+    truth: Truth,
+    timetable_s: f64,
 }
 
 impl Feeder {
-    fn start(socket: PathBuf) -> Self {
-        let stop = Arc::new(AtomicBool::new(false));
-        let flag = Arc::clone(&stop);
-        let thread = std::thread::spawn(move || feed_loop(&socket, &flag));
-        Self {
-            stop,
+    fn start(socket: PathBuf, options: &FeedOptions, speed: f64) -> Result<Self, String> {
+        let mut world = FeedWorld::new(options).map_err(|e| format!("the simulated world: {e}"))?;
+        let control = Arc::new(FeedControl::new());
+        let log: FedLog = Arc::new(Mutex::new(Vec::new()));
+        let (period_us, scales, truth) = (world.period_us(), world.scales(), world.truth());
+        let timetable_s = world.timetable_s();
+        let thread_control = Arc::clone(&control);
+        let thread_log = Arc::clone(&log);
+        let thread = std::thread::spawn(move || {
+            let mut stream =
+                connect_feed_socket(&socket, Duration::from_secs(10)).map_err(|e| e.to_string())?;
+            run_feed(
+                &mut world,
+                &mut stream,
+                speed,
+                &thread_control,
+                &mut |_, sample| {
+                    thread_log
+                        .lock()
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .push(*sample)
+                },
+            )
+            .map_err(|e| e.to_string())
+        });
+        Ok(Self {
+            control,
             thread: Some(thread),
-        }
+            log,
+            period_us,
+            scales,
+            truth,
+            timetable_s,
+        })
     }
 
-    fn finish(mut self) -> Result<(), String> {
-        self.stop.store(true, Ordering::Relaxed);
-        self.thread.take().map_or(Ok(()), |t| {
+    /// The sample fed with index `i`, if it was fed.
+    fn fed(&self, i: u64) -> Option<RawSample> {
+        let log = self.log.lock().unwrap_or_else(PoisonError::into_inner);
+        usize::try_from(i).ok().and_then(|i| log.get(i).copied())
+    }
+
+    fn finish(mut self) -> Result<FeedStats, String> {
+        self.control.stop();
+        self.thread.take().map_or(Ok(FeedStats::default()), |t| {
             t.join()
                 .unwrap_or_else(|_| Err("the feeder thread panicked".into()))
         })
@@ -88,7 +118,7 @@ impl Feeder {
 
 impl Drop for Feeder {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
+        self.control.stop();
     }
 }
 
@@ -108,45 +138,12 @@ fn connect_retrying(path: &Path, what: &str) -> Result<UnixStream, String> {
     }
 }
 
-fn feed_loop(socket: &Path, stop: &AtomicBool) -> Result<(), String> {
-    let mut stream = connect_retrying(socket, "UART1")?;
-    let started = Instant::now();
-    let mut buf = [0u8; MAX_FEED_FRAME];
-    let mut send = |stream: &mut UnixStream, frame: &FeedFrame| -> Result<(), String> {
-        let n = feed::encode(frame, &mut buf)
-            .map_err(|e| format!("feed frame does not encode: {e:?}"))?;
-        stream
-            .write_all(&buf[..n])
-            .map_err(|e| format!("writing the feed to QEMU failed: {e}"))
-    };
-    let mut i = 0u64;
-    while !stop.load(Ordering::Relaxed) {
-        if i.is_multiple_of(SCALES_EVERY) {
-            send(&mut stream, &FeedFrame::Scales(SCALES))?;
-        }
-        let t_us = i * PERIOD_US;
-        send(
-            &mut stream,
-            &FeedFrame::Sample {
-                t_us,
-                sample: fed_sample(i),
-            },
-        )?;
-        i += 1;
-        // Real-time pacing keeps the firmware's feed-derived clock close to wall time.
-        let due = started + Duration::from_micros(i * PERIOD_US);
-        if let Some(wait) = due.checked_duration_since(Instant::now()) {
-            std::thread::sleep(wait);
-        }
-    }
-    Ok(())
-}
-
 /// One QEMU process with its pty, feeder and monitor.
 struct Board {
     qemu: Child,
     port: TTYPort,
-    feeder: Feeder,
+    /// `None` only once stopped.
+    feeder: Option<Feeder>,
     monitor_socket: PathBuf,
     decoder: FrameDecoder<MAX_FRAME>,
     seq: u16,
@@ -156,7 +153,13 @@ struct Board {
 }
 
 impl Board {
-    fn start(elf: &Path, dir: &Path, run: u32) -> Result<Self, String> {
+    fn start(
+        elf: &Path,
+        dir: &Path,
+        run: u32,
+        feed: &FeedOptions,
+        speed: f64,
+    ) -> Result<Self, String> {
         let (master, mut slave) =
             TTYPort::pair().map_err(|e| format!("could not create a pseudo-terminal pair: {e}"))?;
         // QEMU opens the slave itself; our handle must not lock it.
@@ -194,14 +197,14 @@ impl Board {
             )
         })?;
         drop(slave);
-        let feeder = Feeder::start(feed_socket);
+        let feeder = Feeder::start(feed_socket, feed, speed)?;
         let mut port = master;
         port.set_timeout(Duration::from_millis(50))
             .map_err(|e| format!("setting the pty timeout failed: {e}"))?;
         Ok(Self {
             qemu,
             port,
-            feeder,
+            feeder: Some(feeder),
             monitor_socket,
             decoder: FrameDecoder::new(),
             seq: 0,
@@ -292,18 +295,19 @@ impl Board {
         Ok(())
     }
 
-    fn stop(mut self) -> Result<(), String> {
+    /// The running feeder.
+    fn feeder(&self) -> Result<&Feeder, String> {
+        self.feeder
+            .as_ref()
+            .ok_or_else(|| "the feeder has stopped".into())
+    }
+
+    /// Stops QEMU and the feeder; returns the feeder's counters.
+    fn stop(mut self) -> Result<FeedStats, String> {
         qemu::kill(&mut self.qemu);
-        let feeder = std::mem::replace(
-            &mut self.feeder,
-            Feeder {
-                stop: Arc::new(AtomicBool::new(true)),
-                thread: None,
-            },
-        );
-        // The feeder fails with a broken pipe once QEMU is gone; that is expected here.
-        let _ = feeder.finish();
-        Ok(())
+        self.feeder
+            .take()
+            .map_or(Ok(FeedStats::default()), Feeder::finish)
     }
 }
 
@@ -333,16 +337,19 @@ fn test_set() -> CalibrationSet {
     }
 }
 
-/// `A·(σ·c − b)` in f64.
-fn expected(cal: &SensorCalibration, counts: [i16; 3], per_count: f32) -> [f64; 3] {
-    let u: Vec<f64> = (0..3)
-        .map(|k| f64::from(per_count) * f64::from(counts[k]) - f64::from(cal.b[k]))
-        .collect();
+/// `A·(σ·c − b)` in f64, and per output the sum of the terms' sizes `Σⱼ |Aᵢⱼ|·(|σcⱼ| + |bⱼ|)`.
+fn expected(cal: &SensorCalibration, counts: [i16; 3], per_count: f32) -> ([f64; 3], [f64; 3]) {
+    let reading = counts.map(|c| f64::from(per_count) * f64::from(c));
+    let offset = cal.b.map(f64::from);
     let mut y = [0.0; 3];
-    for (row, out) in cal.a.iter().zip(y.iter_mut()) {
-        *out = row.iter().zip(&u).map(|(a, u)| f64::from(*a) * u).sum();
+    let mut size = [0.0; 3];
+    for ((row, out), size) in cal.a.iter().zip(y.iter_mut()).zip(size.iter_mut()) {
+        for ((a, x), b) in row.iter().zip(reading).zip(offset) {
+            *out += f64::from(*a) * (x - b);
+            *size += f64::from(*a).abs() * (x.abs() + b.abs());
+        }
     }
-    y
+    (y, size)
 }
 
 /// Records the outcome of each check; a check that did not run is listed as such, never as passed.
@@ -362,29 +369,42 @@ impl Report {
     }
 }
 
-/// Runs every check; fails when any check fails.
+/// Runs every check; fails when any check fails. The end-to-end calibration runs only when the
+/// host tool builds; otherwise the output says plainly that it did not run, and the test fails.
 pub fn run(elf: &Path) -> Result<(), String> {
     let dir = std::env::temp_dir().join(format!("imucal-qemu-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     println!("qemu-test: firmware {}", elf.display());
     let mut report = Report { lines: Vec::new() };
-    let result = checks(elf, &dir, &mut report);
+    let started = Instant::now();
+    let result = checks(elf, &dir, &mut report).and_then(|()| {
+        println!("qemu-test: end-to-end calibration");
+        end_to_end(elf, &dir, &mut report)
+    });
     let _ = std::fs::remove_dir_all(&dir);
-    println!("not run: end-to-end `imucal calibrate` against QEMU with the simulator's world model (those pieces are not available to this test yet)");
     let failed = report.lines.iter().filter(|(_, r)| r.is_err()).count();
+    println!(
+        "qemu-test: {} checks ran in {:.0} s, {} passed, {failed} failed",
+        report.lines.len(),
+        started.elapsed().as_secs_f64(),
+        report.lines.len() - failed
+    );
     result?;
     if failed > 0 {
         return Err(format!("{failed} of {} checks failed", report.lines.len()));
     }
-    println!(
-        "qemu-test: all {} checks that ran passed",
-        report.lines.len()
-    );
+    println!("qemu-test: all {} checks passed", report.lines.len());
     Ok(())
 }
 
+/// Feed options of the protocol checks: the person never starts, so the board lies still.
+fn resting_feed() -> FeedOptions {
+    FeedOptions::new(SEED)
+}
+
 fn checks(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
-    let mut board = Board::start(elf, dir, 1)?;
+    let mut board = Board::start(elf, dir, 1, &resting_feed(), 1.0)?;
+    let scales = board.feeder()?.scales;
 
     let welcome = board.hello();
     let hello_ok = report.check(
@@ -395,9 +415,9 @@ fn checks(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
                     "protocol {} vs host {PROTOCOL_MAJOR}",
                     w.protocol_major
                 ))
-            } else if w.scales != SCALES {
+            } else if w.scales != scales {
                 Err(format!(
-                    "scales {:?} differ from those fed on UART1 {SCALES:?}",
+                    "scales {:?} differ from those fed on UART1 {scales:?}",
                     w.scales
                 ))
             } else {
@@ -409,7 +429,7 @@ fn checks(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
         }),
     );
     if !hello_ok {
-        return board.stop();
+        return board.stop().map(|_| ());
     }
 
     let ping = board.request(RequestBody::Ping(0xC0FF_EE11), Duration::from_secs(2));
@@ -434,7 +454,7 @@ fn checks(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
     let raw = std::mem::take(&mut board.raw_seen);
     report.check(
         "raw stream equals the UART1 feed",
-        check_raw(&ack, &stop_ack, &raw),
+        check_raw(board.feeder()?, &ack, &stop_ack, &raw),
     );
 
     // Parameters: write, commit, read back.
@@ -474,7 +494,7 @@ fn checks(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
     let calibrated = std::mem::take(&mut board.calibrated_seen);
     report.check(
         "calibrated stream equals A(sigma c - b)",
-        check_calibrated(&ack, &calibrated, &set),
+        check_calibrated(board.feeder()?, &ack, &calibrated, &set),
     );
 
     // Soft reset: RAM (and so the parameter storage) survives; the firmware reboots.
@@ -505,7 +525,7 @@ fn checks(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
     board.stop()?;
 
     // Power cycle: a new QEMU process starts with erased storage, so on identity.
-    let mut board = Board::start(elf, dir, 2)?;
+    let mut board = Board::start(elf, dir, 2, &resting_feed(), 1.0)?;
     let cold = board
         .hello()
         .and_then(|_| board.request(RequestBody::GetParams, Duration::from_secs(2)));
@@ -518,7 +538,185 @@ fn checks(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
             other => Err(format!("{other:?}")),
         },
     );
-    board.stop()
+    board.stop().map(|_| ())
+}
+
+/// `imucal calibrate` against the firmware while the simulated person goes through the session.
+fn end_to_end(elf: &Path, dir: &Path, report: &mut Report) -> Result<(), String> {
+    let tool = match calibrate_e2e::build_host_tool(&crate::build::repo_root()) {
+        Ok(tool) => tool,
+        Err(why) => {
+            report.check(
+                "imucal calibrate end to end",
+                Err(format!("NOT RUN: the host tool could not be built: {why}")),
+            );
+            return Ok(());
+        }
+    };
+    let mut options = FeedOptions::new(SEED);
+    options.hold_s = E2E_HOLD_S;
+    // Without tremor the only errors are white noise and quantisation, from which the
+    // tolerances below are derived.
+    options.tremor = false;
+    let mut board = Board::start(elf, dir, 3, &options, E2E_SPEED)?;
+    if let Err(why) = board.hello() {
+        report.check("imucal calibrate end to end", Err(why));
+        return board.stop().map(|_| ());
+    }
+    let (truth, control, timetable_s) = {
+        let feeder = board.feeder()?;
+        (
+            feeder.truth.clone(),
+            Arc::clone(&feeder.control),
+            feeder.timetable_s,
+        )
+    };
+    let board_side = board
+        .port
+        .try_clone_native()
+        .map_err(|e| format!("could not share the board's pty with the relay: {e}"))?;
+    let relay = Relay::start(board_side, Arc::clone(&control))?;
+    let session_dir = dir.join("session");
+    let args: Vec<String> = [
+        "calibrate",
+        "--port",
+        &relay.host_path,
+        "--yes",
+        "--json",
+        "--out",
+        &session_dir.display().to_string(),
+        "--field-ut",
+        &truth.world.earth_field.magnitude_ut.to_string(),
+        "--gravity",
+        &truth.world.gravity_mps2.to_string(),
+        "--pose-timeout",
+        "60",
+        "--mag-timeout",
+        "60",
+        "--rest-timeout",
+        "60",
+    ]
+    .map(String::from)
+    .to_vec();
+    println!(
+        "  running imucal calibrate (seed {SEED}, {E2E_SPEED}x real time, {E2E_HOLD_S} s holds, \
+         {timetable_s:.0} s of positions and tumble, then rest)"
+    );
+    let run = calibrate_e2e::run_tool(&tool, &args, E2E_LIMIT);
+    let relayed = relay.finish();
+    let run = match run {
+        Ok(run) => run,
+        Err(why) => {
+            report.check("imucal calibrate completes and verifies", Err(why));
+            return board.stop().map(|_| ());
+        }
+    };
+    let summary: Result<serde_json::Value, String> = if run.success {
+        serde_json::from_str(&run.stdout)
+            .map_err(|e| format!("its JSON summary does not parse: {e}"))
+    } else {
+        Err(format!(
+            "imucal calibrate exited with {} after {:.0} s; its last lines: {}",
+            run.status,
+            run.wall_s,
+            run.stderr_tail.join(" / ")
+        ))
+    };
+    let completed = report.check(
+        "imucal calibrate completes and verifies",
+        summary.as_ref().map_err(Clone::clone).and_then(|summary| {
+            let verified = summary["verified"].as_bool() == Some(true);
+            let session_s = calibrate_e2e::number(summary, &["session_seconds"])?;
+            let relayed = relayed.as_ref().map_err(Clone::clone)?;
+            let text = format!(
+                "{} positions, {} magnetometer regions, {session_s:.0} s of board time in \
+                 {:.0} s wall; {} bytes to the board, {} from it",
+                summary["poses"],
+                summary["mag_regions_covered"],
+                run.wall_s,
+                relayed.to_board,
+                relayed.to_host
+            );
+            if verified {
+                Ok(format!("verified; {text}"))
+            } else {
+                Err(format!("the written set was not verified; {text}"))
+            }
+        }),
+    );
+    let Ok(summary) = summary else {
+        return board.stop().map(|_| ());
+    };
+    for (name, result) in calibrate_e2e::compare_with_truth(&summary, &truth) {
+        report.check(&name, result);
+    }
+    let accel_mg = calibrate_e2e::number(&summary, &["accel_rest_error_mg"]);
+    let mag_pct = calibrate_e2e::number(&summary, &["mag_rest_error_pct"]);
+    let gyro_dps = calibrate_e2e::number(&summary, &["gyro_rest_error_dps"]);
+    report.check(
+        "calibrated stream at rest meets the accuracy targets",
+        accel_mg
+            .and_then(|a| mag_pct.map(|m| (a, m)))
+            .and_then(|(a, m)| {
+                let text = format!(
+                "|a| error {a:.3} mg (target < {ACCEL_TARGET_MG}), |m| error {m:.3} % (target < \
+                 {MAG_TARGET_PCT}), gyro rate {} °/s",
+                gyro_dps.map_or_else(|e| e, |g| format!("{g:.4}"))
+            );
+                if a.abs() < ACCEL_TARGET_MG && m.abs() < MAG_TARGET_PCT {
+                    Ok(text)
+                } else {
+                    Err(text)
+                }
+            }),
+    );
+
+    // Soft reset: the calibrated set stays active.
+    let crc = summary["params_crc"]
+        .as_str()
+        .and_then(|t| u32::from_str_radix(t.trim_start_matches("0x"), 16).ok());
+    let uptime_before = status_uptime(&mut board);
+    board.monitor("system_reset")?;
+    let after = board.hello().and_then(|_| {
+        let status = board.request(RequestBody::Status, Duration::from_secs(2))?;
+        let params = board.request(RequestBody::GetParams, Duration::from_secs(2))?;
+        Ok((status, params))
+    });
+    report.check(
+        "soft reset keeps the calibrated set active",
+        match (completed, crc, after, uptime_before) {
+            (false, _, _, _) => Err("not meaningful: the calibration did not complete".into()),
+            (true, None, _, _) => Err("the summary has no readable params_crc".into()),
+            (
+                true,
+                Some(crc),
+                Ok((ResponseBody::Status(status), ResponseBody::Params(back))),
+                Ok(before),
+            ) if status.uptime_ms < before && status.active_crc == crc && back.crc32() == crc => {
+                Ok(format!(
+                    "uptime {before} ms -> {} ms (rebooted), GetParams CRC {crc:08x} as written",
+                    status.uptime_ms
+                ))
+            }
+            (true, Some(crc), other, before) => Err(format!(
+                "expected CRC {crc:08x}; after reset {other:?}, uptime before {before:?}"
+            )),
+        },
+    );
+    let last_sample_s = board
+        .feeder()
+        .map(|f| f.control.time_us() as f64 * 1e-6)
+        .unwrap_or_default();
+    let stats = board.stop()?;
+    println!(
+        "  feed: {:.1} s of board time in {:.1} s wall ({:.2}x), largest lag behind the pace \
+         {:.2} s, last sample at {last_sample_s:.1} s",
+        stats.feed_time_s,
+        stats.wall_time_s,
+        stats.feed_time_s / stats.wall_time_s.max(1e-9),
+        stats.max_lag_s
+    );
+    Ok(())
 }
 
 fn status_uptime(board: &mut Board) -> Result<u64, String> {
@@ -533,9 +731,10 @@ fn status_uptime(board: &mut Board) -> Result<u64, String> {
 const MAX_TIME_QUANTISATION_US: u64 = 8;
 
 /// The feed index of a sample streamed with time `t_us`, checking the time against the feed's.
-fn feed_index(t_us: u64) -> Result<u64, String> {
-    let index = (t_us + PERIOD_US / 2) / PERIOD_US;
-    let fed_at = index * PERIOD_US;
+fn feed_index(feeder: &Feeder, t_us: u64) -> Result<u64, String> {
+    let period = feeder.period_us;
+    let index = (t_us + period / 2) / period;
+    let fed_at = index * period;
     if t_us > fed_at || fed_at - t_us > MAX_TIME_QUANTISATION_US {
         return Err(format!(
             "streamed time {t_us} us is not a feed time (nearest {fed_at} us)"
@@ -544,7 +743,17 @@ fn feed_index(t_us: u64) -> Result<u64, String> {
     Ok(index)
 }
 
+/// The fed sample a sample streamed at `t_us` must be.
+fn fed_at(feeder: &Feeder, t_us: u64) -> Result<(u64, RawSample), String> {
+    let index = feed_index(feeder, t_us)?;
+    feeder
+        .fed(index)
+        .map(|sample| (index, sample))
+        .ok_or_else(|| format!("the firmware streamed a sample at {t_us} us that was never fed"))
+}
+
 fn check_raw(
+    feeder: &Feeder,
     ack: &Result<ResponseBody, String>,
     stop_ack: &Result<ResponseBody, String>,
     raw: &[(RawSample, u64)],
@@ -556,25 +765,27 @@ fn check_raw(
     if raw.len() < 20 {
         return Err(format!("only {} samples streamed in 0.8 s", raw.len()));
     }
+    let mut previous = None;
     for (k, (sample, t_us)) in raw.iter().enumerate() {
-        let index = feed_index(*t_us)?;
-        if *sample != fed_sample(index) {
+        let (index, fed) = fed_at(feeder, *t_us)?;
+        if *sample != fed {
             return Err(format!(
-                "streamed sample {k} at {t_us} us is {sample:?}, the feed sent {:?} at {} us",
-                fed_sample(index),
-                index * PERIOD_US
+                "streamed sample {k} at {t_us} us is {sample:?}, the feed sent {fed:?} at {} us",
+                index * feeder.period_us
             ));
         }
-        if k > 0 && index != feed_index(raw[k - 1].1)? + 1 {
+        if previous.is_some_and(|p: u64| index != p + 1) {
             return Err(format!(
                 "sample {k} (feed index {index}) does not follow the previous one"
             ));
         }
+        previous = Some(index);
     }
-    Ok(format!("{} consecutive samples identical to the fed ones, with their feed timestamps (within the 4 us batch tick)", raw.len()))
+    Ok(format!("{} consecutive samples identical to the simulator's, with their feed timestamps (within the 4 us batch tick)", raw.len()))
 }
 
 fn check_calibrated(
+    feeder: &Feeder,
     ack: &Result<ResponseBody, String>,
     calibrated: &[(imucal_protocol::CalibratedSample, u64)],
     set: &CalibrationSet,
@@ -588,27 +799,28 @@ fn check_calibrated(
             calibrated.len()
         ));
     }
+    let scales = feeder.scales;
     let mut worst = 0.0f64;
     for (sample, t_us) in calibrated {
-        let raw = fed_sample(feed_index(*t_us)?);
+        let (_, raw) = fed_at(feeder, *t_us)?;
         let sensors = [
             (
                 &set.accel,
                 raw.accel,
-                SCALES.accel_mps2_per_count,
+                scales.accel_mps2_per_count,
                 sample.accel,
             ),
-            (&set.gyro, raw.gyro, SCALES.gyro_rads_per_count, sample.gyro),
-            (&set.mag, raw.mag, SCALES.mag_ut_per_count, sample.mag),
+            (&set.gyro, raw.gyro, scales.gyro_rads_per_count, sample.gyro),
+            (&set.mag, raw.mag, scales.mag_ut_per_count, sample.mag),
         ];
         for (cal, counts, per_count, got) in sensors {
-            let want = expected(cal, counts, per_count);
-            for (g, w) in got.iter().zip(want) {
-                // f32 evaluation of a 3-term dot product: a few ulps of the largest term
-                // (|A|·|σc| ≲ 1.1 × the reading), so 1e-5 relative plus a floor for zeros.
-                let tolerance = 1e-5 * w.abs().max(1e-3);
+            let (want, size) = expected(cal, counts, per_count);
+            for ((g, w), size) in got.iter().zip(want).zip(size) {
+                // f32 evaluation of `σc − b` and a 3-term dot product: a few ulps (6e-8) of the
+                // largest term, so 1e-5 of the sum of |terms| plus a floor for zeros.
+                let tolerance = 1e-5 * size.max(1e-3);
                 let error = (f64::from(*g) - w).abs();
-                worst = worst.max(error / w.abs().max(1e-3));
+                worst = worst.max(error / size.max(1e-3));
                 if error > tolerance {
                     return Err(format!(
                         "at {t_us} us: firmware {g}, expected {w} (error {error:e})"
@@ -618,7 +830,7 @@ fn check_calibrated(
         }
     }
     Ok(format!(
-        "{} samples, worst relative error {worst:.1e} (f32 rounding)",
+        "{} samples, worst error {worst:.1e} of the terms' size (f32 rounding)",
         calibrated.len()
     ))
 }
