@@ -6,6 +6,23 @@
 //! not determine a rotation of the output, so norm-model fits fix the gauge by taking `A`
 //! upper-triangular (9 unknowns); see `ARCHITECTURE.md`, "The fitting problems, precisely".
 
+pub mod alignment;
+pub mod axis_aligned;
+pub mod chen;
+pub mod covariance;
+pub mod frosio;
+pub mod gyro_bias;
+pub mod gyro_scale;
+pub mod li;
+pub mod linalg;
+pub mod lm;
+pub mod loo;
+pub mod merayo;
+pub mod minmax;
+pub mod norm_lm;
+pub mod six_position;
+pub mod validate;
+
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 /// 3-vector of f64.
@@ -45,7 +62,10 @@ pub struct Calibration {
 impl Calibration {
     /// The identity calibration.
     pub fn identity() -> Self {
-        Self { a: Mat3::identity(), b: Vec3::zeros() }
+        Self {
+            a: Mat3::identity(),
+            b: Vec3::zeros(),
+        }
     }
 
     /// Apply the calibration to one reading.
@@ -114,6 +134,8 @@ pub enum Method {
     Frosio,
     /// Merayo's ellipsoid method (seed 000 Table 1–2).
     Merayo,
+    /// Gyroscope scale and misalignment from rotations between still poses (Tedaldi et al. 2014).
+    GyroScale,
 }
 
 impl Method {
@@ -129,6 +151,7 @@ impl Method {
             Method::Lm => "lm",
             Method::Frosio => "frosio",
             Method::Merayo => "merayo",
+            Method::GyroScale => "gyro-scale",
         }
     }
 }

@@ -1,0 +1,62 @@
+//! Speed of the fits: Li's ellipsoid on 10⁶ magnetometer samples, the 12-pose accelerometer LM,
+//! and the 300-sample magnetometer LM. Run: `cargo bench -p imucal --bench fit_speed`.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use imucal::fit::li::{fit_li, LiOptions};
+use imucal::fit::norm_lm::{fit_accel_lm_detailed, fit_mag_lm};
+use imucal::synthetic::{
+    accel_poses, directions, mag_samples, random_calibration, rng, sphere_directions, PoseSet,
+    TruthSpec,
+};
+
+fn bench_fits(c: &mut Criterion) {
+    let mag_spec = TruthSpec {
+        scale_error: 0.2,
+        cross_axis: 0.05,
+        offset_ratio: 2.0,
+        reference: 50.0,
+        upper_triangular: false,
+    };
+    let mag_truth = random_calibration(&mut rng(1), &mag_spec);
+    let mut r = rng(2);
+    let million_dirs = sphere_directions(&mut r, 1_000_000);
+    let million = mag_samples(&mut r, &mag_truth, &million_dirs, 50.0, 0.5);
+    let dirs300 = sphere_directions(&mut r, 300);
+    let cloud300 = mag_samples(&mut r, &mag_truth, &dirs300, 50.0, 0.5);
+
+    let accel_spec = TruthSpec {
+        scale_error: 0.05,
+        cross_axis: 0.02,
+        offset_ratio: 0.05,
+        reference: 9.81,
+        upper_triangular: false,
+    };
+    let accel_truth = random_calibration(&mut rng(3), &accel_spec);
+    let dirs12 = directions(&mut r, PoseSet::TwelvePositions);
+    let poses = accel_poses(&mut r, &accel_truth, &dirs12, 9.81, 0.02, 100);
+
+    let mut group = c.benchmark_group("fit");
+    group.sample_size(10);
+    group.bench_function("li_1e6_mag_samples", |b| {
+        b.iter(|| {
+            fit_li(
+                &million,
+                50.0,
+                LiOptions {
+                    subtract_mean: true,
+                },
+            )
+            .map(|f| f.cal)
+        })
+    });
+    group.finish();
+    c.bench_function("lm_accel_12_poses", |b| {
+        b.iter(|| fit_accel_lm_detailed(&poses, 9.81).map(|o| o.fit.cal))
+    });
+    c.bench_function("lm_mag_300_samples", |b| {
+        b.iter(|| fit_mag_lm(&cloud300, 50.0).map(|f| f.cal))
+    });
+}
+
+criterion_group!(benches, bench_fits);
+criterion_main!(benches);

@@ -1,0 +1,289 @@
+//! Gyroscope scale and misalignment after Tedaldi, Pretto & Menegatti (2014), "A robust and easy
+//! to implement method for IMU calibration without external equipments", ICRA 2014, section IV-B.
+//!
+//! Between two consecutive still poses the board is turned; the calibrated rate `ω = A·ω_raw`
+//! (`ω_raw` bias-corrected, in the gyroscope's nominal units) is integrated as a quaternion with
+//! fourth-order Runge–Kutta, `q̇ = ½·q ⊗ (0, ω)`, giving the rotation `R` from the start pose to
+//! the end pose. Gravity is fixed in the world, so the start pose's calibrated gravity direction
+//! rotated into the end pose, `Rᵀ·ĝ_before`, must equal the measured `ĝ_after`. The 9 entries of
+//! a full `A` (scale, cross-axis, and the gyro-to-accelerometer misalignment) minimise the
+//! mismatch by Levenberg–Marquardt, Jacobian by central differences. The residual of a motion is
+//! the mismatch's two components perpendicular to `ĝ_after` (≈ angle errors in radians). A
+//! rotation about gravity leaves gravity unchanged, so motions must turn about varied axes.
+
+use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion};
+
+use super::covariance::{
+    calibration_std, normal_covariance, param_names, reduced_chi_square, FULL_MATRIX_LAYOUT,
+};
+use super::gyro_bias::fit_gyro_bias;
+use super::linalg::{condition_number, rms};
+use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
+use crate::recording::{Recording, Sensor};
+use crate::still::StillReport;
+
+/// One motion between two still poses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GyroMotion {
+    /// Calibrated accelerometer reading (mean) in the still pose before the motion.
+    pub gravity_before: Vec3,
+    /// Calibrated accelerometer reading (mean) in the still pose after the motion.
+    pub gravity_after: Vec3,
+    /// Bias-corrected gyroscope samples, evenly spaced, from the end of the first pose to the
+    /// start of the second.
+    pub rates: Vec<Vec3>,
+    /// Sample interval, in seconds.
+    pub dt: f64,
+}
+
+/// Rotation (body at the end → body at the start) from integrating `A·rates` with RK4 on the
+/// quaternion, the rate interpolated linearly between samples.
+pub fn integrate_rotation(a: &Mat3, rates: &[Vec3], dt: f64) -> UnitQuaternion<f64> {
+    let deriv = |q: &Quaternion<f64>, w: &Vec3| q * Quaternion::new(0.0, w.x, w.y, w.z) * 0.5;
+    let mut q = Quaternion::identity();
+    for pair in rates.windows(2) {
+        let (w0, w1) = (a * pair[0], a * pair[1]);
+        let wm = (w0 + w1) * 0.5;
+        let k1 = deriv(&q, &w0);
+        let k2 = deriv(&(q + k1 * (dt / 2.0)), &wm);
+        let k3 = deriv(&(q + k2 * (dt / 2.0)), &wm);
+        let k4 = deriv(&(q + k3 * dt), &w1);
+        q += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
+        // Renormalise each step so that round-off does not accumulate as a scale.
+        q = q.normalize();
+    }
+    UnitQuaternion::new_normalize(q)
+}
+
+struct GyroProblem {
+    /// Per motion: unit gravity before, and an orthonormal basis perpendicular to gravity after.
+    motions: Vec<(Vec3, Vec3, Vec3, Vec3)>,
+    rates: Vec<Vec<Vec3>>,
+    dt: Vec<f64>,
+}
+
+fn matrix_from(p: &DVector<f64>) -> Mat3 {
+    Mat3::from_row_slice(p.as_slice())
+}
+
+impl LeastSquaresProblem for GyroProblem {
+    fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
+        let a = matrix_from(p);
+        let mut r = DVector::zeros(2 * self.motions.len());
+        for (k, ((before, _after, e1, e2), (rates, dt))) in self
+            .motions
+            .iter()
+            .zip(self.rates.iter().zip(&self.dt))
+            .enumerate()
+        {
+            let predicted = integrate_rotation(&a, rates, *dt).inverse() * before;
+            r[2 * k] = e1.dot(&predicted);
+            r[2 * k + 1] = e2.dot(&predicted);
+        }
+        r
+    }
+
+    fn jacobian(&self, p: &DVector<f64>) -> DMatrix<f64> {
+        let mut j = DMatrix::zeros(2 * self.motions.len(), 9);
+        for k in 0..9 {
+            // Entries of A are O(1); 1e-6 balances truncation against round-off.
+            let h = 1e-6;
+            let mut plus = p.clone();
+            let mut minus = p.clone();
+            plus[k] += h;
+            minus[k] -= h;
+            let d = (self.residuals(&plus) - self.residuals(&minus)) / (2.0 * h);
+            j.set_column(k, &d);
+        }
+        j
+    }
+}
+
+/// Fit the full gyroscope matrix `A` (bias already removed) from motions between still poses;
+/// `start` defaults to the identity (nominal scale). Residuals are the per-motion angle errors in
+/// radians; `reference` of the result is 1.
+pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fit, FitError> {
+    if motions.len() < 5 {
+        return Err(FitError::Underdetermined(format!(
+            "only {} motions between still poses for 9 unknowns; turn the board between at least 5 poses (9+ recommended)",
+            motions.len()
+        )));
+    }
+    let mut prepared = Vec::with_capacity(motions.len());
+    for (i, m) in motions.iter().enumerate() {
+        if !(m.dt.is_finite() && m.dt > 0.0) {
+            return Err(FitError::Underdetermined(format!(
+                "motion {i} has sample interval {} s; give the gyroscope's sample period",
+                m.dt
+            )));
+        }
+        if m.rates
+            .iter()
+            .chain([&m.gravity_before, &m.gravity_after])
+            .any(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            return Err(FitError::NonFinite(format!("motion {i}")));
+        }
+        if m.rates.len() < 2 {
+            return Err(FitError::Underdetermined(format!(
+                "motion {i} has fewer than 2 gyroscope samples; record the rotation between the poses"
+            )));
+        }
+        let (Some(before), Some(after)) = (
+            m.gravity_before.try_normalize(0.0),
+            m.gravity_after.try_normalize(0.0),
+        ) else {
+            return Err(FitError::Underdetermined(format!(
+                "motion {i} has a zero gravity reading; use calibrated accelerometer pose means"
+            )));
+        };
+        // Any orthonormal pair perpendicular to gravity-after spans the angle error.
+        let not_parallel = if after.x.abs() < 0.9 {
+            Vec3::x()
+        } else {
+            Vec3::y()
+        };
+        let e1 = after.cross(&not_parallel).normalize();
+        let e2 = after.cross(&e1);
+        prepared.push((before, after, e1, e2));
+    }
+    let problem = GyroProblem {
+        motions: prepared,
+        rates: motions.iter().map(|m| m.rates.clone()).collect(),
+        dt: motions.iter().map(|m| m.dt).collect(),
+    };
+    let a0 = start.copied().unwrap_or_else(Mat3::identity);
+    if a0.iter().any(|v| !v.is_finite()) {
+        return Err(FitError::NonFinite("the starting gyroscope matrix".into()));
+    }
+    let p0 = DVector::from_row_slice(a0.transpose().as_slice());
+    let sol = levenberg_marquardt(&problem, p0, &LmOptions::default())
+        .map_err(|e| e.into_fit_error("gyroscope scale (Tedaldi)"))?;
+    let n_res = sol.residuals.len();
+    let noise = reduced_chi_square(sol.cost, n_res, 9);
+    let covariance = normal_covariance(&sol.jtj).map(|c| c * noise.unwrap_or(0.0));
+    if covariance.is_none() {
+        return Err(FitError::Underdetermined(
+            "the motions do not turn the board about enough different axes to separate all nine \
+             gyroscope terms; add turns about each of the board's axes (not about the vertical)"
+                .into(),
+        ));
+    }
+    let std = covariance
+        .as_ref()
+        .map(|c| calibration_std(c, &FULL_MATRIX_LAYOUT));
+    let residuals: Vec<f64> = sol
+        .residuals
+        .as_slice()
+        .chunks(2)
+        .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt())
+        .collect();
+    Ok(Fit {
+        method: Method::GyroScale,
+        cal: Calibration {
+            a: matrix_from(&sol.params),
+            b: Vec3::zeros(),
+        },
+        rms: rms(&residuals),
+        residuals,
+        loo_rms: None,
+        covariance,
+        param_names: param_names(&FULL_MATRIX_LAYOUT),
+        std,
+        condition_number: condition_number(&sol.jacobian),
+        iterations: sol.iterations,
+        reference: 1.0,
+    })
+}
+
+/// Still time (seconds) kept on each side of a motion: the hold boundaries come from windowed
+/// variance and may cut a little into the motion, while a second of rest adds only noise.
+const REST_MARGIN_S: f64 = 1.0;
+
+/// The motions between consecutive still intervals of a recording: gravity before and after from
+/// the holds' accelerometer means through `accel` (a calibrated accelerometer), and the gyroscope
+/// rows from one second before the end of a hold to one second after the start of the next,
+/// bias-corrected by `bias` (data units) and converted to rad/s by `unit_scale`.
+pub fn motions_from_recording(
+    recording: &Recording,
+    still: &StillReport,
+    accel: &Calibration,
+    bias: &Vec3,
+    unit_scale: f64,
+) -> Result<Vec<GyroMotion>, FitError> {
+    let (Some(gyro), Some(_)) = (
+        recording.samples(Sensor::Gyro),
+        recording.samples(Sensor::Accel),
+    ) else {
+        return Err(FitError::Underdetermined(
+            "the gyroscope scale needs both accelerometer and gyroscope columns".into(),
+        ));
+    };
+    if recording.time_is_index {
+        return Err(FitError::Underdetermined(
+            "the recording has no time column; give the sample rate so the rotation can be integrated".into(),
+        ));
+    }
+    let time = &recording.time;
+    let mut motions = Vec::new();
+    for pair in still.intervals.windows(2) {
+        let (hold, next) = (&pair[0], &pair[1]);
+        let (Some(before), Some(after)) = (hold.accel.as_ref(), next.accel.as_ref()) else {
+            continue;
+        };
+        let first = (hold.start..hold.end)
+            .find(|&i| {
+                time.get(i)
+                    .is_some_and(|t| *t >= hold.t_end - REST_MARGIN_S)
+            })
+            .unwrap_or(hold.start);
+        let last = (next.start..next.end)
+            .take_while(|&i| {
+                time.get(i)
+                    .is_some_and(|t| *t <= next.t_start + REST_MARGIN_S)
+            })
+            .last()
+            .unwrap_or(next.start);
+        let (Some(rows), Some(times)) = (gyro.get(first..=last), time.get(first..=last)) else {
+            continue;
+        };
+        if rows.len() < 2 {
+            continue;
+        }
+        // Evenly spaced samples are assumed; the mean interval keeps the total time exact.
+        let dt = (times[times.len() - 1] - times[0]) / (times.len() - 1) as f64;
+        motions.push(GyroMotion {
+            gravity_before: accel.apply(&before.mean),
+            gravity_after: accel.apply(&after.mean),
+            rates: rows.iter().map(|w| (w - bias) * unit_scale).collect(),
+            dt,
+        });
+    }
+    Ok(motions)
+}
+
+/// The gyroscope calibration of a recording by Tedaldi's method: bias from the still poses
+/// (seed 000 eq. 9), then scale and misalignment from the motions between them
+/// ([`fit_gyro_scale`]). The result maps the file's units to rad/s: `A = A_fit·unit_scale`,
+/// `b` = the bias in the file's units, with `std` scaled alike; residuals are angle errors in
+/// radians per motion.
+pub fn fit_gyro_scale_recording(
+    recording: &Recording,
+    still: &StillReport,
+    accel: &Calibration,
+    unit_scale: f64,
+) -> Result<Fit, FitError> {
+    let bias_fit = fit_gyro_bias(&still.poses(Sensor::Gyro), unit_scale)?;
+    let motions = motions_from_recording(recording, still, accel, &bias_fit.cal.b, unit_scale)?;
+    let mut fit = fit_gyro_scale(&motions, None)?;
+    fit.cal = Calibration {
+        a: fit.cal.a * unit_scale,
+        b: bias_fit.cal.b,
+    };
+    fit.std = fit.std.map(|s| CalibrationStd {
+        a: s.a * unit_scale,
+        b: bias_fit.std.map_or(Vec3::zeros(), |bs| bs.b),
+    });
+    Ok(fit)
+}

@@ -1,0 +1,270 @@
+//! General ellipsoid fit after Li & Griffiths (2004) with the `M^½` construction of seed 000
+//! (eq. 17–29).
+//!
+//! The quadric (eq. 17) `a x² + b y² + c z² + 2f yz + 2g xz + 2h xy + 2p x + 2q y + 2r z + d = 0`,
+//! `v = [a b c f g h p q r d]ᵀ` (eq. 18), is fitted by minimising `vᵀSv` (`S = DᵀD`, one design row
+//! `[x² y² z² 2yz 2xz 2xy 2x 2y 2z 1]` per sample) subject to Li & Griffiths' ellipsoid constraint
+//! `kJ − I² = 1` with `k = 4` (`I = a+b+c`, `J = ab+bc+ca−f²−g²−h²`), written `v₁ᵀC₁v₁ = 1` on the
+//! quadratic part `v₁ = [a b c f g h]ᵀ`. With `S` split into blocks (`S₁₁` 6×6, `S₁₂` 6×4, `S₂₂`
+//! 4×4) the linear part is `v₂ = −S₂₂⁻¹S₂₁v₁`, and `v₁` is the eigenvector of
+//! `C₁⁻¹(S₁₁ − S₁₂S₂₂⁻¹S₂₁)` with the one positive eigenvalue.
+//!
+//! Factor-of-two convention: with `M = [[a h g],[h b f],[g f c]]` and `n = [p q r]ᵀ` the quadric is
+//! `xᵀMx + 2nᵀx + d = 0` (seed 000 eq. 19 omits the 2 of eq. 17), so completing the square
+//! (eq. 21) gives the centre `b = −M⁻¹n` (eq. 22) and `C = bᵀMb − d` (eq. 23 as printed has `M⁻¹`,
+//! which is not consistent with eq. 21). The semi-axes are `√(C/λ)` (eq. 24–25) and the calibration
+//! is `A = (ref/√C)·M^½` (eq. 26–29), a symmetric matrix.
+//!
+//! Conditioning: samples are scaled to unit RMS radius about the chosen centre (the origin, or the
+//! sample mean with [`LiOptions::subtract_mean`], the preconditioning of seed 000 Table 2) before
+//! forming `D`; the centre and scale are mapped back afterwards.
+//!
+//! Degenerate case: noise-free samples make `S₁₁ − S₁₂S₂₂⁻¹S₂₁` singular, the wanted eigenvalue is
+//! zero rather than positive, and "the positive one" is ill defined in rounding. Every eigenpair
+//! is therefore scored: among eigenvectors with `v₁ᵀC₁v₁ > 0` (the constraint can be met) the one
+//! with the smallest normalised cost `v₁ᵀMv₁ / v₁ᵀC₁v₁` is taken; for noisy data this is exactly
+//! the positive eigenvalue, for exact data the zero one. The sign is fixed by making `M` positive
+//! definite.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::linalg::{rms, singular_values, sqrt_spd, RANK_TOLERANCE};
+use super::validate::{
+    check_finite_points, check_reference, guard_fit, CoverageHint, EllipsoidModel,
+};
+use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
+
+/// Largest accepted design condition number: the eigenproblem works on `S = DᵀD`, whose condition
+/// is its square, so beyond 1e6 fewer than 4 of the 16 digits of the eigenvector remain.
+pub const MAX_CONDITION: f64 = 1e6;
+
+/// Options of the Li fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LiOptions {
+    /// Subtract the sample mean before fitting and add it back to `b` (seed 000 Table 2); strongly
+    /// improves conditioning when the offset is large next to the ellipsoid's radius.
+    pub subtract_mean: bool,
+}
+
+/// Fit a general ellipsoid to `points` and return the calibration mapping it onto the sphere of
+/// radius `reference`. Needs at least 10 points spread over the ellipsoid.
+///
+/// `condition_number` is the ratio of the largest to the second-smallest singular value of the
+/// normalised design matrix: the fit is its (near-)null vector, whose sensitivity to noise is set
+/// by the gap to the next singular value. Above [`MAX_CONDITION`] the fit is refused.
+///
+/// Before returning, the coverage rule of [`super::validate`] is applied: a cloud that cannot
+/// determine the ellipsoid (one plane, a few clusters) is refused with what to add.
+pub fn fit_li(points: &[Vec3], reference: f64, opts: LiOptions) -> Result<Fit, FitError> {
+    guard_fit(
+        fit_li_unchecked(points, reference, opts),
+        points,
+        None,
+        reference,
+        EllipsoidModel::General,
+        CoverageHint::Either,
+        None,
+    )
+}
+
+/// [`fit_li`] without the coverage rule (used to judge the coverage of failed fits).
+pub(crate) fn fit_li_unchecked(
+    points: &[Vec3],
+    reference: f64,
+    opts: LiOptions,
+) -> Result<Fit, FitError> {
+    check_reference(reference)?;
+    check_finite_points(points)?;
+    if points.len() < 10 {
+        return Err(FitError::Underdetermined(format!(
+            "only {} samples; the general ellipsoid has 9 degrees of freedom and needs at least 10",
+            points.len()
+        )));
+    }
+    let centre = if opts.subtract_mean {
+        points.iter().sum::<Vec3>() / points.len() as f64
+    } else {
+        Vec3::zeros()
+    };
+    let scale = (points
+        .iter()
+        .map(|p| (p - centre).norm_squared())
+        .sum::<f64>()
+        / points.len() as f64)
+        .sqrt();
+    if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return Err(FitError::Underdetermined(
+            "all samples are at the origin; the sensor reads nothing".into(),
+        ));
+    }
+    let q: Vec<Vec3> = points.iter().map(|p| (p - centre) / scale).collect();
+
+    let design = DMatrix::from_fn(q.len(), 10, |i, j| {
+        let (x, y, z) = (q[i].x, q[i].y, q[i].z);
+        [
+            x * x,
+            y * y,
+            z * z,
+            2.0 * y * z,
+            2.0 * x * z,
+            2.0 * x * y,
+            2.0 * x,
+            2.0 * y,
+            2.0 * z,
+            1.0,
+        ][j]
+    });
+    let sv = singular_values(&design);
+    let condition_number = match sv.get(8) {
+        Some(&s9) if s9 > 0.0 => sv[0] / s9,
+        _ => f64::INFINITY,
+    };
+
+    if condition_number > MAX_CONDITION {
+        return Err(FitError::Underdetermined(format!(
+            "the samples are too far from the origin for their spread (condition number \
+             {condition_number:.1e}); fit with mean subtraction"
+        )));
+    }
+    let v = constrained_quadric(&design)?;
+    let cal_q = calibration_from_quadric(&v, reference)?;
+    // Undo the normalisation: q = (x − centre)/scale.
+    let cal = Calibration {
+        a: cal_q.a / scale,
+        b: centre + cal_q.b * scale,
+    };
+    if !cal.a.iter().chain(cal.b.iter()).all(|x| x.is_finite()) {
+        return Err(no_ellipsoid("the fitted parameters are not finite"));
+    }
+
+    let residuals: Vec<f64> = points
+        .iter()
+        .map(|p| (cal.apply(p).norm() - reference) / reference)
+        .collect();
+    Ok(Fit {
+        method: Method::Li,
+        cal,
+        rms: rms(&residuals),
+        residuals,
+        loo_rms: None,
+        covariance: None,
+        param_names: Vec::new(),
+        std: None,
+        condition_number,
+        iterations: 0,
+        reference,
+    })
+}
+
+/// Li & Griffiths' constraint matrix `C₁` for `k = 4`.
+pub fn constraint_matrix() -> DMatrix<f64> {
+    let k = 4.0;
+    let o = k / 2.0 - 1.0;
+    let mut c = DMatrix::zeros(6, 6);
+    for i in 0..3 {
+        for j in 0..3 {
+            c[(i, j)] = if i == j { -1.0 } else { o };
+        }
+        c[(i + 3, i + 3)] = -k;
+    }
+    c
+}
+
+/// The 10 quadric coefficients minimising `vᵀDᵀDv` under the ellipsoid constraint.
+fn constrained_quadric(design: &DMatrix<f64>) -> Result<DVector<f64>, FitError> {
+    let s = design.transpose() * design;
+    let s11 = s.view((0, 0), (6, 6)).into_owned();
+    let s12 = s.view((0, 6), (6, 4)).into_owned();
+    let s22 = s.view((6, 6), (4, 4)).into_owned();
+    let sv22 = singular_values(&s22);
+    if sv22.last().copied().unwrap_or(0.0) <= sv22.first().copied().unwrap_or(0.0) * RANK_TOLERANCE
+    {
+        return Err(FitError::Underdetermined(
+            "the samples lie in one plane; rotate the board about more than one axis".into(),
+        ));
+    }
+    let s22_inv = s22
+        .try_inverse()
+        .ok_or_else(|| no_ellipsoid("the linear block is singular"))?;
+    let reduced = &s11 - &s12 * &s22_inv * s12.transpose();
+    let reduced = (&reduced + reduced.transpose()) * 0.5;
+    let c1 = constraint_matrix();
+    let c1_inv = c1
+        .clone()
+        .try_inverse()
+        .ok_or_else(|| no_ellipsoid("constraint matrix is singular"))?;
+    let e = &c1_inv * &reduced;
+
+    let eigenvalues = e.complex_eigenvalues();
+    let magnitude = eigenvalues
+        .iter()
+        .map(|l| l.norm())
+        .fold(0.0, f64::max)
+        .max(f64::MIN_POSITIVE);
+    let mut best: Option<(f64, DVector<f64>)> = None;
+    for lambda in eigenvalues.iter() {
+        if lambda.im.abs() > 1e-8 * magnitude {
+            continue;
+        }
+        // Eigenvector: the right singular vector of (E − λI) with the smallest singular value.
+        let shifted = &e - DMatrix::identity(6, 6) * lambda.re;
+        let svd = shifted.svd(false, true);
+        let Some(vt) = svd.v_t else { continue };
+        let Some(k) = svd
+            .singular_values
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(k, _)| k)
+        else {
+            continue;
+        };
+        let v1 = vt.row(k).transpose();
+        let kappa = (v1.transpose() * &c1 * &v1)[(0, 0)];
+        if kappa.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            continue;
+        }
+        let cost = (v1.transpose() * &reduced * &v1)[(0, 0)].abs() / kappa;
+        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+            best = Some((cost, v1));
+        }
+    }
+    let (_, v1) =
+        best.ok_or_else(|| no_ellipsoid("no eigenvector satisfies the ellipsoid constraint"))?;
+    let v2 = -(&s22_inv * s12.transpose() * &v1);
+    Ok(DVector::from_iterator(
+        10,
+        v1.iter().chain(v2.iter()).copied(),
+    ))
+}
+
+/// Centre, `C` and `A = (ref/√C)·M^½` from the quadric coefficients (eq. 19–29).
+fn calibration_from_quadric(v: &DVector<f64>, reference: f64) -> Result<Calibration, FitError> {
+    let sign = if v[0] + v[1] + v[2] < 0.0 { -1.0 } else { 1.0 };
+    let w: Vec<f64> = v.iter().map(|x| x * sign).collect();
+    let m = Mat3::new(w[0], w[5], w[4], w[5], w[1], w[3], w[4], w[3], w[2]);
+    let n = Vec3::new(w[6], w[7], w[8]);
+    let d = w[9];
+    let m_inv = m
+        .try_inverse()
+        .ok_or_else(|| no_ellipsoid("the quadric matrix M is singular"))?;
+    let centre = -(m_inv * n);
+    let c = centre.dot(&(m * centre)) - d;
+    if c.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return Err(no_ellipsoid(
+            "the fitted quadric encloses no volume (C ≤ 0)",
+        ));
+    }
+    let root =
+        sqrt_spd(&m).ok_or_else(|| no_ellipsoid("the fitted quadric is not an ellipsoid"))?;
+    Ok(Calibration {
+        a: root * (reference / c.sqrt()),
+        b: centre,
+    })
+}
+
+fn no_ellipsoid(why: &str) -> FitError {
+    FitError::Underdetermined(format!(
+        "no ellipsoid fits the samples ({why}); cover more orientations and check for outliers"
+    ))
+}

@@ -1,0 +1,598 @@
+//! Levenberg–Marquardt refinement of the norm model `|A(xᵢ − b)| = ref` (the default method).
+//!
+//! Seed 003 (Chen et al.) iterates on the norm model from a six-position start; seed 000
+//! (Puc et al., eq. 17–29) gives the algebraic ellipsoid start for the magnetometer. Here the
+//! residual is the measurement residual `rᵢ = (|A(xᵢ − b)| − ref)/σ'ᵢ`, with `σ'ᵢ` the noise of
+//! the calibrated norm; to first order this is the orthogonal distance to the ellipsoid in units
+//! of its noise, so the weighted least-squares estimate is the maximum-likelihood one and
+//! `(JᵀJ)⁻¹` is its Cramér–Rao bound. Gauge: `A` upper-triangular with positive diagonal
+//! (9 unknowns); a start with a general `A = QR` is converted to `R`, since `|Au| = |Ru|`.
+//!
+//! For robustness with large offsets the unknowns are solved for in centred, scaled data
+//! `x̃ = (x − c)/s` (c = start offset, s = RMS distance from it), where every parameter is of
+//! order one: `A = ref·R̃/s`, `b = c + s·b̃`.
+//!
+//! `σ'ᵢ = σᵢ·|Aᵀv̂ᵢ|` (v̂ = direction of the calibrated point) is the radial part of the noise.
+//! The tangential part lengthens every norm on average by `σ_t²/(2|v|)`; a second pass subtracts
+//! this (the first-order "essential bias" of the geometric fit), which matters at low
+//! signal-to-noise. What remains is the second-order bias of any geometric fit, which grows on
+//! partial coverage (see `examples/fit_montecarlo.rs`).
+
+use nalgebra::{DMatrix, DVector};
+
+use super::chen::fit_chen;
+use super::covariance::{
+    calibration_std, condition_number, normal_covariance, param_names, reduced_chi_square,
+    UPPER_TRIANGULAR_LAYOUT,
+};
+use super::li::{fit_li, LiOptions};
+use super::linalg::upper_triangular_gauge;
+use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use super::loo::leave_one_out_rms;
+use super::six_position::fit_six_position;
+use super::validate::{
+    check_finite_points, check_finite_poses, guard_fit, CoverageHint, EllipsoidModel,
+};
+use super::{Calibration, Fit, FitError, Mat3, Method, Pose, Vec3};
+
+/// Points on the (distorted) sphere and the noise of each point's norm.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NormObservations {
+    /// Readings (pose means or samples), in data units.
+    pub points: Vec<Vec3>,
+    /// One-sigma noise of each point along its radial direction, in data units.
+    pub sigma: Vec<f64>,
+}
+
+impl NormObservations {
+    /// Pose means, each with the noise of its mean (`var/n`) projected on its direction from `centre`.
+    pub fn from_poses(poses: &[Pose], centre: &Vec3) -> Self {
+        let points: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
+        let sigma = poses
+            .iter()
+            .map(|p| {
+                let d = (p.mean - centre)
+                    .try_normalize(0.0)
+                    .unwrap_or_else(|| Vec3::repeat(1.0 / 3f64.sqrt()));
+                d.component_mul(&d).dot(&p.var_of_mean()).max(0.0).sqrt()
+            })
+            .collect();
+        Self { points, sigma }
+    }
+
+    /// Samples with one common (possibly unknown, then use 1) noise level.
+    pub fn uniform(points: Vec<Vec3>, sigma: f64) -> Self {
+        let sigma = vec![sigma; points.len()];
+        Self { points, sigma }
+    }
+}
+
+/// Options of [`refine_lm`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NormLmOptions {
+    /// Solver settings.
+    pub lm: LmOptions,
+    /// `true` when `sigma` is the real noise (covariance = `(JᵀJ)⁻¹`); `false` when it is only
+    /// relative, so the covariance is scaled by the reduced chi-square.
+    pub noise_known: bool,
+    /// Remove the `σ_t²/(2n)` lengthening of each norm by tangential noise in the final pass
+    /// (with unknown noise, σ is first estimated from the residual).
+    pub correct_norm_bias: bool,
+}
+
+impl Default for NormLmOptions {
+    fn default() -> Self {
+        Self {
+            lm: LmOptions::default(),
+            noise_known: true,
+            correct_norm_bias: true,
+        }
+    }
+}
+
+/// A norm-model fit with its goodness of fit.
+#[derive(Debug, Clone)]
+pub struct NormLmOutcome {
+    /// The fit.
+    pub fit: Fit,
+    /// `χ²/(N − 9)`: about 1 when the residual is at the noise floor given by `sigma`.
+    pub reduced_chi_square: Option<f64>,
+}
+
+/// The weighted norm residual in centred, scaled coordinates.
+struct NormProblem {
+    /// Centred, scaled points `x̃ᵢ`.
+    points: Vec<Vec3>,
+    /// `1/σ'ᵢ` in units of the reference.
+    weights: Vec<f64>,
+    /// Half the tangential noise variance `½σ_t²` of each calibrated point (reference units):
+    /// noise across the sphere lengthens a vector by `σ_t²/(2n)` on average, which is removed.
+    tangential: Vec<f64>,
+}
+
+fn upper_from_params(p: &DVector<f64>) -> Mat3 {
+    Mat3::new(p[0], p[1], p[2], 0.0, p[3], p[4], 0.0, 0.0, p[5])
+}
+
+impl LeastSquaresProblem for NormProblem {
+    fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
+        let r = upper_from_params(p);
+        let b = Vec3::new(p[6], p[7], p[8]);
+        DVector::from_iterator(
+            self.points.len(),
+            self.points
+                .iter()
+                .zip(&self.weights)
+                .zip(&self.tangential)
+                .map(|((x, w), k)| {
+                    let n = (r * (x - b)).norm();
+                    let corrected = if n > 0.0 { n - k / n } else { 0.0 };
+                    w * (corrected - 1.0)
+                }),
+        )
+    }
+
+    fn jacobian(&self, p: &DVector<f64>) -> DMatrix<f64> {
+        let r = upper_from_params(p);
+        let b = Vec3::new(p[6], p[7], p[8]);
+        let mut j = DMatrix::zeros(self.points.len(), 9);
+        for (i, ((x, w), k)) in self
+            .points
+            .iter()
+            .zip(&self.weights)
+            .zip(&self.tangential)
+            .enumerate()
+        {
+            let u = x - b;
+            let v = r * u;
+            let n = v.norm();
+            if n == 0.0 {
+                continue; // the norm is not differentiable at the centre; contributes nothing
+            }
+            // d(n − k/n)/dn = 1 + k/n².
+            let w = w * (1.0 + k / (n * n));
+            let vh = v / n;
+            let cols = [
+                vh[0] * u[0],
+                vh[0] * u[1],
+                vh[0] * u[2],
+                vh[1] * u[1],
+                vh[1] * u[2],
+                vh[2] * u[2],
+            ];
+            for (k, c) in cols.iter().enumerate() {
+                j[(i, k)] = w * c;
+            }
+            let db = -(r.transpose() * vh);
+            for k in 0..3 {
+                j[(i, 6 + k)] = w * db[k];
+            }
+        }
+        j
+    }
+}
+
+fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> {
+    if !(reference.is_finite() && reference > 0.0) {
+        return Err(FitError::Underdetermined(format!(
+            "the reference magnitude must be a positive number, got {reference}; pass g or the field strength, or 1"
+        )));
+    }
+    if obs.points.len() != obs.sigma.len() {
+        return Err(FitError::Underdetermined(format!(
+            "{} points but {} noise values were given; give one σ per point",
+            obs.points.len(),
+            obs.sigma.len()
+        )));
+    }
+    if let Some(i) = obs
+        .points
+        .iter()
+        .position(|p| p.iter().any(|v| !v.is_finite()))
+    {
+        return Err(FitError::NonFinite(format!("reading {i}")));
+    }
+    if let Some(i) = obs.sigma.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(FitError::Underdetermined(format!(
+            "the noise of reading {i} is {}, not a positive number; record more than one sample per pose",
+            obs.sigma[i]
+        )));
+    }
+    if obs.points.len() < 9 {
+        return Err(FitError::Underdetermined(format!(
+            "only {} readings for 9 unknowns; record at least 9 distinct orientations (12 recommended)",
+            obs.points.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Refine `start` by Levenberg–Marquardt on the weighted norm residual; see the module comment.
+///
+/// The covariance is in the order `A11 A12 A13 A22 A23 A33 b1 b2 b3`; the condition number is
+/// that of the weighted Jacobian in the centred, scaled parameters (so independent of units).
+pub fn refine_lm(
+    obs: &NormObservations,
+    start: &Calibration,
+    reference: f64,
+    opts: &NormLmOptions,
+) -> Result<Fit, FitError> {
+    refine_lm_detailed(obs, start, reference, opts).map(|o| o.fit)
+}
+
+/// As [`refine_lm`], also returning the reduced chi-square.
+pub fn refine_lm_detailed(
+    obs: &NormObservations,
+    start: &Calibration,
+    reference: f64,
+    opts: &NormLmOptions,
+) -> Result<NormLmOutcome, FitError> {
+    check_inputs(obs, reference)?;
+    let n = obs.points.len();
+    let mean = obs.points.iter().sum::<Vec3>() / n as f64;
+    let start_usable = start.a.iter().chain(start.b.iter()).all(|v| v.is_finite())
+        && start.a.determinant().abs() > 0.0
+        && upper_triangular_gauge(&start.a)
+            .iter()
+            .all(|v| v.is_finite());
+    // An unusable start (singular or non-finite) is replaced by the sphere around the mean.
+    let centre = if start_usable { start.b } else { mean };
+    let s = (obs
+        .points
+        .iter()
+        .map(|p| (p - centre).norm_squared())
+        .sum::<f64>()
+        / n as f64)
+        .sqrt();
+    if !(s.is_finite() && s > 0.0) {
+        return Err(FitError::Underdetermined(
+            "all readings are identical; rotate the sensor between readings".into(),
+        ));
+    }
+    let r0 = if start_usable {
+        upper_triangular_gauge(&start.a) * (s / reference)
+    } else {
+        Mat3::identity()
+    };
+    let scaled: Vec<Vec3> = obs.points.iter().map(|p| (p - centre) / s).collect();
+    let mut params = DVector::from_vec(vec![
+        r0[(0, 0)],
+        r0[(0, 1)],
+        r0[(0, 2)],
+        r0[(1, 1)],
+        r0[(1, 2)],
+        r0[(2, 2)],
+        0.0,
+        0.0,
+        0.0,
+    ]);
+
+    // Two passes: the noise of each norm (σ propagated through A) is taken from the start, then
+    // from the first solution, where also the noise-induced lengthening is corrected.
+    let mut iterations = 0;
+    let mut solution: Option<super::lm::LmSolution> = None;
+    for pass in 0..2 {
+        let r = upper_from_params(&params);
+        let b = Vec3::new(params[6], params[7], params[8]);
+        // With unknown noise `sigma` is relative; its scale comes from the first pass's residual.
+        let noise_scale = match (&solution, opts.noise_known) {
+            (Some(prev), false) => reduced_chi_square(prev.cost, n, 9).unwrap_or(0.0).sqrt(),
+            _ => 1.0,
+        };
+        let frobenius2 = r.norm_squared();
+        let (weights, tangential) = scaled
+            .iter()
+            .zip(&obs.sigma)
+            .map(|(x, sigma)| {
+                let v = r * (x - b);
+                let vh = v
+                    .try_normalize(0.0)
+                    .unwrap_or_else(|| Vec3::repeat(1.0 / 3f64.sqrt()));
+                // Per-axis noise σ̃ in scaled units; its radial part is σ̃|R̃ᵀv̂|, the rest tangential.
+                let axis_sigma = sigma / s;
+                let radial2 = (r.transpose() * vh).norm_squared();
+                let weight = 1.0 / (axis_sigma * radial2.sqrt()).max(f64::MIN_POSITIVE);
+                let k = if pass == 1 && opts.correct_norm_bias {
+                    0.5 * (axis_sigma * noise_scale).powi(2) * (frobenius2 - radial2).max(0.0)
+                } else {
+                    0.0
+                };
+                (weight, k)
+            })
+            .unzip();
+        let problem = NormProblem {
+            points: scaled.clone(),
+            weights,
+            tangential,
+        };
+        let sol = levenberg_marquardt(&problem, params.clone(), &opts.lm)
+            .map_err(|e| e.into_fit_error(Method::Lm.name()))?;
+        iterations += sol.iterations;
+        params = sol.params.clone();
+        solution = Some(sol);
+    }
+    let Some(sol) = solution else {
+        return Err(FitError::NotConverged {
+            method: Method::Lm.name(),
+            iterations,
+            detail: "no pass ran".into(),
+        });
+    };
+
+    // Positive diagonal: flipping the sign of a row of R leaves every norm unchanged.
+    let mut r = upper_from_params(&params);
+    let mut signs = DVector::from_element(9, 1.0);
+    for row in 0..3 {
+        if r[(row, row)] < 0.0 {
+            r.row_mut(row).neg_mut();
+            for (k, entry) in UPPER_TRIANGULAR_LAYOUT.iter().enumerate().take(6) {
+                if matches!(entry, super::covariance::ParamEntry::A(rr, _) if *rr == row) {
+                    signs[k] = -1.0;
+                }
+            }
+        }
+    }
+    let a = r * (reference / s);
+    let b = centre + Vec3::new(params[6], params[7], params[8]) * s;
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) || r.determinant() == 0.0 {
+        return Err(FitError::NotConverged {
+            method: Method::Lm.name(),
+            iterations,
+            detail: "the solution is degenerate (a zero or non-finite scale)".into(),
+        });
+    }
+    let cal = Calibration { a, b };
+
+    let chi2_red = reduced_chi_square(sol.cost, n, 9);
+    let to_natural: Vec<f64> = (0..9)
+        .map(|k| signs[k] * if k < 6 { reference / s } else { s })
+        .collect();
+    let covariance = normal_covariance(&sol.jtj).map(|cov_scaled| {
+        let noise_factor = if opts.noise_known {
+            1.0
+        } else {
+            chi2_red.unwrap_or(1.0)
+        };
+        DMatrix::from_fn(9, 9, |i, j| {
+            cov_scaled[(i, j)] * to_natural[i] * to_natural[j] * noise_factor
+        })
+    });
+    let std = covariance
+        .as_ref()
+        .map(|c| calibration_std(c, &UPPER_TRIANGULAR_LAYOUT));
+    let residuals: Vec<f64> = obs
+        .points
+        .iter()
+        .map(|x| (cal.apply(x).norm() - reference) / reference)
+        .collect();
+    let rms = (residuals.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+    let fit = Fit {
+        method: Method::Lm,
+        cal,
+        residuals,
+        rms,
+        loo_rms: None,
+        covariance,
+        param_names: param_names(&UPPER_TRIANGULAR_LAYOUT),
+        std,
+        condition_number: condition_number(&sol.jacobian),
+        iterations,
+        reference,
+    };
+    Ok(NormLmOutcome {
+        fit,
+        reduced_chi_square: chi2_red,
+    })
+}
+
+/// The sphere around the mean of `points` with their RMS radius: the start of last resort.
+pub fn sphere_start(points: &[Vec3], reference: f64) -> Calibration {
+    let n = points.len().max(1) as f64;
+    let mean = points.iter().sum::<Vec3>() / n;
+    let radius = (points
+        .iter()
+        .map(|p| (p - mean).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let gain = if radius > 0.0 {
+        reference / radius
+    } else {
+        1.0
+    };
+    Calibration {
+        a: Mat3::identity() * gain,
+        b: mean,
+    }
+}
+
+/// Accelerometer start: six-position (seed 000 eq. 11–15), else Li's ellipsoid (seed 000
+/// eq. 17–29) on the pose means, else Chen's coarse model (seed 003), else the sphere.
+fn accel_start(poses: &[Pose], reference: f64) -> Calibration {
+    if let Ok(f) = fit_six_position(poses, None, reference) {
+        return f.cal;
+    }
+    let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
+    if let Ok(f) = fit_li(
+        &means,
+        reference,
+        LiOptions {
+            subtract_mean: true,
+        },
+    ) {
+        return f.cal;
+    }
+    if let Ok(f) = fit_chen(poses, reference) {
+        return f.cal;
+    }
+    sphere_start(&means, reference)
+}
+
+/// Per-axis noise of each pose mean, in data units (for the coverage rule).
+fn pose_mean_noise(poses: &[Pose]) -> Vec<f64> {
+    poses
+        .iter()
+        .map(|p| (p.var_of_mean().sum() / 3.0).max(0.0).sqrt())
+        .collect()
+}
+
+/// Apply the coverage rule of [`super::validate`] to a norm-model outcome (judging a failed fit
+/// by its start).
+fn guard_outcome(
+    outcome: Result<NormLmOutcome, FitError>,
+    points: &[Vec3],
+    noise: Option<&[f64]>,
+    reference: f64,
+    hint: CoverageHint,
+    start: Option<&Calibration>,
+) -> Result<NormLmOutcome, FitError> {
+    let (fit, chi2) = match outcome {
+        Ok(o) => (Ok(o.fit), o.reduced_chi_square),
+        Err(e) => (Err(e), None),
+    };
+    guard_fit(
+        fit,
+        points,
+        noise,
+        reference,
+        EllipsoidModel::General,
+        hint,
+        start,
+    )
+    .map(|fit| NormLmOutcome {
+        fit,
+        reduced_chi_square: chi2,
+    })
+}
+
+fn accel_lm_without_loo(poses: &[Pose], reference: f64) -> Result<NormLmOutcome, FitError> {
+    check_finite_poses(poses)?;
+    let start = accel_start(poses, reference);
+    let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
+    let noise = pose_mean_noise(poses);
+    let outcome = accel_lm_from_start(poses, reference, &start);
+    guard_outcome(
+        outcome,
+        &means,
+        Some(&noise),
+        reference,
+        CoverageHint::Poses,
+        Some(&start),
+    )
+}
+
+fn accel_lm_from_start(
+    poses: &[Pose],
+    reference: f64,
+    start: &Calibration,
+) -> Result<NormLmOutcome, FitError> {
+    let obs = NormObservations::from_poses(poses, &start.b);
+    // Poses without a usable variance (single samples, or a variance of exactly zero) leave the
+    // noise unknown: weight uniformly and take the noise from the residual.
+    let noise_known = obs.sigma.iter().all(|s| s.is_finite() && *s > 0.0);
+    let obs = if noise_known {
+        obs
+    } else {
+        NormObservations::uniform(obs.points, 1.0)
+    };
+    refine_lm_detailed(
+        &obs,
+        start,
+        reference,
+        &NormLmOptions {
+            noise_known,
+            ..NormLmOptions::default()
+        },
+    )
+}
+
+/// The default accelerometer fit: LM on the norm model over static poses, weighted by each
+/// pose's noise, with the leave-one-pose-out RMS.
+pub fn fit_accel_lm(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
+    let mut fit = accel_lm_without_loo(poses, reference)?.fit;
+    fit.loo_rms = leave_one_out_rms(poses, reference, |rest| {
+        accel_lm_without_loo(rest, reference).map(|o| o.fit.cal)
+    });
+    Ok(fit)
+}
+
+/// As [`fit_accel_lm`] (without the leave-one-out RMS), also returning the reduced chi-square.
+pub fn fit_accel_lm_detailed(poses: &[Pose], reference: f64) -> Result<NormLmOutcome, FitError> {
+    accel_lm_without_loo(poses, reference)
+}
+
+/// The default magnetometer fit: LM on the norm model over samples, started from Li's ellipsoid
+/// with mean subtraction (seed 000 Table 2); the noise is estimated from the residual.
+pub fn fit_mag_lm(points: &[Vec3], reference: f64) -> Result<Fit, FitError> {
+    fit_mag_lm_detailed(points, reference).map(|o| o.fit)
+}
+
+/// As [`fit_mag_lm`], also returning the reduced chi-square (relative to unit noise, so it is
+/// the estimated noise variance in data units).
+pub fn fit_mag_lm_detailed(points: &[Vec3], reference: f64) -> Result<NormLmOutcome, FitError> {
+    check_finite_points(points)?;
+    let start = fit_li(
+        points,
+        reference,
+        LiOptions {
+            subtract_mean: true,
+        },
+    )
+    .map(|f| f.cal)
+    .ok();
+    // Without an algebraic start a failed fit is judged through the algebraic fit itself, not
+    // through the sphere it was started from.
+    let judge_by = start;
+    let start = start.unwrap_or_else(|| sphere_start(points, reference));
+    let obs = NormObservations::uniform(points.to_vec(), 1.0);
+    let outcome = refine_lm_detailed(
+        &obs,
+        &start,
+        reference,
+        &NormLmOptions {
+            noise_known: false,
+            ..NormLmOptions::default()
+        },
+    );
+    guard_outcome(
+        outcome,
+        points,
+        None,
+        reference,
+        CoverageHint::Samples,
+        judge_by.as_ref(),
+    )
+}
+
+/// Cramér–Rao bound of the upper-triangular norm-model parameters (`A11 A12 A13 A22 A23 A33
+/// b1 b2 b3`) for noise-free readings `clean` of a sensor with calibration `truth` (in the
+/// upper-triangular gauge) and white noise of standard deviation `axis_sigma[i]` per axis on
+/// reading `i`. Errors-in-variables form: each reading contributes `∇θfᵀ∇θf / (∇ₓfᵀΣ∇ₓf)` with
+/// `f = |A(x − b)|`. `None` when the readings do not determine the parameters.
+pub fn cramer_rao_bound(
+    clean: &[Vec3],
+    axis_sigma: &[f64],
+    truth: &Calibration,
+) -> Option<DMatrix<f64>> {
+    let mut info = DMatrix::zeros(9, 9);
+    for (x, sigma) in clean.iter().zip(axis_sigma) {
+        let u = x - truth.b;
+        let v = truth.a * u;
+        let vh = v.try_normalize(0.0)?;
+        let grad_x = truth.a.transpose() * vh;
+        let var = sigma * sigma * grad_x.norm_squared();
+        let g = DVector::from_vec(vec![
+            vh[0] * u[0],
+            vh[0] * u[1],
+            vh[0] * u[2],
+            vh[1] * u[1],
+            vh[1] * u[2],
+            vh[2] * u[2],
+            -grad_x[0],
+            -grad_x[1],
+            -grad_x[2],
+        ]);
+        info += &g * g.transpose() / var;
+    }
+    normal_covariance(&info)
+}

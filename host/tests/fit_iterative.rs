@@ -1,0 +1,473 @@
+//! Iterative fits against synthetic truth: LM on the norm model (accelerometer poses and
+//! magnetometer samples, including the hard cases), the Frosio Gauss–Newton and Merayo
+//! comparisons of seed 000, magnetometer-to-accelerometer alignment, and the Tedaldi gyroscope
+//! scale fit. Tolerances are multiples of the reported or Monte Carlo standard deviation.
+
+use imucal::fit::alignment::fit_alignment;
+use imucal::fit::frosio::{fit_frosio, FrosioOptions};
+use imucal::fit::gyro_scale::{fit_gyro_scale, GyroMotion};
+use imucal::fit::linalg::upper_triangular_gauge;
+use imucal::fit::merayo::fit_merayo;
+use imucal::fit::norm_lm::{
+    cramer_rao_bound, fit_accel_lm, fit_accel_lm_detailed, fit_mag_lm, refine_lm, NormLmOptions,
+    NormObservations,
+};
+use imucal::fit::{Calibration, FitError, Mat3, Vec3};
+use imucal::synthetic::{
+    accel_poses, cap_directions, directions, mag_samples, random_calibration, rng,
+    sphere_directions, PoseSet, TruthSpec,
+};
+use nalgebra::{DMatrix, Rotation3};
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+const G: f64 = 9.81;
+const FIELD: f64 = 50.0;
+
+/// `A11 A12 A13 A22 A23 A33 b1 b2 b3` of a calibration in the upper-triangular gauge.
+fn upper_params(cal: &Calibration) -> [f64; 9] {
+    let r = upper_triangular_gauge(&cal.a);
+    [
+        r[(0, 0)],
+        r[(0, 1)],
+        r[(0, 2)],
+        r[(1, 1)],
+        r[(1, 2)],
+        r[(2, 2)],
+        cal.b.x,
+        cal.b.y,
+        cal.b.z,
+    ]
+}
+
+fn std_of(cov: &DMatrix<f64>) -> [f64; 9] {
+    std::array::from_fn(|k| cov[(k, k)].sqrt())
+}
+
+fn assert_within_sigmas(name: &str, est: &[f64; 9], truth: &[f64; 9], std: &[f64; 9], k: f64) {
+    for i in 0..9 {
+        let err = (est[i] - truth[i]).abs();
+        assert!(
+            err < k * std[i],
+            "{name}: parameter {i}: |error| {err:.3e} ≥ {k}σ = {:.3e}",
+            k * std[i]
+        );
+    }
+}
+
+fn accel_truth(seed: u64) -> Calibration {
+    let spec = TruthSpec {
+        scale_error: 0.05,
+        cross_axis: 0.02,
+        offset_ratio: 0.05,
+        reference: G,
+        upper_triangular: true,
+    };
+    random_calibration(&mut rng(seed), &spec)
+}
+
+fn mag_truth(seed: u64, scale_error: f64, offset_ratio: f64) -> Calibration {
+    let spec = TruthSpec {
+        scale_error,
+        cross_axis: 0.05,
+        offset_ratio,
+        reference: FIELD,
+        upper_triangular: true,
+    };
+    random_calibration(&mut rng(seed), &spec)
+}
+
+#[test]
+fn accel_lm_recovers_truth_from_twelve_poses_within_four_reported_sigmas() {
+    let truth = accel_truth(1);
+    let mut r = rng(2);
+    let dirs = directions(&mut r, PoseSet::TwelvePositions);
+    // 0.02 m/s² per sample, 200 samples per pose: σ of a pose mean ≈ 1.4 mm/s².
+    let poses = accel_poses(&mut r, &truth, &dirs, G, 0.02, 200);
+    let fit = fit_accel_lm(&poses, G).unwrap();
+    let std = std_of(fit.covariance.as_ref().unwrap());
+    // 4σ: a Gaussian error passes with probability 0.99994 per parameter.
+    assert_within_sigmas(
+        "accel",
+        &upper_params(&fit.cal),
+        &upper_params(&truth),
+        &std,
+        4.0,
+    );
+    assert!(
+        fit.rms < 1e-3,
+        "relative RMS {} should be at the 1e-4 noise level",
+        fit.rms
+    );
+    assert!(fit.loo_rms.is_some_and(|l| l.is_finite() && l >= 0.0));
+}
+
+#[test]
+fn accel_lm_reported_std_matches_the_monte_carlo_spread() {
+    let truth = accel_truth(3);
+    let mut r = rng(4);
+    let dirs = directions(&mut r, PoseSet::TwelvePositions);
+    let trials = 300;
+    let mut sum_sq = [0.0; 9];
+    let mut reported = [0.0; 9];
+    for _ in 0..trials {
+        let poses = accel_poses(&mut r, &truth, &dirs, G, 0.02, 100);
+        let out = fit_accel_lm_detailed(&poses, G).unwrap();
+        let est = upper_params(&out.fit.cal);
+        let t = upper_params(&truth);
+        let std = std_of(out.fit.covariance.as_ref().unwrap());
+        for k in 0..9 {
+            sum_sq[k] += (est[k] - t[k]).powi(2);
+            reported[k] += std[k] / trials as f64;
+        }
+    }
+    for k in 0..9 {
+        let spread = (sum_sq[k] / trials as f64).sqrt();
+        // 300 trials estimate a std to ±4 % (1σ); 0.8–1.25 leaves ≥ 5σ of sampling margin.
+        let ratio = reported[k] / spread;
+        assert!(
+            (0.8..1.25).contains(&ratio),
+            "parameter {k}: reported/MC std = {ratio:.3}"
+        );
+    }
+}
+
+#[test]
+fn mag_lm_recovers_truth_from_300_samples_and_estimates_the_noise() {
+    let truth = mag_truth(5, 0.2, 2.0);
+    let mut r = rng(6);
+    let dirs = sphere_directions(&mut r, 300);
+    let sigma = 0.5;
+    let points = mag_samples(&mut r, &truth, &dirs, FIELD, sigma);
+    let fit = fit_mag_lm(&points, FIELD).unwrap();
+    let std = std_of(fit.covariance.as_ref().unwrap());
+    assert_within_sigmas(
+        "mag",
+        &upper_params(&fit.cal),
+        &upper_params(&truth),
+        &std,
+        4.0,
+    );
+    // The reported std must agree with the Cramér–Rao bound for the true noise: the noise is
+    // estimated from 291 degrees of freedom (±4 %), so within 15 %.
+    let clean: Vec<Vec3> = dirs
+        .iter()
+        .map(|u| truth.a.try_inverse().unwrap() * (u * FIELD) + truth.b)
+        .collect();
+    let crb = cramer_rao_bound(&clean, &vec![sigma; clean.len()], &truth).unwrap();
+    for (k, s) in std.iter().enumerate() {
+        let ratio = s / crb[(k, k)].sqrt();
+        assert!(
+            (0.85..1.15).contains(&ratio),
+            "parameter {k}: reported/CRB std = {ratio:.3}"
+        );
+    }
+}
+
+#[test]
+fn mag_lm_reported_std_matches_the_monte_carlo_spread() {
+    let truth = mag_truth(7, 0.2, 2.0);
+    let mut r = rng(8);
+    let dirs = sphere_directions(&mut r, 300);
+    let trials = 150;
+    let t = upper_params(&truth);
+    let mut sum_sq = [0.0; 9];
+    let mut reported = [0.0; 9];
+    for _ in 0..trials {
+        let points = mag_samples(&mut r, &truth, &dirs, FIELD, 0.5);
+        let fit = fit_mag_lm(&points, FIELD).unwrap();
+        let est = upper_params(&fit.cal);
+        let std = std_of(fit.covariance.as_ref().unwrap());
+        for k in 0..9 {
+            sum_sq[k] += (est[k] - t[k]).powi(2);
+            reported[k] += std[k] / trials as f64;
+        }
+    }
+    for k in 0..9 {
+        let ratio = reported[k] / (sum_sq[k] / trials as f64).sqrt();
+        // 150 trials: ±6 % (1σ) on the spread; 0.75–1.33 is a ≥ 4σ margin.
+        assert!(
+            (0.75..1.33).contains(&ratio),
+            "parameter {k}: reported/MC std = {ratio:.3}"
+        );
+    }
+}
+
+/// Run the magnetometer LM on 25 random instances of a hard case; every one must converge to
+/// within 5 reported σ of the truth (5σ: 225 comparisons, a Gaussian false alarm ≈ 1e-4).
+fn hard_case(name: &str, seed: u64, scale_error: f64, offset_ratio: f64, cap_deg: f64) {
+    for trial in 0..25 {
+        let truth = mag_truth(seed + trial, scale_error, offset_ratio);
+        let mut r = rng(1000 + seed + trial);
+        let axis = Vec3::new(r.gen(), r.gen(), r.gen()) - Vec3::repeat(0.5);
+        let dirs = cap_directions(&mut r, 300, axis, cap_deg);
+        let points = mag_samples(&mut r, &truth, &dirs, FIELD, 0.5);
+        let fit =
+            fit_mag_lm(&points, FIELD).unwrap_or_else(|e| panic!("{name} trial {trial}: {e}"));
+        let std = std_of(fit.covariance.as_ref().unwrap());
+        assert_within_sigmas(
+            &format!("{name} trial {trial}"),
+            &upper_params(&fit.cal),
+            &upper_params(&truth),
+            &std,
+            5.0,
+        );
+    }
+}
+
+#[test]
+fn mag_lm_converges_with_an_offset_ten_times_the_field() {
+    hard_case("10x offset", 100, 0.2, 10.0, 180.0);
+}
+
+#[test]
+fn mag_lm_converges_on_half_sphere_coverage() {
+    hard_case("half sphere", 200, 0.2, 2.0, 90.0);
+}
+
+#[test]
+fn mag_lm_converges_with_thirty_percent_scale_errors_and_large_offset() {
+    hard_case("±30 % scale", 300, 0.3, 10.0, 180.0);
+}
+
+#[test]
+fn frosio_gauss_newton_fails_with_a_large_offset_and_succeeds_after_mean_subtraction() {
+    // Seed 000 section 3.2: with an offset far larger than the radius the undamped iteration
+    // from A = I, b = 0 never converges; subtracting the mean first fixes it.
+    let truth = mag_truth(11, 0.1, 10.0);
+    let mut r = rng(12);
+    let dirs = sphere_directions(&mut r, 300);
+    // Normalised units (field = 1), as in seed 000 Table 2.
+    let truth_unit = Calibration {
+        a: truth.a * (1.0 / FIELD),
+        b: truth.b,
+    };
+    let points = mag_samples(&mut r, &truth, &dirs, FIELD, 0.5);
+    let plain = fit_frosio(&points, 1.0, &FrosioOptions::default());
+    assert!(
+        matches!(plain, Err(FitError::NotConverged { .. })),
+        "expected no convergence, got {plain:?}"
+    );
+    let centred = fit_frosio(
+        &points,
+        1.0,
+        &FrosioOptions {
+            subtract_mean: true,
+            ..FrosioOptions::default()
+        },
+    )
+    .unwrap();
+    let lm = fit_mag_lm(&points, 1.0).unwrap();
+    let std = std_of(lm.covariance.as_ref().unwrap());
+    // Frosio's squared-norm residual is a different (slightly less efficient) estimator than the
+    // LM's; it must still land within 5 σ of the LM uncertainty.
+    assert_within_sigmas(
+        "frosio",
+        &upper_params(&centred.cal),
+        &upper_params(&truth_unit),
+        &std,
+        5.0,
+    );
+}
+
+#[test]
+fn merayo_recovers_truth_on_a_full_sphere() {
+    let truth = mag_truth(13, 0.2, 3.0);
+    let mut r = rng(14);
+    let dirs = sphere_directions(&mut r, 300);
+    let points = mag_samples(&mut r, &truth, &dirs, FIELD, 0.5);
+    let fit = fit_merayo(&points, FIELD, true).unwrap();
+    let lm = fit_mag_lm(&points, FIELD).unwrap();
+    // Merayo's algebraic residual is not the ML one; on full coverage it is nearly as good:
+    // within 5 σ of the LM uncertainty, and its own reported std within a factor 2 of the LM's.
+    let lm_std = std_of(lm.covariance.as_ref().unwrap());
+    assert_within_sigmas(
+        "merayo",
+        &upper_params(&fit.cal),
+        &upper_params(&truth),
+        &lm_std,
+        5.0,
+    );
+    let own = std_of(fit.covariance.as_ref().unwrap());
+    for k in 0..9 {
+        let ratio = own[k] / lm_std[k];
+        assert!(
+            (0.5..2.0).contains(&ratio),
+            "parameter {k}: Merayo/LM std = {ratio:.3}"
+        );
+    }
+}
+
+#[test]
+fn refine_lm_refuses_non_finite_and_too_few_readings() {
+    let mut points: Vec<Vec3> = sphere_directions(&mut rng(15), 20);
+    let err = refine_lm(
+        &NormObservations::uniform(points[..5].to_vec(), 0.01),
+        &Calibration::identity(),
+        1.0,
+        &NormLmOptions::default(),
+    );
+    assert!(matches!(err, Err(FitError::Underdetermined(_))));
+    points[3].y = f64::NAN;
+    let err = refine_lm(
+        &NormObservations::uniform(points, 0.01),
+        &Calibration::identity(),
+        1.0,
+        &NormLmOptions::default(),
+    );
+    assert!(matches!(err, Err(FitError::NonFinite(_))));
+}
+
+fn gauss<R: Rng>(r: &mut R) -> f64 {
+    StandardNormal.sample(r)
+}
+
+/// Accelerometer and magnetometer pose readings for a world with the given dip, the magnetometer
+/// frame rotated by `mag_to_accel` relative to the accelerometer frame.
+fn dip_poses(
+    seed: u64,
+    mag_to_accel: &Mat3,
+    dip: f64,
+    noise: f64,
+    n: usize,
+) -> (Vec<Vec3>, Vec<Vec3>) {
+    let mut r = rng(seed);
+    let up = Vec3::z();
+    let field = Vec3::new(dip.cos(), 0.0, -dip.sin());
+    let mut accel = Vec::new();
+    let mut mag = Vec::new();
+    for _ in 0..n {
+        let w = Vec3::new(gauss(&mut r), gauss(&mut r), gauss(&mut r)) * 2.0;
+        let body = Rotation3::new(w); // body → world
+        let a =
+            body.inverse() * up + Vec3::new(gauss(&mut r), gauss(&mut r), gauss(&mut r)) * noise;
+        let m_accel = body.inverse() * field;
+        let m = mag_to_accel.transpose() * m_accel
+            + Vec3::new(gauss(&mut r), gauss(&mut r), gauss(&mut r)) * noise;
+        accel.push(a);
+        mag.push(m);
+    }
+    (accel, mag)
+}
+
+#[test]
+fn alignment_recovers_a_small_rotation_and_the_dip() {
+    let truth = Rotation3::new(Vec3::new(0.03, -0.02, 0.05)).into_inner();
+    let dip = 64f64.to_radians();
+    let (accel, mag) = dip_poses(21, &truth, dip, 0.002, 20);
+    let fit = fit_alignment(&accel, &mag).unwrap();
+    let err = Rotation3::from_matrix(&(fit.rotation * truth.transpose())).scaled_axis();
+    for k in 0..3 {
+        // 4σ per axis, plus the unobservable-free check that std is at the noise scale.
+        assert!(
+            err[k].abs() < 4.0 * fit.rotation_std[k],
+            "axis {k}: {:.2e} vs σ {:.2e}",
+            err[k],
+            fit.rotation_std[k]
+        );
+        assert!(
+            fit.rotation_std[k] < 0.01,
+            "axis {k}: σ {:.2e} rad is far above the 2 mrad noise",
+            fit.rotation_std[k]
+        );
+    }
+    assert!(
+        (fit.dip - dip).abs() < 4.0 * fit.dip_std,
+        "dip error {:.2e}",
+        fit.dip - dip
+    );
+}
+
+#[test]
+fn alignment_recovers_a_swapped_and_inverted_magnetometer_mounting() {
+    // Magnetometer x = accelerometer y, y = x, z = −z (a common two-die mounting), plus 2°.
+    let swap = Mat3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
+    let truth = Rotation3::new(Vec3::new(0.0, 0.035, 0.0)).into_inner() * swap;
+    let (accel, mag) = dip_poses(22, &truth, 50f64.to_radians(), 0.002, 16);
+    let fit = fit_alignment(&accel, &mag).unwrap();
+    let angle = Rotation3::from_matrix(&(fit.rotation * truth.transpose())).angle();
+    // σ per axis ≈ 1 mrad (2 mrad noise, 16 poses); 4σ·√3 ≈ 7 mrad.
+    assert!(angle < 0.007, "rotation error {angle:.2e} rad");
+}
+
+#[test]
+fn alignment_refuses_poses_turned_only_about_the_vertical() {
+    let up = Vec3::z();
+    let field = Vec3::new(0.5, 0.0, -0.85);
+    let (accel, mag): (Vec<Vec3>, Vec<Vec3>) = (0..10)
+        .map(|k| {
+            let body = Rotation3::from_axis_angle(&Vec3::z_axis(), f64::from(k) * 0.6);
+            (body.inverse() * up, body.inverse() * field)
+        })
+        .unzip();
+    assert!(matches!(
+        fit_alignment(&accel, &mag),
+        Err(FitError::Underdetermined(_))
+    ));
+}
+
+/// Motions about fixed body axes with a smooth angle profile: the end rotation is known exactly.
+fn gyro_motions(truth: &Mat3, seed: u64, count: usize, rate_noise: f64) -> Vec<GyroMotion> {
+    let mut r = rng(seed);
+    let dt = 0.005;
+    let steps = 300; // 1.5 s per motion
+    let duration = dt * steps as f64;
+    let to_raw = truth.try_inverse().unwrap();
+    let mut gravity = Vec3::new(0.3, -0.2, 0.93).normalize();
+    let mut motions = Vec::new();
+    for _ in 0..count {
+        let axis = Vec3::new(gauss(&mut r), gauss(&mut r), gauss(&mut r)).normalize();
+        let total = r.gen_range(1.0..2.5) * if r.gen::<bool>() { 1.0 } else { -1.0 };
+        let rates: Vec<Vec3> = (0..=steps)
+            .map(|k| {
+                // θ(t) = total·(1 − cos(πt/T))/2, so ω = θ'(t)·axis in the body frame.
+                let t = k as f64 * dt;
+                let omega = axis
+                    * (total * std::f64::consts::PI / (2.0 * duration)
+                        * (std::f64::consts::PI * t / duration).sin());
+                to_raw * omega + Vec3::new(gauss(&mut r), gauss(&mut r), gauss(&mut r)) * rate_noise
+            })
+            .collect();
+        let after = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), total)
+            .inverse()
+            * gravity;
+        motions.push(GyroMotion {
+            gravity_before: gravity * G,
+            gravity_after: after * G,
+            rates,
+            dt,
+        });
+        gravity = after;
+    }
+    motions
+}
+
+#[test]
+fn tedaldi_gyro_fit_recovers_a_known_scale_and_misalignment_matrix() {
+    let truth = Mat3::new(1.04, 0.012, -0.008, -0.015, 0.97, 0.02, 0.01, -0.006, 1.02);
+    let motions = gyro_motions(&truth, 31, 16, 0.003);
+    let fit = fit_gyro_scale(&motions, None).unwrap();
+    let std = fit.std.unwrap().a;
+    for i in 0..3 {
+        for j in 0..3 {
+            let err = (fit.cal.a[(i, j)] - truth[(i, j)]).abs();
+            // 4σ from the fit's own covariance; the noise (3 mrad/s at 200 Hz) gives σ ≈ 1e-3.
+            assert!(
+                err < 4.0 * std[(i, j)],
+                "A[{i}][{j}]: |error| {err:.2e} vs σ {:.2e}",
+                std[(i, j)]
+            );
+            assert!(err < 0.005, "A[{i}][{j}]: |error| {err:.2e}");
+        }
+    }
+}
+
+#[test]
+fn tedaldi_gyro_fit_refuses_too_few_motions() {
+    let truth = Mat3::identity();
+    let motions = gyro_motions(&truth, 32, 3, 0.0);
+    assert!(matches!(
+        fit_gyro_scale(&motions, None),
+        Err(FitError::Underdetermined(_))
+    ));
+}
