@@ -2,4 +2,14 @@
 //! and (in later modules) talking to a board.
 #![forbid(unsafe_code)]
 
+pub mod device;
+pub mod analysis;
 pub mod fit;
+pub mod export;
+pub mod geomag;
+pub mod input_checks;
+pub mod recording;
+pub mod report;
+pub mod session;
+pub mod still;
+pub mod synthetic;

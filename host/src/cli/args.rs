@@ -1,0 +1,208 @@
+//! Command-line arguments (clap derive). Parsing only; the work is done by the library.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+/// IMU calibration: fit calibration models to recordings and inspect still intervals.
+#[derive(Debug, Parser)]
+#[command(name = "imucal", version, about, propagate_version = true)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Sub-commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Fit calibrations of the accelerometer, gyroscope and magnetometer to a recording.
+    #[command(after_help = "Examples:\n  \
+        imucal fit data/real/imucal_nilspod_ferraris.csv --gyro-unit dps\n  \
+        imucal fit data/real/imutk_xsens_multipos.csv --accel-unit counts --gyro-unit counts --sensor accel --method chen --json\n  \
+        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --field-ut 48.5")]
+    Fit(FitArgs),
+    /// List the still intervals of a recording and the gravity directions they cover.
+    #[command(
+        after_help = "Example:\n  imucal still data/real/tsi_mpu6050_multipos.csv --accel-unit counts --gyro-unit counts"
+    )]
+    Still(StillArgs),
+    /// Analyse the residual of the fitted models: noise floor, candidate effects, held-out error.
+    Analyze(super::analyze::AnalyzeArgs),
+    /// Board commands: ports, info, flash, stream, record.
+    #[command(flatten)]
+    Device(super::device::DeviceCommand),
+    /// Guided calibration of a board (or `--sim`): positions, magnetometer, fit, write, verify.
+    #[command(after_help = "Examples:\n  imucal calibrate --sim --yes\n  imucal calibrate --port /dev/ttyACM0 --field-ut 48.5")]
+    Calibrate(super::calibrate::CalibrateArgs),
+    /// Write an HTML report (plots, parameters, verdict) of a session directory or a recording.
+    #[command(after_help = super::report::EXAMPLES)]
+    Report(super::report::ReportArgs),
+    /// Export a parameter file as a C header, a Rust module or versioned JSON for other firmware.
+    #[command(after_help = super::export::EXAMPLES)]
+    Export(super::export::ExportArgs),
+}
+
+/// Which sensor(s) to fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SensorChoice {
+    /// Accelerometer.
+    Accel,
+    /// Gyroscope.
+    Gyro,
+    /// Magnetometer.
+    Mag,
+    /// Every sensor the recording has.
+    All,
+}
+
+/// Accelerometer unit flag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AccelUnitArg {
+    /// m/s².
+    Mps2,
+    /// Multiples of standard gravity.
+    G,
+    /// Raw counts.
+    Counts,
+}
+
+/// Gyroscope unit flag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum GyroUnitArg {
+    /// rad/s.
+    Rads,
+    /// Degrees per second.
+    Dps,
+    /// Raw counts.
+    Counts,
+}
+
+/// Magnetometer unit flag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MagUnitArg {
+    /// Microtesla.
+    Ut,
+    /// Gauss.
+    Gauss,
+    /// Raw counts.
+    Counts,
+}
+
+/// File format flag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FormatArg {
+    /// Decide from the first line.
+    Auto,
+    /// CSV with a header of column names.
+    Csv,
+    /// IMU-TK text (`timestamp x y z` per line; the recording is the accelerometer file).
+    Imutk,
+    /// MotionCal serial log (`Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines; detected by `auto` too).
+    Motioncal,
+}
+
+/// Time-stamp unit of IMU-TK files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum TimeUnitArg {
+    /// Seconds.
+    S,
+    /// Milliseconds.
+    Ms,
+    /// Microseconds.
+    Us,
+    /// Nanoseconds.
+    Ns,
+}
+
+/// How to read a recording (shared by every command).
+#[derive(Debug, Args)]
+pub struct InputArgs {
+    /// Recording file (CSV with a header, or IMU-TK accelerometer text file).
+    pub recording: PathBuf,
+    /// Unit of the accelerometer columns.
+    #[arg(long, value_enum, default_value = "mps2")]
+    pub accel_unit: AccelUnitArg,
+    /// Unit of the gyroscope columns.
+    #[arg(long, value_enum, default_value = "rads")]
+    pub gyro_unit: GyroUnitArg,
+    /// Unit of the magnetometer columns.
+    #[arg(long, value_enum, default_value = "ut")]
+    pub mag_unit: MagUnitArg,
+    /// Sample rate in Hz for files without a `t_s` column.
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Magnetometer file with its own clock (default: `<name>_mag.csv` next to the recording, if present).
+    #[arg(long)]
+    pub mag_file: Option<PathBuf>,
+    /// Do not look for a `<name>_mag.csv` file next to the recording.
+    #[arg(long)]
+    pub no_mag_sibling: bool,
+    /// File format.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub format: FormatArg,
+    /// Read any delimited file through a column mapping, imucal column = file column, e.g.
+    /// `t_ms=Timestamp,ax=AccX,ay=AccY,az=AccZ` (time keys t_s, t_ms, t_us, t_ns; units by the unit flags).
+    #[arg(long)]
+    pub columns: Option<String>,
+    /// IMU-TK: the gyroscope file paired row by row with the accelerometer file.
+    #[arg(long)]
+    pub gyro_file: Option<PathBuf>,
+    /// IMU-TK: unit of the time stamps.
+    #[arg(long, value_enum, default_value = "s")]
+    pub imutk_time_unit: TimeUnitArg,
+    /// Still detection: window length in seconds.
+    #[arg(long, default_value_t = 0.5)]
+    pub window: f64,
+    /// Still detection: shortest hold kept, in seconds.
+    #[arg(long, default_value_t = 1.0)]
+    pub min_hold: f64,
+    /// Still detection: fixed margin over the χ² threshold (default: chosen from the data).
+    #[arg(long)]
+    pub still_margin: Option<f64>,
+    /// Holds whose gravity directions are within this angle (degrees) count as one direction.
+    #[arg(long, default_value_t = 10.0)]
+    pub direction_angle: f64,
+}
+
+/// Arguments of `imucal fit`.
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// How to read the recording.
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Which sensor to fit.
+    #[arg(long, value_enum, default_value = "all")]
+    pub sensor: SensorChoice,
+    /// Fitting method (default: `lm` for accelerometer and magnetometer, `gyro-bias` for the
+    /// gyroscope). One of: gyro-bias, minmax, axis-aligned, six-position, chen, li, lm, frosio, merayo.
+    #[arg(long)]
+    pub method: Option<String>,
+    /// Local gravity in m/s²; accelerometer output is in m/s².
+    #[arg(long, default_value_t = imucal::recording::STANDARD_GRAVITY)]
+    pub gravity: f64,
+    /// Local field magnitude; magnetometer output is in its unit (µT). Without it the
+    /// magnetometer output is normalised to 1.
+    #[arg(long)]
+    pub field_ut: Option<f64>,
+    /// Gyroscope scale in rad/s per count, for `--gyro-unit counts`.
+    #[arg(long)]
+    pub gyro_scale: Option<f64>,
+    /// Magnetometer fits use at most this many samples, evenly thinned (0 = all).
+    #[arg(long, default_value_t = 2000)]
+    pub max_mag_samples: usize,
+    /// Print a JSON object keyed by sensor instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `imucal still`.
+#[derive(Debug, Args)]
+pub struct StillArgs {
+    /// How to read the recording.
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}

@@ -1,0 +1,145 @@
+//! Which fitting method applies to which sensor, and how its input is formed from a
+//! recording: accelerometer methods take still-interval poses (point methods take the pose
+//! means), magnetometer methods take samples over many orientations, the gyroscope takes the
+//! still poses. Shared by the command line and the real-data example.
+
+use imucal::fit::{self, Fit, FitError, Method, Pose, Vec3};
+
+/// Methods offered for the accelerometer, the default first.
+pub const ACCEL_METHODS: [Method; 8] = [
+    Method::Lm,
+    Method::SixPosition,
+    Method::Chen,
+    Method::MinMax,
+    Method::AxisAligned,
+    Method::Li,
+    Method::Frosio,
+    Method::Merayo,
+];
+
+/// Methods offered for the magnetometer, the default first.
+pub const MAG_METHODS: [Method; 6] = [
+    Method::Lm,
+    Method::Li,
+    Method::Frosio,
+    Method::Merayo,
+    Method::AxisAligned,
+    Method::MinMax,
+];
+
+/// Methods offered for the gyroscope.
+/// `gyro-scale` needs the whole recording (motions between holds), see `cli/fit.rs`.
+pub const GYRO_METHODS: [Method; 2] = [Method::GyroBias, Method::GyroScale];
+
+/// Every method, for parsing names.
+pub const ALL_METHODS: [Method; 10] = [
+    Method::GyroScale,
+    Method::GyroBias,
+    Method::MinMax,
+    Method::AxisAligned,
+    Method::SixPosition,
+    Method::Chen,
+    Method::Li,
+    Method::Lm,
+    Method::Frosio,
+    Method::Merayo,
+];
+
+/// Look a method up by its command-line name.
+pub fn method_by_name(name: &str) -> Option<Method> {
+    ALL_METHODS.into_iter().find(|m| m.name() == name)
+}
+
+/// Frosio (and Merayo, by its `true` flag) start at the data mean: raw counts can have offsets
+/// as large as the signal, where a start at zero offset does not converge (seed 000, Table 2
+/// uses the same preconditioning for all methods).
+const FROSIO: fit::frosio::FrosioOptions = fit::frosio::FrosioOptions {
+    subtract_mean: true,
+    max_iterations: 50,
+    step_tolerance: 1e-10,
+};
+
+fn means(poses: &[Pose]) -> Vec<Vec3> {
+    poses.iter().map(|p| p.mean).collect()
+}
+
+/// Single samples as poses of one sample each, for pose-based methods run on points.
+fn as_poses(points: &[Vec3]) -> Vec<Pose> {
+    points
+        .iter()
+        .map(|p| Pose {
+            mean: *p,
+            var: Vec3::zeros(),
+            n: 1,
+            label: None,
+        })
+        .collect()
+}
+
+fn not_for(method: Method, sensor: &str) -> FitError {
+    FitError::Underdetermined(format!(
+        "method `{}` is not offered for the {sensor}",
+        method.name()
+    ))
+}
+
+/// Fit the accelerometer from still poses to the gravity magnitude `reference`.
+pub fn fit_accel(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
+    match method {
+        Method::Lm => fit::norm_lm::fit_accel_lm(poses, reference),
+        Method::SixPosition => fit::six_position::fit_six_position(poses, None, reference),
+        Method::Chen => fit::chen::fit_chen(poses, reference),
+        Method::MinMax => fit::minmax::fit_minmax(poses, reference),
+        Method::AxisAligned => fit::axis_aligned::fit_axis_aligned_poses(poses, reference),
+        Method::Li => fit::li::fit_li(
+            &means(poses),
+            reference,
+            fit::li::LiOptions {
+                subtract_mean: true,
+            },
+        ),
+        Method::Frosio => fit::frosio::fit_frosio(&means(poses), reference, &FROSIO),
+        Method::Merayo => fit::merayo::fit_merayo(&means(poses), reference, true),
+        Method::GyroBias | Method::GyroScale => Err(not_for(method, "accelerometer")),
+    }
+}
+
+/// Fit the magnetometer from samples over many orientations to the field magnitude `reference`.
+pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, FitError> {
+    match method {
+        Method::Lm => fit::norm_lm::fit_mag_lm(points, reference),
+        Method::Li => fit::li::fit_li(
+            points,
+            reference,
+            fit::li::LiOptions {
+                subtract_mean: true,
+            },
+        ),
+        Method::Frosio => fit::frosio::fit_frosio(points, reference, &FROSIO),
+        Method::Merayo => fit::merayo::fit_merayo(points, reference, true),
+        Method::AxisAligned => fit::axis_aligned::fit_axis_aligned(points, reference),
+        Method::MinMax => fit::minmax::fit_minmax(&as_poses(points), reference),
+        Method::SixPosition | Method::Chen | Method::GyroBias | Method::GyroScale => {
+            Err(not_for(method, "magnetometer"))
+        }
+    }
+}
+
+/// Fit the gyroscope bias from still poses; `scale` converts the file's unit to rad/s.
+pub fn fit_gyro(method: Method, poses: &[Pose], scale: f64) -> Result<Fit, FitError> {
+    match method {
+        Method::GyroBias => fit::gyro_bias::fit_gyro_bias(poses, scale),
+        _ => Err(not_for(method, "gyroscope")),
+    }
+}
+
+/// `max` points evenly spaced through `points` (all of them when `max` is 0 or larger).
+pub fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
+    if max == 0 || points.len() <= max {
+        return points.to_vec();
+    }
+    // Evenly spaced indices i·len/max keep exactly `max` points spread over the whole recording.
+    (0..max)
+        .filter_map(|i| points.get(i * points.len() / max).copied())
+        .collect()
+}

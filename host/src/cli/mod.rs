@@ -1,0 +1,74 @@
+//! The `imucal` command line: argument parsing and thin commands over the library.
+
+pub mod analyze;
+pub mod calibrate;
+pub mod args;
+pub mod device;
+pub mod export;
+pub mod fit;
+pub mod import;
+pub mod methods;
+pub mod report;
+pub mod still;
+
+use anyhow::Context;
+use imucal::recording::{AccelUnit, Format, GyroUnit, LoadOptions, MagUnit, Recording, Units};
+use imucal::still::StillOptions;
+
+use args::{AccelUnitArg, FormatArg, GyroUnitArg, InputArgs, MagUnitArg, TimeUnitArg};
+
+/// Read the recording named on the command line.
+pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
+    let units = Units {
+        accel: match input.accel_unit {
+            AccelUnitArg::Mps2 => AccelUnit::Mps2,
+            AccelUnitArg::G => AccelUnit::G,
+            AccelUnitArg::Counts => AccelUnit::Counts,
+        },
+        gyro: match input.gyro_unit {
+            GyroUnitArg::Rads => GyroUnit::Rads,
+            GyroUnitArg::Dps => GyroUnit::Dps,
+            GyroUnitArg::Counts => GyroUnit::Counts,
+        },
+        mag: match input.mag_unit {
+            MagUnitArg::Ut => MagUnit::Ut,
+            MagUnitArg::Gauss => MagUnit::Gauss,
+            MagUnitArg::Counts => MagUnit::Counts,
+        },
+    };
+    if let Some(recording) = import::load(input, units)? {
+        return Ok(recording);
+    }
+    let options = LoadOptions {
+        units,
+        rate_hz: input.rate,
+        mag_file: input.mag_file.clone(),
+        no_mag_sibling: input.no_mag_sibling,
+        format: match input.format {
+            FormatArg::Auto => Format::Auto,
+            FormatArg::Csv => Format::Csv,
+            FormatArg::Imutk => Format::Imutk,
+            // Read by `import::load` above.
+            FormatArg::Motioncal => Format::Auto,
+        },
+        gyro_file: input.gyro_file.clone(),
+        imutk_time_scale: Some(match input.imutk_time_unit {
+            TimeUnitArg::S => 1.0,
+            TimeUnitArg::Ms => 1e-3,
+            TimeUnitArg::Us => 1e-6,
+            TimeUnitArg::Ns => 1e-9,
+        }),
+    };
+    Recording::load(&input.recording, &options).context("the recording could not be read")
+}
+
+/// Still-detection settings from the command line.
+pub fn still_options(input: &InputArgs) -> StillOptions {
+    StillOptions {
+        window_s: input.window,
+        min_hold_s: input.min_hold,
+        margin: input.still_margin,
+        direction_angle_deg: input.direction_angle,
+        ..StillOptions::default()
+    }
+}

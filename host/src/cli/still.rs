@@ -1,0 +1,81 @@
+//! `imucal still`: list the still intervals of a recording and the directions they cover.
+
+use imucal::fit::Vec3;
+use imucal::input_checks;
+use imucal::recording::Sensor;
+use imucal::still::find_still;
+use serde_json::json;
+
+use super::args::StillArgs;
+
+fn triple(v: &Vec3) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Run the command.
+pub fn run(args: &StillArgs) -> anyhow::Result<()> {
+    let recording = super::load(&args.input)?;
+    let report = find_still(&recording, &super::still_options(&args.input))?;
+    input_checks::require_still(&recording, &report, args.input.min_hold)?;
+    if args.json {
+        let intervals: Vec<_> = report
+            .intervals
+            .iter()
+            .map(|i| {
+                json!({
+                    "t_start": i.t_start, "t_end": i.t_end, "label": i.label, "direction": i.direction,
+                    "accel_mean": i.accel.as_ref().map(|p| triple(&p.mean)),
+                    "gyro_mean": i.gyro.as_ref().map(|p| triple(&p.mean)),
+                    "mag_mean": i.mag.as_ref().map(|p| triple(&p.mean)),
+                    "n": i.accel.as_ref().or(i.gyro.as_ref()).map(|p| p.n),
+                    "temp_c": i.temp.map(|t| json!({"mean": t.mean, "min": t.min, "max": t.max})),
+                })
+            })
+            .collect();
+        let noise: Vec<_> = report
+            .noise
+            .iter()
+            .map(|n| json!({"sensor": n.sensor.name(), "sigma": triple(&n.sigma), "margin": n.margin}))
+            .collect();
+        let directions: Vec<_> = report.directions.iter().map(triple).collect();
+        let out = json!({"intervals": intervals, "directions": directions, "noise": noise, "window": report.window});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!("{}: {}", recording.source.display(), report.summary());
+    for n in &report.noise {
+        println!(
+            "  {} noise σ = [{:.4}, {:.4}, {:.4}] {} per sample; stillness margin {:.1} over the χ² test",
+            n.sensor,
+            n.sigma.x,
+            n.sigma.y,
+            n.sigma.z,
+            recording.units.symbol(n.sensor),
+            n.margin
+        );
+    }
+    println!(
+        "{:>3} {:>9} {:>9} {:>6} {:>6} {:>4}  accel mean ({})",
+        "#",
+        "t_start",
+        "t_end",
+        "dur",
+        "label",
+        "dir",
+        recording.units.symbol(Sensor::Accel)
+    );
+    for (k, i) in report.intervals.iter().enumerate() {
+        let label = i.label.map_or("-".to_string(), |l| l.to_string());
+        let dir = i.direction.map_or("-".to_string(), |d| d.to_string());
+        let mean = i.accel.as_ref().map_or("-".to_string(), |p| {
+            format!("[{:.4}, {:.4}, {:.4}]", p.mean.x, p.mean.y, p.mean.z)
+        });
+        println!(
+            "{k:>3} {:>9.2} {:>9.2} {:>6.1} {label:>6} {dir:>4}  {mean}",
+            i.t_start,
+            i.t_end,
+            i.duration()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,400 @@
+//! Recordings of IMU data read from files: the CSV recording format of `ARCHITECTURE.md`
+//! ("Recording format") and the plain-text format of IMU-TK (one file per sensor).
+//!
+//! A [`Recording`] keeps the values exactly as read together with their [`Units`]; it never
+//! rescales. The magnetometer may run on its own clock (a sibling `<name>_mag.csv` file), so it
+//! is held as a separate [`MagStream`] with its own time stamps.
+
+mod csv;
+mod imutk;
+pub mod mapping;
+pub mod motioncal;
+pub mod units;
+
+use std::path::{Path, PathBuf};
+
+use crate::fit::Vec3;
+pub use units::{AccelUnit, GyroUnit, MagUnit, Sensor, Units, STANDARD_GRAVITY};
+
+/// Why a recording could not be read. Each message names the file (and line and column where
+/// there is one) and says how to fix the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// The file could not be opened or read.
+    #[error("cannot read `{path}`: {cause}; check the path and that the file is readable")]
+    Io {
+        /// File concerned.
+        path: String,
+        /// Operating-system error (kept out of the error chain so it is printed once).
+        cause: std::io::Error,
+    },
+    /// The file is not UTF-8 text (a binary file, an image, or text in another encoding).
+    #[error("`{path}` is not a text recording: {detail}; a recording is a UTF-8 CSV text file, so export or save it as CSV (UTF-8)")]
+    NotText {
+        /// File concerned.
+        path: String,
+        /// What was found instead of text.
+        detail: String,
+    },
+    /// A sensor value is finite but too large to be any sensor's reading.
+    #[error("`{path}` line {line}, column `{column}`: {value:e} is larger than any sensor reading (limit {limit:e} in magnitude); correct or delete that row")]
+    OutOfRange {
+        /// File concerned.
+        path: String,
+        /// 1-based line number.
+        line: usize,
+        /// Column name.
+        column: String,
+        /// The value read.
+        value: f64,
+        /// Largest magnitude accepted.
+        limit: f64,
+    },
+    /// The file holds no header line.
+    #[error("`{path}` is empty: a recording starts with a header line naming its columns (e.g. `t_s,ax,ay,az`)")]
+    Empty {
+        /// File concerned.
+        path: String,
+    },
+    /// A header names some but not all columns of a sensor.
+    #[error("`{path}`, header: column `{present}` is present but `{missing}` is not; a sensor needs all three of its columns")]
+    IncompleteSensor {
+        /// File concerned.
+        path: String,
+        /// A column that is present.
+        present: &'static str,
+        /// The column that is missing.
+        missing: &'static str,
+    },
+    /// A header names the same column twice.
+    #[error("`{path}`, header: column `{column}` appears twice; rename or remove one of them")]
+    DuplicateColumn {
+        /// File concerned.
+        path: String,
+        /// The repeated column name.
+        column: String,
+    },
+    /// A header names no sensor column at all.
+    #[error("`{path}`, header: no sensor columns found (expected some of `ax ay az`, `gx gy gz`, `mx my mz`); header was `{header}`; name the columns in the first line, e.g. `t_s,ax,ay,az,gx,gy,gz`")]
+    NoSensor {
+        /// File concerned.
+        path: String,
+        /// The header line as read.
+        header: String,
+    },
+    /// A field is not a finite number.
+    #[error("`{path}` line {line}, column `{column}`: `{text}` is not a finite number; correct or delete that row")]
+    BadNumber {
+        /// File concerned.
+        path: String,
+        /// 1-based line number.
+        line: usize,
+        /// Column name.
+        column: String,
+        /// The offending text.
+        text: String,
+    },
+    /// A row has a different number of fields than the header.
+    #[error("`{path}` line {line}: {found} fields but the header names {expected} columns; every row needs one value per column")]
+    FieldCount {
+        /// File concerned.
+        path: String,
+        /// 1-based line number.
+        line: usize,
+        /// Number of columns in the header.
+        expected: usize,
+        /// Number of fields in the row.
+        found: usize,
+    },
+    /// Time stamps go backwards.
+    #[error("`{path}` line {line}: time {time} s is earlier than the previous row's {previous} s; sort the rows by time")]
+    TimeBackwards {
+        /// File concerned.
+        path: String,
+        /// 1-based line number.
+        line: usize,
+        /// This row's time.
+        time: f64,
+        /// The previous row's time.
+        previous: f64,
+    },
+    /// A file holds a header but no data rows.
+    #[error("`{path}` has a header but no data rows")]
+    NoRows {
+        /// File concerned.
+        path: String,
+    },
+    /// Two files that must pair sample by sample do not.
+    #[error("`{first}` and `{second}` do not pair sample by sample: {detail}; give files recorded together")]
+    Unpaired {
+        /// First file.
+        first: String,
+        /// Second file.
+        second: String,
+        /// What differs.
+        detail: String,
+    },
+    /// A sample rate given on the command line is not a positive finite number.
+    #[error("sample rate {0} Hz is not a positive finite number; pass e.g. `--rate 100`")]
+    BadRate(f64),
+    /// An IMU-TK text line does not hold a time stamp and three values.
+    #[error("`{path}` line {line}: expected `timestamp x y z` (4 numbers separated by spaces or commas), found `{text}`")]
+    ImutkLine {
+        /// File concerned.
+        path: String,
+        /// 1-based line number.
+        line: usize,
+        /// The line as read.
+        text: String,
+    },
+}
+
+/// How a label column divides the rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LabelKind {
+    /// `pose`: each label is one static hold; rows labelled alike are averaged together.
+    Pose,
+    /// `segment`: labels name sections (separate recordings or phases); still intervals are
+    /// detected inside each section and never across a boundary.
+    Segment,
+}
+
+/// A label column (`pose` or `segment`). Empty fields and `-` mean "no label".
+#[derive(Debug, Clone, PartialEq)]
+pub struct Labels {
+    /// Whether the labels are poses or sections.
+    pub kind: LabelKind,
+    /// Distinct label texts in order of first appearance.
+    pub names: Vec<String>,
+    /// Per row: index into `names`, or `None` for an unlabelled row.
+    pub per_row: Vec<Option<usize>>,
+}
+
+impl Labels {
+    /// Integer value of a label for [`crate::fit::Pose::label`]: the text itself when it is an
+    /// integer, otherwise its index in `names`.
+    pub fn value(&self, index: usize) -> i64 {
+        self.names
+            .get(index)
+            .and_then(|name| name.parse::<i64>().ok())
+            .unwrap_or(index as i64)
+    }
+}
+
+/// Magnetometer samples with their own time stamps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MagStream {
+    /// File the samples came from.
+    pub source: PathBuf,
+    /// Time of each sample in seconds, on the same time base as the main stream.
+    pub time: Vec<f64>,
+    /// Readings in the file's units.
+    pub samples: Vec<Vec3>,
+}
+
+/// One recording: sensor streams as read, their units and time stamps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    /// Main file.
+    pub source: PathBuf,
+    /// Time of each row in seconds. Without a `t_s` column: row index / rate, or the row index
+    /// itself when no rate was given (then `time_is_index` is set).
+    pub time: Vec<f64>,
+    /// True when `time` counts rows rather than seconds.
+    pub time_is_index: bool,
+    /// Accelerometer readings per row, if present.
+    pub accel: Option<Vec<Vec3>>,
+    /// Gyroscope readings per row, if present.
+    pub gyro: Option<Vec<Vec3>>,
+    /// Die temperature per row in °C, if present.
+    pub temp_c: Option<Vec<f64>>,
+    /// Magnetometer readings (same rows as the main file, or a file with its own clock).
+    pub mag: Option<MagStream>,
+    /// `pose` or `segment` labels, if present.
+    pub labels: Option<Labels>,
+    /// Columns of the header that are not part of the format and were not read.
+    pub ignored_columns: Vec<String>,
+    /// Units of the sensor columns.
+    pub units: Units,
+}
+
+/// File format of a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Format {
+    /// Decide from the first line: a header of names means CSV, four numbers mean IMU-TK.
+    #[default]
+    Auto,
+    /// CSV with a header line of column names.
+    Csv,
+    /// IMU-TK text: `timestamp x y z` per line, the main file being the accelerometer.
+    Imutk,
+}
+
+/// How to read a recording.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LoadOptions {
+    /// Units of the sensor columns.
+    pub units: Units,
+    /// Sample rate for files without a `t_s` column (ignored when `t_s` exists).
+    pub rate_hz: Option<f64>,
+    /// Magnetometer file with its own clock. When `None`, a sibling `<stem>_mag.csv` is used
+    /// if the main file has no magnetometer columns and such a file exists.
+    pub mag_file: Option<PathBuf>,
+    /// Do not look for a sibling magnetometer file.
+    pub no_mag_sibling: bool,
+    /// Format of the main file.
+    pub format: Format,
+    /// IMU-TK only: the gyroscope file paired row by row with the accelerometer file.
+    pub gyro_file: Option<PathBuf>,
+    /// IMU-TK only: seconds per time-stamp unit (1 for seconds, 1e-6 for microseconds).
+    pub imutk_time_scale: Option<f64>,
+}
+
+impl Recording {
+    /// Read a recording with the given options (see [`LoadOptions`]).
+    pub fn load(path: &Path, options: &LoadOptions) -> Result<Self, RecordingError> {
+        if let Some(rate) = options.rate_hz {
+            if !(rate.is_finite() && rate > 0.0) {
+                return Err(RecordingError::BadRate(rate));
+            }
+        }
+        let format = match options.format {
+            Format::Auto => {
+                if imutk::looks_like_imutk(path)? {
+                    Format::Imutk
+                } else {
+                    Format::Csv
+                }
+            }
+            other => other,
+        };
+        let mut recording = match format {
+            Format::Imutk => imutk::load(path, options)?,
+            _ => csv::load(path, options)?,
+        };
+        if recording.mag.is_none() {
+            let mag_path = match &options.mag_file {
+                Some(p) => Some(p.clone()),
+                None if !options.no_mag_sibling => sibling_mag_file(path).filter(|p| p.is_file()),
+                None => None,
+            };
+            if let Some(mag_path) = mag_path {
+                recording.mag = Some(csv::load_mag_stream(&mag_path, options)?);
+            }
+        } else if let Some(mag_path) = &options.mag_file {
+            // An explicit file replaces magnetometer columns of the main file.
+            recording.mag = Some(csv::load_mag_stream(mag_path, options)?);
+        }
+        Ok(recording)
+    }
+
+    /// Number of rows of the main stream.
+    pub fn len(&self) -> usize {
+        self.time.len()
+    }
+
+    /// True when the main stream holds no rows.
+    pub fn is_empty(&self) -> bool {
+        self.time.is_empty()
+    }
+
+    /// Whether the recording carries `sensor`.
+    pub fn has(&self, sensor: Sensor) -> bool {
+        match sensor {
+            Sensor::Accel => self.accel.is_some(),
+            Sensor::Gyro => self.gyro.is_some(),
+            Sensor::Mag => self.mag.is_some(),
+        }
+    }
+
+    /// Sensors present, in the usual order.
+    pub fn sensors(&self) -> Vec<Sensor> {
+        Sensor::ALL.into_iter().filter(|s| self.has(*s)).collect()
+    }
+
+    /// Samples of a row-synchronous sensor (accelerometer or gyroscope), or the magnetometer
+    /// stream's samples.
+    pub fn samples(&self, sensor: Sensor) -> Option<&[Vec3]> {
+        match sensor {
+            Sensor::Accel => self.accel.as_deref(),
+            Sensor::Gyro => self.gyro.as_deref(),
+            Sensor::Mag => self.mag.as_ref().map(|m| m.samples.as_slice()),
+        }
+    }
+
+    /// Median sample rate of the main stream in Hz (from time stamps), if it can be told.
+    pub fn rate_hz(&self) -> Option<f64> {
+        median_rate(&self.time)
+    }
+}
+
+/// Median rate in Hz of a time series (robust to the bursty host time stamps of some loggers).
+pub fn median_rate(time: &[f64]) -> Option<f64> {
+    let mut dt: Vec<f64> = time
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .collect();
+    if dt.is_empty() {
+        return None;
+    }
+    dt.sort_by(f64::total_cmp);
+    let span = time.last()? - time.first()?;
+    let median = dt[dt.len() / 2];
+    // Bursty loggers (many near-zero steps then a long gap) make the median step misleading;
+    // the mean rate over the whole span is the honest figure then.
+    let mean_rate = (time.len() - 1) as f64 / span;
+    let median_rate = 1.0 / median;
+    if median_rate > 2.0 * mean_rate {
+        Some(mean_rate)
+    } else {
+        Some(median_rate)
+    }
+}
+
+/// `<dir>/<stem>_mag.csv` for `<dir>/<stem>.csv`.
+pub fn sibling_mag_file(path: &Path) -> Option<PathBuf> {
+    let stem = path.file_stem()?.to_str()?;
+    if stem.ends_with("_mag") {
+        return None;
+    }
+    Some(path.with_file_name(format!("{stem}_mag.csv")))
+}
+
+/// Largest magnitude accepted for a sensor value: raw counts of 32-bit converters stay below
+/// 4.3e9 and physical readings far below; larger values would overflow the sums of squares
+/// that pose statistics are built from.
+pub const MAX_SENSOR_MAGNITUDE: f64 = 1e10;
+
+/// The whole file as UTF-8 text, or an error that says what the file holds instead.
+pub(crate) fn read_text(path: &Path) -> Result<String, RecordingError> {
+    let bytes = std::fs::read(path).map_err(|cause| RecordingError::Io {
+        path: display(path),
+        cause,
+    })?;
+    let not_text = |detail: String| RecordingError::NotText {
+        path: display(path),
+        detail,
+    };
+    if bytes.starts_with(&[0xFF, 0xFE]) || bytes.starts_with(&[0xFE, 0xFF]) {
+        return Err(not_text(
+            "it is UTF-16 text (it starts with a UTF-16 byte-order mark)".to_string(),
+        ));
+    }
+    if let Some(offset) = bytes.iter().position(|b| *b == 0) {
+        return Err(not_text(format!(
+            "it holds binary data (a zero byte at offset {offset})"
+        )));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        let offset = e.utf8_error().valid_up_to();
+        let byte = e.as_bytes().get(offset).copied().unwrap_or_default();
+        not_text(format!(
+            "it holds bytes that are not UTF-8 text (byte 0x{byte:02X} at offset {offset})"
+        ))
+    })
+}
+
+fn display(path: &Path) -> String {
+    path.display().to_string()
+}

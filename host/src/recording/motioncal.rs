@@ -1,0 +1,114 @@
+//! Reader for MotionCal-style serial logs: the lines `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` that the
+//! PJRC/Adafruit calibration sketches print for MotionCal, nine integers per line.
+//!
+//! Scales are MotionCal's (its `imuread.h`, matched by the Adafruit AHRS `calibration` sketch):
+//! accelerometer 8192 counts per g, gyroscope 16 counts per °/s, magnetometer 10 counts per µT
+//! (0.1 µT per count). The reader converts with them, so the recording is in g, °/s and µT.
+//! Other lines of such a log (`Uni:`, `Ori:`, `Cal1:`, `Cal2:`, text) are skipped. The log has
+//! no time stamps: rows are timed by `--rate`, or counted when no rate is given.
+
+use std::path::Path;
+
+use super::mapping::ImportError;
+use super::{AccelUnit, GyroUnit, MagStream, MagUnit, Recording, Units};
+use crate::fit::Vec3;
+
+/// Accelerometer counts per g in MotionCal's `Raw:` lines.
+pub const ACCEL_COUNTS_PER_G: f64 = 8192.0;
+/// Gyroscope counts per °/s in MotionCal's `Raw:` lines.
+pub const GYRO_COUNTS_PER_DPS: f64 = 16.0;
+/// Magnetometer counts per µT in MotionCal's `Raw:` lines.
+pub const MAG_COUNTS_PER_UT: f64 = 10.0;
+
+/// The prefix of a raw-data line.
+const RAW_PREFIX: &str = "Raw:";
+
+/// Largest magnitude of a field: MotionCal's counts are 16-bit, so anything beyond 32-bit range
+/// is a corrupted line rather than a reading.
+const MAX_COUNTS: f64 = 4_294_967_296.0;
+
+/// True when some line of `text` starts with `Raw:` (MotionCal log detection).
+pub fn looks_like_motioncal(text: &str) -> bool {
+    text.lines()
+        .take(200)
+        .any(|line| line.trim_start().starts_with(RAW_PREFIX))
+}
+
+/// Parses one `Raw:` payload into nine numbers, or says which field is wrong.
+fn parse_raw(payload: &str) -> Result<[f64; 9], (usize, String)> {
+    let fields: Vec<&str> = payload.split(',').map(str::trim).collect();
+    if fields.len() != 9 {
+        return Err((fields.len(), String::new()));
+    }
+    let mut values = [0.0; 9];
+    for (slot, field) in values.iter_mut().zip(&fields) {
+        *slot = field
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && v.abs() < MAX_COUNTS)
+            .ok_or_else(|| (9, (*field).to_string()))?;
+    }
+    Ok(values)
+}
+
+/// Reads a MotionCal log from text; `path` names it in errors and in the recording.
+pub fn parse(text: &str, path: &Path, rate_hz: Option<f64>) -> Result<Recording, ImportError> {
+    if let Some(rate) = rate_hz {
+        if !(rate.is_finite() && rate > 0.0) {
+            return Err(ImportError::BadRate(rate));
+        }
+    }
+    let shown = path.display().to_string();
+    let mut accel = Vec::new();
+    let mut gyro = Vec::new();
+    let mut mag = Vec::new();
+    for (index, line) in text.lines().enumerate() {
+        let Some(payload) = line.trim().strip_prefix(RAW_PREFIX) else {
+            continue;
+        };
+        let v = parse_raw(payload).map_err(|(found, field)| ImportError::RawLine {
+            path: shown.clone(),
+            line: index + 1,
+            found,
+            field,
+        })?;
+        accel.push(Vec3::new(v[0], v[1], v[2]) / ACCEL_COUNTS_PER_G);
+        gyro.push(Vec3::new(v[3], v[4], v[5]) / GYRO_COUNTS_PER_DPS);
+        mag.push(Vec3::new(v[6], v[7], v[8]) / MAG_COUNTS_PER_UT);
+    }
+    if accel.is_empty() {
+        return Err(ImportError::NoRawLines { path: shown });
+    }
+    let time: Vec<f64> = (0..accel.len())
+        .map(|i| rate_hz.map_or(i as f64, |rate| i as f64 / rate))
+        .collect();
+    Ok(Recording {
+        source: path.to_path_buf(),
+        time_is_index: rate_hz.is_none(),
+        accel: Some(accel),
+        gyro: Some(gyro),
+        temp_c: None,
+        mag: Some(MagStream {
+            source: path.to_path_buf(),
+            time: time.clone(),
+            samples: mag,
+        }),
+        time,
+        labels: None,
+        ignored_columns: Vec::new(),
+        units: Units {
+            accel: AccelUnit::G,
+            gyro: GyroUnit::Dps,
+            mag: MagUnit::Ut,
+        },
+    })
+}
+
+/// Reads a MotionCal log file.
+pub fn load(path: &Path, rate_hz: Option<f64>) -> Result<Recording, ImportError> {
+    let text = std::fs::read_to_string(path).map_err(|cause| ImportError::Io {
+        path: path.display().to_string(),
+        cause,
+    })?;
+    parse(&text, path, rate_hz)
+}

@@ -1,0 +1,392 @@
+//! The `imucal fit` command end to end: on a synthetic recording with known calibration (written
+//! by the test), on a copied real recording, and on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use imucal::fit::{Mat3, Vec3};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal, UnitSphere};
+use serde_json::Value;
+
+const G: f64 = 9.80665;
+
+fn imucal(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(args)
+        .output()
+        .expect("binary runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("imucal-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temporary directory is writable");
+    dir
+}
+
+fn real(name: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/real")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn matrix(v: &Value) -> Mat3 {
+    let e: Vec<f64> = v
+        .as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect();
+    Mat3::from_row_slice(&e)
+}
+
+fn vector(v: &Value) -> Vec3 {
+    let e: Vec<f64> = v
+        .as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect();
+    Vec3::from_row_slice(&e)
+}
+
+/// The accelerometer truth: counts → m/s², upper-triangular with positive diagonal (the gauge
+/// of the norm-model fit), offsets of a few hundred counts.
+fn accel_truth() -> (Mat3, Vec3) {
+    let a = Mat3::new(
+        1.0 / 1640.0,
+        2.0e-6,
+        -1.5e-6,
+        0.0,
+        1.0 / 1655.0,
+        3.0e-6,
+        0.0,
+        0.0,
+        1.0 / 1620.0,
+    ) * 1.0;
+    (a, Vec3::new(120.0, -340.0, 75.0))
+}
+
+/// A CSV with 14 still holds (2 s at 100 Hz) in distinct directions joined by 1 s of motion;
+/// accelerometer in counts, gyroscope in rad/s with a constant bias.
+fn write_synthetic_imu(path: &Path, sigma_counts: f64, sigma_gyro: f64, gyro_bias: Vec3) {
+    let (a, b) = accel_truth();
+    let a_inv = a.try_inverse().expect("invertible truth");
+    let mut rng = rand::rngs::StdRng::seed_from_u64(42);
+    let na = Normal::new(0.0, sigma_counts).expect("sigma");
+    let ng = Normal::new(0.0, sigma_gyro).expect("sigma");
+    let mut dirs: Vec<Vec3> = vec![
+        Vec3::x(),
+        -Vec3::x(),
+        Vec3::y(),
+        -Vec3::y(),
+        Vec3::z(),
+        -Vec3::z(),
+    ];
+    for s in [-1.0, 1.0] {
+        for t in [-1.0, 1.0] {
+            dirs.push(Vec3::new(s, t, 1.0).normalize());
+            dirs.push(Vec3::new(t, 1.0, s).normalize());
+        }
+    }
+    let mut text = String::from("t_s,ax,ay,az,gx,gy,gz\n");
+    let mut t = 0.0;
+    for k in 0..dirs.len() {
+        let raw = a_inv * (dirs[k] * G) + b;
+        for _ in 0..200 {
+            let x = raw + Vec3::from_fn(|_, _| na.sample(&mut rng));
+            let w = gyro_bias + Vec3::from_fn(|_, _| ng.sample(&mut rng));
+            text += &format!(
+                "{t:.2},{:.3},{:.3},{:.3},{:.6},{:.6},{:.6}\n",
+                x.x, x.y, x.z, w.x, w.y, w.z
+            );
+            t += 0.01;
+        }
+        let next = dirs[(k + 1) % dirs.len()];
+        for i in 0..100 {
+            let s = i as f64 / 100.0;
+            let d = (dirs[k] * (1.0 - s)
+                + next * s
+                + Vec3::new(0.3, -0.2, 0.25) * (s * std::f64::consts::PI).sin())
+            .normalize();
+            let x = a_inv * (d * G) + b + Vec3::from_fn(|_, _| rng.gen_range(-40.0..40.0));
+            let w =
+                gyro_bias + Vec3::new(0.8, -0.5, 0.6) + Vec3::from_fn(|_, _| ng.sample(&mut rng));
+            text += &format!(
+                "{t:.2},{:.3},{:.3},{:.3},{:.6},{:.6},{:.6}\n",
+                x.x, x.y, x.z, w.x, w.y, w.z
+            );
+            t += 0.01;
+        }
+    }
+    std::fs::write(path, text).expect("temporary file is writable");
+}
+
+#[test]
+fn synthetic_accelerometer_and_gyroscope_recover_the_truth_within_their_stated_uncertainty() {
+    let dir = scratch("synthetic");
+    let path = dir.join("imu.csv");
+    let gyro_bias = Vec3::new(0.012, -0.034, 0.005);
+    let (sigma_counts, sigma_gyro) = (4.0, 0.003);
+    write_synthetic_imu(&path, sigma_counts, sigma_gyro, gyro_bias);
+    let path = path.display().to_string();
+    let (ok, stdout, stderr) = imucal(&["fit", &path, "--accel-unit", "counts", "--json"]);
+    assert!(ok, "{stderr}");
+    let json: Value = serde_json::from_str(&stdout).expect("valid JSON");
+
+    let accel = &json["accel"];
+    assert_eq!(accel["method"], "lm");
+    assert_eq!(accel["n_poses"], 14, "{stdout}");
+    let (a_true, b_true) = accel_truth();
+    let (a, b) = (matrix(&accel["A"]), vector(&accel["b"]));
+    let (a_std, b_std) = (
+        matrix(&accel["param_std"]["A"]),
+        vector(&accel["param_std"]["b"]),
+    );
+    // Each estimate within 5 of its own stated standard deviations (a 6e-7 two-sided chance per
+    // entry if the uncertainty is right) plus a floor for entries fixed by the gauge.
+    for k in 0..3 {
+        assert!(
+            (b[k] - b_true[k]).abs() <= 5.0 * b_std[k] + 1e-9,
+            "b[{k}] {} vs {} ± {}",
+            b[k],
+            b_true[k],
+            b_std[k]
+        );
+        // The stated σ of b must itself match the noise: pose means of 200 samples with σ = 4
+        // counts have standard error 0.28 counts; 14 poses spread it over 3 offsets, so σ_b is
+        // of that order (between 0.05 and 1 count).
+        assert!(b_std[k] > 0.05 && b_std[k] < 1.0, "σ_b[{k}] = {}", b_std[k]);
+    }
+    for r in 0..3 {
+        for c in r..3 {
+            let tol = 5.0 * a_std[(r, c)] + 1e-12;
+            assert!(
+                (a[(r, c)] - a_true[(r, c)]).abs() <= tol,
+                "A[{r}{c}] {} vs {}",
+                a[(r, c)],
+                a_true[(r, c)]
+            );
+        }
+    }
+    // Relative residual: the noise of a pose mean (4/√200 = 0.28 counts) over the radius
+    // (~1600 counts) is 1.8e-4; with 9 of 14 degrees of freedom used the RMS is below that.
+    let rms = accel["rms"].as_f64().expect("rms");
+    assert!(rms < 3.0e-4, "rms {rms}");
+    assert!(accel["loo_rms"].as_f64().expect("loo") >= rms);
+
+    let gyro = &json["gyro"];
+    assert_eq!(gyro["method"], "gyro-bias");
+    let gb = vector(&gyro["b"]);
+    // 14 holds of ≥ 150 still samples each: standard error σ/√2100 = 6.5e-5 rad/s; 5 of them.
+    for k in 0..3 {
+        assert!(
+            (gb[k] - gyro_bias[k]).abs() < 5.0 * sigma_gyro / 2100f64.sqrt(),
+            "gyro b[{k}] {}",
+            gb[k]
+        );
+    }
+    assert!(
+        json.get("mag").is_none(),
+        "no magnetometer columns, no mag entry"
+    );
+}
+
+#[test]
+fn synthetic_magnetometer_in_counts_is_fitted_to_the_given_field() {
+    let dir = scratch("mag");
+    let path = dir.join("mag.csv");
+    let a_true = Mat3::new(0.16, 0.004, -0.002, 0.0, 0.15, 0.003, 0.0, 0.0, 0.17); // counts → µT
+    let b_true = Vec3::new(210.0, -95.0, 40.0);
+    let field = 48.0;
+    let sigma = 1.5; // counts
+    let a_inv = a_true.try_inverse().expect("invertible");
+    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+    let noise = Normal::new(0.0, sigma).expect("sigma");
+    let mut text = String::from("t_s,mx,my,mz\n");
+    for i in 0..3000 {
+        let u: [f64; 3] = UnitSphere.sample(&mut rng);
+        let m =
+            a_inv * (Vec3::from(u) * field) + b_true + Vec3::from_fn(|_, _| noise.sample(&mut rng));
+        text += &format!("{:.3},{:.3},{:.3},{:.3}\n", i as f64 * 0.02, m.x, m.y, m.z);
+    }
+    std::fs::write(&path, text).expect("writable");
+    let path = path.display().to_string();
+    let (ok, stdout, stderr) = imucal(&[
+        "fit",
+        &path,
+        "--mag-unit",
+        "counts",
+        "--field-ut",
+        "48",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let mag = &serde_json::from_str::<Value>(&stdout).expect("valid JSON")["mag"];
+    assert_eq!(mag["n_samples"], 2000, "thinned to the default bound");
+    let b = vector(&mag["b"]);
+    // 2000 samples of σ = 1.5 counts on a ~300-count radius: σ_b ≈ 1.5·√(3/2000) ≈ 0.06 counts;
+    // allow 0.5 counts (8 σ) as the stated σ is checked separately.
+    for k in 0..3 {
+        assert!(
+            (b[k] - b_true[k]).abs() < 0.5,
+            "b[{k}] {} vs {}",
+            b[k],
+            b_true[k]
+        );
+    }
+    // Relative residual = σ·|A|/H ≈ 1.5·0.16/48 = 5e-3.
+    let rms = mag["rms"].as_f64().expect("rms");
+    assert!((rms / 5.0e-3 - 1.0).abs() < 0.2, "rms {rms}");
+}
+
+#[test]
+fn xsens_recording_in_counts_fits_offsets_near_the_per_axis_reference() {
+    let (ok, stdout, stderr) = imucal(&[
+        "fit",
+        &real("imutk_xsens_multipos.csv"),
+        "--accel-unit",
+        "counts",
+        "--gyro-unit",
+        "counts",
+        "--sensor",
+        "accel",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let accel = &serde_json::from_str::<Value>(&stdout).expect("valid JSON")["accel"];
+    assert_eq!(accel["method"], "lm");
+    assert!((36..=40).contains(&accel["n_poses"].as_u64().expect("count")));
+    // The provenance note's per-axis fit (no cross-axis terms) puts the offsets at
+    // 32768 + [354.35, 510.24, −396.56] counts. The cross-axis terms of this fit (up to 2% here)
+    // move them by a few counts; 10 counts is 0.25% of the ~4000-count radius.
+    let b = vector(&accel["b"]);
+    for (k, want) in [354.35, 510.24, -396.56].into_iter().enumerate() {
+        assert!(
+            (b[k] - 32768.0 - want).abs() < 10.0,
+            "b[{k}] {} vs {want}",
+            b[k] - 32768.0
+        );
+    }
+    // Scale: ~414 counts per m/s² on each axis in the note, so A diagonal ≈ 1/414 within 1%.
+    let a = matrix(&accel["A"]);
+    for k in 0..3 {
+        assert!(
+            (a[(k, k)] * 414.0 - 1.0).abs() < 0.01,
+            "A[{k}{k}] {}",
+            a[(k, k)]
+        );
+    }
+    // With 38 holds the held-out error is close to the fit error: the model is not overfitted.
+    let (rms, loo) = (
+        accel["rms"].as_f64().expect("rms"),
+        accel["loo_rms"].as_f64().expect("loo"),
+    );
+    assert!(rms < 3.0e-4 && loo < 2.0 * rms, "rms {rms}, loo {loo}");
+}
+
+#[test]
+fn six_face_recording_falls_back_to_the_six_position_method_and_says_why() {
+    let (ok, stdout, stderr) = imucal(&[
+        "fit",
+        &real("imucal_nilspod_ferraris.csv"),
+        "--gyro-unit",
+        "dps",
+        "--sensor",
+        "accel",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let accel = &serde_json::from_str::<Value>(&stdout).expect("valid JSON")["accel"];
+    assert_eq!(accel["method"], "six-position");
+    assert!(accel["note"]
+        .as_str()
+        .expect("note")
+        .contains("6 were found"));
+    assert_eq!(accel["n_poses"], 13);
+    // Offsets of the provenance note's per-axis fit of the six faces: [0.537, −0.616, 0.399]
+    // m/s². This fit has cross-axis terms, which move the offsets by up to ~0.015 m/s²; 0.02.
+    let b = vector(&accel["b"]);
+    for (k, want) in [0.53667, -0.61626, 0.39856].into_iter().enumerate() {
+        assert!((b[k] - want).abs() < 0.02, "b[{k}] {} vs {want}", b[k]);
+    }
+    // The six-position residual is a vector error: it includes the tilt of each face of the
+    // table (a 0.1° tilt alone is 1.7e-3 of g), so 5e-3 rather than the norm fits' 1e-4.
+    assert!(accel["rms"].as_f64().expect("rms") < 5.0e-3);
+}
+
+#[test]
+fn table_output_names_method_uncertainty_and_verdict() {
+    let (ok, stdout, stderr) = imucal(&[
+        "fit",
+        &real("imucal_nilspod_ferraris.csv"),
+        "--gyro-unit",
+        "dps",
+    ]);
+    assert!(ok, "{stderr}");
+    for needle in [
+        "accel — method six-position",
+        "gyro — method gyro-bias",
+        "±",
+        "leave-one-out RMS",
+        "verdict:",
+    ] {
+        assert!(stdout.contains(needle), "missing `{needle}` in\n{stdout}");
+    }
+}
+
+#[test]
+fn errors_are_sentences_with_a_failing_exit_code() {
+    let (ok, _, stderr) = imucal(&["fit", "/nonexistent/rec.csv"]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("cannot read `/nonexistent/rec.csv`"),
+        "{stderr}"
+    );
+
+    let dir = scratch("errors");
+    let bad = dir.join("bad.csv");
+    std::fs::write(&bad, "t_s,ax,ay,az\n0,1,2,3\n0.01,1,x,3\n").expect("writable");
+    let (ok, _, stderr) = imucal(&["fit", &bad.display().to_string()]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("line 3, column `ay`: `x` is not a finite number"),
+        "{stderr}"
+    );
+
+    let (ok, _, stderr) = imucal(&[
+        "fit",
+        &real("tsm_qmc5883l_mag_rotation.csv"),
+        "--method",
+        "six-position",
+        "--sensor",
+        "mag",
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("does not apply to the mag"), "{stderr}");
+
+    let (ok, _, stderr) = imucal(&[
+        "fit",
+        &real("tsm_qmc5883l_mag_rotation.csv"),
+        "--sensor",
+        "accel",
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("has no accel data"), "{stderr}");
+}
+
+#[test]
+fn help_of_every_command_has_an_example() {
+    for command in ["fit", "still"] {
+        let (ok, stdout, _) = imucal(&[command, "--help"]);
+        assert!(ok);
+        assert!(stdout.contains("Example"), "{command} --help:\n{stdout}");
+    }
+}

@@ -1,0 +1,177 @@
+//! Still-interval detection on synthetic recordings whose holds are known exactly.
+
+use imucal::fit::Vec3;
+use imucal::recording::{LabelKind, Labels, Recording, Units};
+use imucal::still::{chi2_quantile_per_dof, find_still, StillError, StillOptions};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+
+const RATE: f64 = 100.0;
+const SIGMA_A: f64 = 0.02; // m/s², accelerometer white noise
+const SIGMA_G: f64 = 0.005; // rad/s, gyroscope white noise
+
+/// Holds of `hold_s` seconds in each of six face directions, joined by 2 s rotations.
+fn six_face_recording(seed: u64, hold_s: f64) -> (Recording, Vec<(f64, f64, Vec3)>) {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let na = Normal::new(0.0, SIGMA_A).expect("valid sigma");
+    let ng = Normal::new(0.0, SIGMA_G).expect("valid sigma");
+    let faces = [
+        Vec3::x(),
+        -Vec3::x(),
+        Vec3::y(),
+        -Vec3::y(),
+        Vec3::z(),
+        -Vec3::z(),
+    ];
+    let (mut time, mut accel, mut gyro, mut truth) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut t = 0.0;
+    for (k, face) in faces.iter().enumerate() {
+        let start = t;
+        let gravity = face * 9.81;
+        while t < start + hold_s {
+            time.push(t);
+            accel.push(gravity + Vec3::from_fn(|_, _| na.sample(&mut rng)));
+            gyro.push(Vec3::from_fn(|_, _| ng.sample(&mut rng)));
+            t += 1.0 / RATE;
+        }
+        truth.push((start, t, gravity));
+        let next = faces[(k + 1) % 6] * 9.81;
+        let move_start = t;
+        while t < move_start + 2.0 {
+            let s = (t - move_start) / 2.0;
+            let wobble = (s * std::f64::consts::PI).sin();
+            let dir = (gravity * (1.0 - s) + next * s + Vec3::new(wobble, -wobble, wobble) * 5.0)
+                .normalize();
+            time.push(t);
+            accel.push(
+                dir * 9.81
+                    + Vec3::from_fn(|_, _| na.sample(&mut rng))
+                    + Vec3::repeat(rng.gen_range(-0.5..0.5)),
+            );
+            gyro.push(
+                Vec3::new(1.5 * wobble, 0.0, -1.0) + Vec3::from_fn(|_, _| ng.sample(&mut rng)),
+            );
+            t += 1.0 / RATE;
+        }
+    }
+    let rec = Recording {
+        source: "synthetic.csv".into(),
+        time,
+        time_is_index: false,
+        accel: Some(accel),
+        gyro: Some(gyro),
+        temp_c: None,
+        mag: None,
+        labels: None,
+        ignored_columns: Vec::new(),
+        units: Units::default(),
+    };
+    (rec, truth)
+}
+
+#[test]
+fn six_synthetic_holds_are_found_with_edges_within_one_window() {
+    let (rec, truth) = six_face_recording(7, 5.0);
+    let report = find_still(&rec, &StillOptions::default()).expect("detection runs");
+    assert_eq!(report.intervals.len(), 6, "{}", report.summary());
+    assert_eq!(report.directions.len(), 6);
+    let window_s = StillOptions::default().window_s;
+    for (hold, (start, end, gravity)) in report.intervals.iter().zip(&truth) {
+        // Centred windows trim each edge by up to one window when motion is abrupt.
+        assert!(
+            hold.t_start >= start - 1e-9 && hold.t_start <= start + window_s,
+            "{} vs {start}",
+            hold.t_start
+        );
+        assert!(
+            hold.t_end <= end + 1e-9 && hold.t_end >= end - window_s - 0.02,
+            "{} vs {end}",
+            hold.t_end
+        );
+        let pose = hold.accel.as_ref().expect("accel pose");
+        // Mean of n samples: 4 standard errors (false-failure rate ~6e-5 per axis).
+        let tol = 4.0 * SIGMA_A / (pose.n as f64).sqrt();
+        for k in 0..3 {
+            assert!(
+                (pose.mean[k] - gravity[k]).abs() < tol,
+                "axis {k}: {} vs {}",
+                pose.mean[k],
+                gravity[k]
+            );
+            // Sample variance of ≥ 400 samples is within ±30% of σ² (χ² 1e-5 tails: ±25%).
+            assert!(
+                (pose.var[k] / (SIGMA_A * SIGMA_A) - 1.0).abs() < 0.3,
+                "variance {}",
+                pose.var[k]
+            );
+        }
+    }
+}
+
+#[test]
+fn noise_estimate_recovers_the_white_noise_sigma() {
+    let (rec, _) = six_face_recording(11, 8.0);
+    let report = find_still(&rec, &StillOptions::default()).expect("detection runs");
+    let accel = report
+        .noise
+        .iter()
+        .find(|n| n.sensor == imucal::recording::Sensor::Accel)
+        .expect("accel floor");
+    // The percentile correction makes the estimate unbiased when most windows are still; with
+    // 48 of 60 s still the 10th percentile is the still distribution's 12.5th, a bias of ~1%
+    // in σ. Allow 10%.
+    for k in 0..3 {
+        assert!(
+            (accel.sigma[k] / SIGMA_A - 1.0).abs() < 0.1,
+            "sigma {}",
+            accel.sigma[k]
+        );
+    }
+}
+
+#[test]
+fn holds_shorter_than_the_minimum_are_dropped() {
+    let (rec, _) = six_face_recording(3, 0.8);
+    let report = find_still(&rec, &StillOptions::default()).expect("detection runs");
+    assert!(report.intervals.is_empty(), "{}", report.summary());
+}
+
+#[test]
+fn a_pose_column_gives_one_hold_per_label_without_detection() {
+    let (mut rec, truth) = six_face_recording(5, 3.0);
+    let per_row = rec
+        .time
+        .iter()
+        .map(|t| truth.iter().position(|(a, b, _)| t >= a && t < b))
+        .collect();
+    rec.labels = Some(Labels {
+        kind: LabelKind::Pose,
+        names: (0..6).map(|i| (10 + i).to_string()).collect(),
+        per_row,
+    });
+    let report = find_still(&rec, &StillOptions::default()).expect("labels are used");
+    assert!(report.from_pose_column);
+    assert_eq!(report.intervals.len(), 6);
+    assert_eq!(report.intervals[2].label, Some(12));
+    let (a, b, _) = truth[2];
+    let rows = rec.time.iter().filter(|t| **t >= a && **t < b).count();
+    assert_eq!(report.intervals[2].accel.as_ref().map(|p| p.n), Some(rows));
+}
+
+#[test]
+fn detection_without_a_rate_asks_for_one() {
+    let (mut rec, _) = six_face_recording(1, 3.0);
+    rec.time_is_index = true;
+    let error = find_still(&rec, &StillOptions::default()).expect_err("no rate");
+    assert!(matches!(error, StillError::NoRate(_)));
+    assert!(error.to_string().contains("--rate"));
+}
+
+#[test]
+fn chi_square_quantile_matches_tabulated_values() {
+    // χ²(49) 0.999 quantile = 85.35, χ²(147) 0.999 = 206.6 (tables); Wilson–Hilferty is good to
+    // well under 1% at these degrees of freedom.
+    assert!((chi2_quantile_per_dof(0.999, 49.0) * 49.0 / 85.351 - 1.0).abs() < 0.005);
+    assert!((chi2_quantile_per_dof(0.1, 49.0) * 49.0 / 36.818 - 1.0).abs() < 0.005);
+}
