@@ -1,0 +1,412 @@
+//! Board commands: `ports`, `info`, `flash`, `stream`, `record`. Thin wrappers over
+//! `imucal::device`.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use imucal::device::{
+    choose_port, list_ports, DeviceClient, ParamsFile, RecordingWriter, SampleChunk, UnitSample,
+};
+use imucal_protocol::{CalibrationSet, SensorSet, StreamKind};
+
+/// Commands that talk to a board.
+#[derive(Debug, Subcommand)]
+pub enum DeviceCommand {
+    /// List serial ports, mark likely IMU boards, and say which port would be used.
+    #[command(after_help = "Example:\n  imucal ports")]
+    Ports,
+    /// Connect to a board and show its identity, sensors, scales, state and parameters.
+    #[command(after_help = "Examples:\n  imucal info\n  imucal info --port /dev/ttyACM0")]
+    Info(PortArgs),
+    /// Write a calibration parameter file to a board, commit it and verify it by reading back.
+    #[command(
+        after_help = "Example:\n  imucal flash board42.params.json --port /dev/ttyACM0\n\n\
+        The file is the JSON written by `imucal calibrate` (\"format\": 1)."
+    )]
+    Flash(FlashArgs),
+    /// Print the board's samples as they arrive (raw counts in units, or calibrated).
+    #[command(
+        after_help = "Examples:\n  imucal stream --port /dev/ttyACM0 --seconds 5\n  \
+        imucal stream --calibrated --csv --seconds 10 > check.csv"
+    )]
+    Stream(StreamArgs),
+    /// Record the raw stream (in m/s², rad/s, µT, °C) to a recording CSV for `imucal fit`.
+    #[command(
+        after_help = "Example:\n  imucal record --port /dev/ttyACM0 -o rest.csv --seconds 60\n\n\
+        Columns: t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c (sensors the board lacks are left out)."
+    )]
+    Record(RecordArgs),
+}
+
+/// Which port to use.
+#[derive(Debug, Args)]
+pub struct PortArgs {
+    /// Serial port, e.g. /dev/ttyACM0, COM3, or a pseudo-terminal of the simulator (default:
+    /// the only likely board from `imucal ports`).
+    #[arg(long, short = 'p')]
+    pub port: Option<String>,
+}
+
+/// Arguments of `imucal flash`.
+#[derive(Debug, Args)]
+pub struct FlashArgs {
+    /// Parameter file (JSON written by `imucal calibrate`).
+    pub params: PathBuf,
+    /// Which port to use.
+    #[command(flatten)]
+    pub port: PortArgs,
+}
+
+/// Arguments of `imucal stream`.
+#[derive(Debug, Args)]
+pub struct StreamArgs {
+    /// Which port to use.
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Stream samples calibrated by the board instead of raw counts × scale.
+    #[arg(long)]
+    pub calibrated: bool,
+    /// Print the recording CSV format instead of readable lines.
+    #[arg(long)]
+    pub csv: bool,
+    /// Stop after this many seconds (default: until interrupted).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Send only every N-th sample.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    pub decimation: u16,
+}
+
+/// Arguments of `imucal record`.
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    /// Which port to use.
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Output CSV file.
+    #[arg(long, short = 'o')]
+    pub output: PathBuf,
+    /// Stop after this many seconds (default: until interrupted; the file is flushed as it
+    /// grows).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+}
+
+/// Runs a board command.
+pub fn run(command: &DeviceCommand) -> anyhow::Result<()> {
+    match command {
+        DeviceCommand::Ports => ports(),
+        DeviceCommand::Info(args) => info(args),
+        DeviceCommand::Flash(args) => flash(args),
+        DeviceCommand::Stream(args) => stream(args),
+        DeviceCommand::Record(args) => record(args),
+    }
+}
+
+fn ports() -> anyhow::Result<()> {
+    let ports = list_ports()?;
+    if ports.is_empty() {
+        println!(
+            "no serial ports found (plug the board in; a simulator's pty is given with --port)"
+        );
+    }
+    for port in &ports {
+        let mark = match port.board_match() {
+            Some(found) => format!("  <- {}", found.describe()),
+            None => String::new(),
+        };
+        println!("{:<16} {}{mark}", port.path, port.describe());
+    }
+    match imucal::device::choose_port_with_reason(&ports) {
+        Ok((port, why)) => println!("without --port, imucal uses {}: {why}", port.path),
+        Err(reason) => println!("without --port, imucal cannot choose: {reason}"),
+    }
+    Ok(())
+}
+
+/// The port given, or the only likely board (announced on stderr).
+fn resolve_port(args: &PortArgs) -> anyhow::Result<String> {
+    if let Some(port) = &args.port {
+        return Ok(port.clone());
+    }
+    let ports = list_ports()?;
+    let chosen = choose_port(&ports)?.path.clone();
+    eprintln!("using port {chosen}");
+    Ok(chosen)
+}
+
+fn connect(args: &PortArgs) -> anyhow::Result<DeviceClient> {
+    let port = resolve_port(args)?;
+    Ok(DeviceClient::open(&port)?)
+}
+
+fn sensor_list(sensors: &SensorSet) -> String {
+    let names: Vec<&str> = [
+        (sensors.accel, "accelerometer"),
+        (sensors.gyro, "gyroscope"),
+        (sensors.mag, "magnetometer"),
+        (sensors.temp, "temperature"),
+    ]
+    .into_iter()
+    .filter_map(|(present, name)| present.then_some(name))
+    .collect();
+    if names.is_empty() {
+        "none".to_string()
+    } else {
+        names.join(", ")
+    }
+}
+
+fn info(args: &PortArgs) -> anyhow::Result<()> {
+    let mut client = connect(args)?;
+    let rtt = client.ping()?;
+    let status = client.status()?;
+    let params = client.get_params()?;
+    let w = *client.welcome();
+    let s = w.scales;
+    let fw = w.firmware_version;
+    println!("port            {}", client.port_name());
+    println!("device id       {}", w.device_id);
+    println!("firmware        {}.{}.{}", fw.major, fw.minor, fw.patch);
+    println!(
+        "protocol        board {}.{}, in use {}.{}",
+        w.protocol_major,
+        w.protocol_minor,
+        client.protocol().major,
+        client.protocol().minor
+    );
+    println!("sensors         {}", sensor_list(&w.sensors));
+    println!("sample rate     {} Hz", s.sample_rate_hz);
+    println!(
+        "accelerometer   {:e} m/s² per count, range ±{} m/s²",
+        s.accel_mps2_per_count, s.accel_range_mps2
+    );
+    println!(
+        "gyroscope       {:e} rad/s per count, range ±{} rad/s",
+        s.gyro_rads_per_count, s.gyro_range_rads
+    );
+    println!(
+        "magnetometer    {:e} µT per count, range ±{} µT",
+        s.mag_ut_per_count, s.mag_range_ut
+    );
+    println!(
+        "temperature     {} °C per count, {} °C at 0",
+        s.temp_c_per_count, s.temp_offset_c
+    );
+    println!("uptime          {:.1} s", status.uptime_ms as f64 / 1000.0);
+    println!(
+        "state           {}, {}",
+        match status.streaming {
+            Some(StreamKind::Raw) => "streaming raw",
+            Some(StreamKind::Calibrated) => "streaming calibrated",
+            None => "not streaming",
+        },
+        if status.still { "still" } else { "moving" }
+    );
+    let e = status.errors;
+    println!(
+        "error counters  rx frames {}, dropped samples {}, sensor {}, flash {}",
+        e.rx_frame_errors, e.dropped_samples, e.sensor_errors, e.flash_errors
+    );
+    println!(
+        "parameters      {} (CRC {:#010x}, store sequence {})",
+        describe_params(&params),
+        status.active_crc,
+        status.active_seq
+    );
+    println!(
+        "link            round trip {:.1} ms",
+        rtt.as_secs_f64() * 1e3
+    );
+    Ok(())
+}
+
+fn describe_params(set: &CalibrationSet) -> String {
+    let identity = CalibrationSet::identity();
+    if set.accel == identity.accel && set.gyro == identity.gyro && set.mag == identity.mag {
+        return "identity (uncalibrated)".to_string();
+    }
+    let age = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|now| now.as_secs().saturating_sub(set.created_unix_s))
+        .unwrap_or(0);
+    let r = set.residuals;
+    format!(
+        "calibrated {} days ago; fit residual RMS accel {} m/s², gyro {} rad/s, mag {} µT",
+        age / 86_400,
+        r.accel_rms,
+        r.gyro_rms,
+        r.mag_rms
+    )
+}
+
+fn flash(args: &FlashArgs) -> anyhow::Result<()> {
+    let shown = args.params.display().to_string();
+    let set = ParamsFile::load(&args.params)?.to_calibration_set(&shown)?;
+    let mut client = connect(&args.port)?;
+    let status = client.write_params_verified(&set)?;
+    println!(
+        "wrote {shown} to {} (CRC {:#010x}, store sequence {}), committed, and verified by reading it back",
+        client.port_name(),
+        status.active_crc,
+        status.active_seq
+    );
+    Ok(())
+}
+
+fn seconds_arg(seconds: Option<f64>) -> anyhow::Result<Option<Duration>> {
+    match seconds {
+        None => Ok(None),
+        Some(s) if s.is_finite() && s > 0.0 && s < 1e9 => Ok(Some(Duration::from_secs_f64(s))),
+        Some(s) => anyhow::bail!("--seconds {s} is not a positive number of seconds"),
+    }
+}
+
+/// Whether to go on streaming after a chunk.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Flow {
+    Continue,
+    Stop,
+}
+
+/// `Flow::Stop` when the reader of stdout has gone (e.g. `| head`), which ends a stream normally.
+fn output_flow(written: std::io::Result<()>) -> anyhow::Result<Flow> {
+    match written {
+        Ok(()) => Ok(Flow::Continue),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(Flow::Stop),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Streams until `limit` (or forever), handing each chunk to `on_chunk`; stops the stream at
+/// the end and reports lost samples.
+fn run_stream(
+    client: &mut DeviceClient,
+    kind: StreamKind,
+    decimation: u16,
+    limit: Option<Duration>,
+    on_chunk: &mut dyn FnMut(&SampleChunk) -> anyhow::Result<Flow>,
+) -> anyhow::Result<()> {
+    client.start_stream(kind, decimation)?;
+    let start = Instant::now();
+    // A stream silent this long has stopped: batches come several times a second.
+    let silence = Duration::from_secs(3);
+    let result = (|| loop {
+        let wait = match limit {
+            Some(limit) => limit.saturating_sub(start.elapsed()).min(silence),
+            None => silence,
+        };
+        if wait.is_zero() {
+            return Ok(());
+        }
+        match client.next_samples(wait)? {
+            Some(chunk) => {
+                for line in client.drain_logs() {
+                    eprintln!("board {:?}: {}", line.level, line.text);
+                }
+                if on_chunk(&chunk)? == Flow::Stop {
+                    return Ok(());
+                }
+            }
+            None if limit.is_some_and(|l| start.elapsed() >= l) => return Ok(()),
+            None => anyhow::bail!(
+                "{} sent no samples for {} s; check the board with `imucal info`",
+                client.port_name(),
+                silence.as_secs()
+            ),
+        }
+    })();
+    let stopped = client.stop_stream();
+    result?;
+    stopped?;
+    let lost = client.stats().lost_samples;
+    if lost > 0 {
+        eprintln!(
+            "{lost} samples were lost in transit (the link could not keep up; try --decimation)"
+        );
+    }
+    Ok(())
+}
+
+fn stream(args: &StreamArgs) -> anyhow::Result<()> {
+    let limit = seconds_arg(args.seconds)?;
+    let mut client = connect(&args.port)?;
+    let kind = if args.calibrated {
+        StreamKind::Calibrated
+    } else {
+        StreamKind::Raw
+    };
+    let stdout = std::io::stdout();
+    if args.csv {
+        let mut writer = RecordingWriter::new(stdout.lock(), client.welcome().sensors)?;
+        run_stream(&mut client, kind, args.decimation, limit, &mut |chunk| {
+            output_flow(chunk.samples.iter().try_for_each(|s| writer.write(s)))
+        })?;
+        // The reader may be gone; nothing is lost by not flushing to it.
+        let _ = writer.finish();
+    } else {
+        let mut out = stdout.lock();
+        run_stream(&mut client, kind, args.decimation, limit, &mut |chunk| {
+            output_flow(
+                chunk
+                    .samples
+                    .iter()
+                    .try_for_each(|s| writeln!(out, "{}", readable(s))),
+            )
+        })?;
+    }
+    Ok(())
+}
+
+fn readable(s: &UnitSample) -> String {
+    let v = |x: &[f64; 3]| format!("{:>9.4} {:>9.4} {:>9.4}", x[0], x[1], x[2]);
+    format!(
+        "t {:>10.4} s  a {} m/s²  g {} rad/s  m {} µT  T {:>6.2} °C",
+        s.t_s,
+        v(&s.accel),
+        v(&s.gyro),
+        v(&s.mag),
+        s.temp_c
+    )
+}
+
+fn record(args: &RecordArgs) -> anyhow::Result<()> {
+    let limit = seconds_arg(args.seconds)?;
+    let mut client = connect(&args.port)?;
+    let shown = args.output.display().to_string();
+    let file = std::fs::File::create(&args.output).with_context(|| {
+        format!("cannot create `{shown}`; check the directory exists and is writable")
+    })?;
+    let mut writer = RecordingWriter::new(std::io::BufWriter::new(file), client.welcome().sensors)
+        .with_context(|| format!("cannot write `{shown}`"))?;
+    let start = Instant::now();
+    let mut last_report = start;
+    run_stream(&mut client, StreamKind::Raw, 1, limit, &mut |chunk| {
+        // Flushed per batch so an interrupted recording is still a valid file.
+        chunk
+            .samples
+            .iter()
+            .try_for_each(|s| writer.write(s))
+            .and_then(|()| writer.flush())
+            .with_context(|| format!("cannot write `{shown}`; check the disk space"))?;
+        if last_report.elapsed() >= Duration::from_secs(1) {
+            last_report = Instant::now();
+            eprint!(
+                "\rrecording {shown}: {:.0} s, {} samples",
+                start.elapsed().as_secs_f64(),
+                writer.rows()
+            );
+        }
+        Ok(Flow::Continue)
+    })?;
+    let rows = writer.rows();
+    writer
+        .finish()
+        .with_context(|| format!("cannot write `{shown}`"))?;
+    eprintln!();
+    println!("recorded {rows} samples to {shown}");
+    Ok(())
+}

@@ -1,0 +1,194 @@
+//! Errors of talking to a board. Every message is a sentence that names the port, says what
+//! happened and what to try.
+
+use imucal_protocol::{ErrorCode, ProtocolVersion};
+
+/// Why an operation on a board failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DeviceError {
+    /// The named serial port does not exist.
+    #[error("no such port {port}; run `imucal ports` to list the serial ports")]
+    NoSuchPort {
+        /// The port as given.
+        port: String,
+    },
+    /// Another program holds the port open exclusively.
+    #[error("port {port} is in use by another program (close it, e.g. a serial monitor or another imucal), then retry")]
+    PortBusy {
+        /// The port as given.
+        port: String,
+    },
+    /// The operating system refused access to the port.
+    #[error("permission denied opening {port}; add your user to the group owning it (usually `dialout`) and log in again")]
+    PermissionDenied {
+        /// The port as given.
+        port: String,
+    },
+    /// The port exists but could not be opened or configured.
+    #[error("cannot open {port}: {detail}; check that it is a serial port with `imucal ports`")]
+    Open {
+        /// The port as given.
+        port: String,
+        /// The operating system's description.
+        detail: String,
+    },
+    /// Listing the serial ports failed.
+    #[error("cannot list the serial ports: {detail}; give the port explicitly with --port")]
+    Enumerate {
+        /// The operating system's description.
+        detail: String,
+    },
+    /// No `--port` was given and no single board could be chosen.
+    #[error("{reason}; give the port explicitly with --port (see `imucal ports`)")]
+    NoPortChosen {
+        /// Why no port was chosen (none found, or several candidates).
+        reason: String,
+    },
+    /// Reading or writing the port failed after it was opened.
+    #[error("lost the connection to {port} ({cause}); check the cable and that the board is powered, then retry")]
+    Io {
+        /// The port.
+        port: String,
+        /// The operating system's error.
+        cause: std::io::Error,
+    },
+    /// The port disappeared while open: the board was unplugged, reset its USB interface, or
+    /// the simulator serving it stopped.
+    #[error(
+        "the port {port} went away: the board was unplugged or reset; reconnect and run again"
+    )]
+    PortGone {
+        /// The port.
+        port: String,
+        /// The operating system's error.
+        cause: std::io::Error,
+    },
+    /// The board did not answer a request within its timeout, on every try.
+    #[error("no answer from {port} to {request} after {tries} tries: is the board running imucal firmware, and is this the right port (`imucal ports`)?")]
+    NoAnswer {
+        /// The port.
+        port: String,
+        /// The request that went unanswered.
+        request: &'static str,
+        /// How many times it was sent.
+        tries: u32,
+    },
+    /// The board speaks an incompatible protocol major version.
+    #[error("{port} speaks imucal protocol {}.{}, this imucal speaks {}.{}; {advice}", .device.major, .device.minor, .host.major, .host.minor)]
+    VersionMismatch {
+        /// The port.
+        port: String,
+        /// The board's protocol version.
+        device: ProtocolVersion,
+        /// This tool's protocol version.
+        host: ProtocolVersion,
+        /// Which side to update.
+        advice: &'static str,
+    },
+    /// The board answered with an error code.
+    #[error("{port} refused {request}: {code}")]
+    Device {
+        /// The port.
+        port: String,
+        /// The request refused.
+        request: &'static str,
+        /// The board's error code (its `Display` says what to try).
+        code: ErrorCode,
+    },
+    /// The board answered with a response of the wrong kind.
+    #[error("{port} answered {request} with {answer}, which is not a valid answer; update the firmware and imucal to matching versions")]
+    UnexpectedAnswer {
+        /// The port.
+        port: String,
+        /// The request sent.
+        request: &'static str,
+        /// A short description of the answer.
+        answer: String,
+    },
+    /// The board staged a parameter set whose CRC differs from the one sent; nothing was
+    /// committed.
+    #[error("{port} staged a parameter set with CRC {echoed} although {sent:#010x} was sent, so it was not committed; write it again (check the cable if this repeats)", echoed = fmt_crc(.echoed))]
+    StagedCrcMismatch {
+        /// The port.
+        port: String,
+        /// CRC computed on the host and sent.
+        sent: u32,
+        /// CRC the board reported as staged (`None`: nothing staged).
+        echoed: Option<u32>,
+    },
+    /// The parameters read back after a commit differ from those written.
+    #[error("the parameters read back from {port} after the commit differ from those written ({detail}); write them again, and if this repeats the board's flash may be faulty")]
+    VerifyFailed {
+        /// The port.
+        port: String,
+        /// What differs.
+        detail: String,
+    },
+    /// A request could not be encoded into a frame (a defect, not a user error).
+    #[error("the {request} request for {port} cannot be encoded ({cause}); this is a defect in imucal, please report it")]
+    Encode {
+        /// The port.
+        port: String,
+        /// The request.
+        request: &'static str,
+        /// The encoder's error.
+        cause: imucal_protocol::EncodeError,
+    },
+}
+
+fn fmt_crc(crc: &Option<u32>) -> String {
+    match *crc {
+        Some(crc) => format!("{crc:#010x}"),
+        None => "none".to_string(),
+    }
+}
+
+impl DeviceError {
+    /// The board's error code, when the board refused a request.
+    pub fn device_code(&self) -> Option<ErrorCode> {
+        match self {
+            Self::Device { code, .. } => Some(*code),
+            _ => None,
+        }
+    }
+
+    /// `Io` or `PortGone` for a failed read or write, by whether the error says the device is
+    /// gone (hang-up, EIO, no such device) rather than a transient failure.
+    pub(crate) fn from_io(port: &str, cause: std::io::Error) -> Self {
+        // EIO, ENXIO, ENODEV: what Linux and macOS return on a removed tty or USB device.
+        let gone_os_error = matches!(cause.raw_os_error(), Some(5 | 6 | 19));
+        let gone_kind = matches!(
+            cause.kind(),
+            std::io::ErrorKind::BrokenPipe
+                | std::io::ErrorKind::NotConnected
+                | std::io::ErrorKind::UnexpectedEof
+        );
+        if gone_os_error || gone_kind {
+            Self::PortGone {
+                port: port.to_string(),
+                cause,
+            }
+        } else {
+            Self::Io {
+                port: port.to_string(),
+                cause,
+            }
+        }
+    }
+
+    /// A version-mismatch error with advice on which side to update.
+    pub(crate) fn version_mismatch(port: &str, device: ProtocolVersion) -> Self {
+        let host = imucal_protocol::PROTOCOL_VERSION;
+        let advice = if device.major < host.major {
+            "update the board's firmware"
+        } else {
+            "update imucal (the host tool)"
+        };
+        Self::VersionMismatch {
+            port: port.to_string(),
+            device,
+            host,
+            advice,
+        }
+    }
+}
