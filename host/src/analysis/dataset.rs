@@ -1,0 +1,331 @@
+//! The observations the residual analysis works on: one per still pose (accelerometer,
+//! gyroscope, and magnetometer when it has enough still poses) or per short window of the
+//! magnetometer stream, each with its mean reading, the standard error of that mean, its mean
+//! temperature, its mid time, and the specific force measured at the same time.
+//!
+//! Standard error of a mean: the within-pose variance `s²` divided by an *effective* sample
+//! size. Samples of real sensors are not independent (digital low-pass filters, slow wander), so
+//! `n_eff = n·(1 − ρ)/(1 + ρ)` from the lag-1 autocorrelation `ρ` of the noise (the AR(1) result,
+//! e.g. Bartlett 1946; von Storch & Zwiers, *Statistical Analysis in Climate Research*, §6.6).
+//! Slow deterministic motion inside a hold (a hand's sway) would make `ρ` of the raw samples
+//! close to 1 and the floor meaningless, so `ρ` is taken from the first differences instead:
+//! for AR(1) noise the differences have lag-1 autocorrelation `−(1 − ρ)/2`, while motion much
+//! slower than the sample rate contributes little to them. The white-noise variance is then
+//! `E[Δx²]/(2(1 − ρ))`, also from the differences. Both choices make the floor the noise of the
+//! sensor, not of the person holding it.
+
+use crate::fit::Vec3;
+use crate::recording::{LabelKind, Recording, Sensor};
+use crate::still::StillReport;
+
+/// Largest lag-1 autocorrelation of the noise accepted; beyond it the AR(1) correction
+/// (factor `(1 + ρ)/(1 − ρ)³` on the variance of the mean) is itself too uncertain.
+const MAX_NOISE_CORRELATION: f64 = 0.9;
+
+/// One observation: a still pose or a short window of samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Mean reading, in the data's units.
+    pub mean: Vec3,
+    /// Standard error of the mean per axis, in the data's units (see the module comment).
+    pub sigma_mean: Vec3,
+    /// Number of samples averaged.
+    pub n: usize,
+    /// Effective number of independent samples after the autocorrelation correction.
+    pub n_eff: f64,
+    /// Lag-1 autocorrelation of the noise (mean over the axes), 0 for white noise.
+    pub noise_correlation: f64,
+    /// Mean die temperature, °C, when the recording has one.
+    pub temp_c: Option<f64>,
+    /// Mid time, s.
+    pub time_s: f64,
+    /// Mean accelerometer reading over the same interval (raw data units), when recorded.
+    pub accel_mean: Option<Vec3>,
+    /// Label from the recording, if any.
+    pub label: Option<i64>,
+}
+
+/// Mean, standard error and noise statistics of a run of samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunStats {
+    /// Mean per axis.
+    pub mean: Vec3,
+    /// Standard error of the mean per axis.
+    pub sigma_mean: Vec3,
+    /// Effective sample size (mean over axes).
+    pub n_eff: f64,
+    /// Lag-1 autocorrelation of the noise (mean over axes).
+    pub rho: f64,
+}
+
+/// Statistics of `samples` as described in the module comment; `None` for fewer than 4 samples
+/// (too few to estimate a correlation) or non-finite data.
+pub fn run_stats(samples: &[Vec3]) -> Option<RunStats> {
+    let n = samples.len();
+    if n < 4 || samples.iter().any(|s| s.iter().any(|v| !v.is_finite())) {
+        return None;
+    }
+    let nf = n as f64;
+    let mean = samples.iter().sum::<Vec3>() / nf;
+    let mut sigma_mean = Vec3::zeros();
+    let mut rho_sum = 0.0;
+    let mut n_eff_sum = 0.0;
+    for k in 0..3 {
+        let d: Vec<f64> = samples.windows(2).map(|w| w[1][k] - w[0][k]).collect();
+        let d_mean = d.iter().sum::<f64>() / d.len() as f64;
+        let d_var = d.iter().map(|v| (v - d_mean).powi(2)).sum::<f64>() / d.len() as f64;
+        let d_cov = d
+            .windows(2)
+            .map(|w| (w[0] - d_mean) * (w[1] - d_mean))
+            .sum::<f64>()
+            / d.len() as f64;
+        let r_d = if d_var > 0.0 { d_cov / d_var } else { -0.5 };
+        let rho = (1.0 + 2.0 * r_d).clamp(0.0, MAX_NOISE_CORRELATION);
+        let white_var = d_var / (2.0 * (1.0 - rho));
+        let n_eff = (nf * (1.0 - rho) / (1.0 + rho)).max(1.0);
+        // A quantised, noise-free axis has zero variance; keep a floor of one quantum²/12 so that
+        // weights stay finite (the step is the smallest non-zero difference).
+        let step = d
+            .iter()
+            .map(|v| v.abs())
+            .filter(|v| *v > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        let quantum_var = if step.is_finite() {
+            step * step / 12.0
+        } else {
+            0.0
+        };
+        sigma_mean[k] = (white_var.max(quantum_var) / n_eff).sqrt();
+        rho_sum += rho;
+        n_eff_sum += n_eff;
+    }
+    Some(RunStats {
+        mean,
+        sigma_mean,
+        n_eff: n_eff_sum / 3.0,
+        rho: rho_sum / 3.0,
+    })
+}
+
+fn mean_of(values: &[f64]) -> Option<f64> {
+    (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
+}
+
+/// Rows of the main stream that belong to a hold: every row in `[start, end)`, or only those
+/// carrying the hold's label when the holds came from a `pose` column.
+fn hold_rows(recording: &Recording, start: usize, end: usize, label: Option<i64>) -> Vec<usize> {
+    match (&recording.labels, label) {
+        (Some(labels), Some(value)) if labels.kind == LabelKind::Pose => (start
+            ..end.min(labels.per_row.len()))
+            .filter(|&i| labels.per_row[i].map(|l| labels.value(l)) == Some(value))
+            .collect(),
+        _ => (start..end.min(recording.len())).collect(),
+    }
+}
+
+/// One observation per still interval for `sensor` (accelerometer, gyroscope, or the
+/// magnetometer samples that fall inside each hold).
+pub fn pose_observations(
+    recording: &Recording,
+    still: &StillReport,
+    sensor: Sensor,
+) -> Vec<Observation> {
+    let mut out = Vec::new();
+    for interval in &still.intervals {
+        let rows = hold_rows(recording, interval.start, interval.end, interval.label);
+        let temp = recording.temp_c.as_ref().and_then(|t| {
+            mean_of(
+                &rows
+                    .iter()
+                    .filter_map(|&i| t.get(i).copied())
+                    .collect::<Vec<f64>>(),
+            )
+        });
+        let accel_mean = recording.accel.as_ref().and_then(|a| {
+            let picked: Vec<Vec3> = rows.iter().filter_map(|&i| a.get(i).copied()).collect();
+            (!picked.is_empty()).then(|| picked.iter().sum::<Vec3>() / picked.len() as f64)
+        });
+        let samples: Vec<Vec3> = match sensor {
+            Sensor::Accel | Sensor::Gyro => {
+                let Some(all) = recording.samples(sensor) else {
+                    continue;
+                };
+                rows.iter().filter_map(|&i| all.get(i).copied()).collect()
+            }
+            Sensor::Mag => match &recording.mag {
+                Some(m) => m
+                    .time
+                    .iter()
+                    .zip(&m.samples)
+                    .filter(|(t, _)| **t >= interval.t_start && **t <= interval.t_end)
+                    .map(|(_, x)| *x)
+                    .collect(),
+                None => continue,
+            },
+        };
+        let Some(stats) = run_stats(&samples) else {
+            continue;
+        };
+        out.push(Observation {
+            mean: stats.mean,
+            sigma_mean: stats.sigma_mean,
+            n: samples.len(),
+            n_eff: stats.n_eff,
+            noise_correlation: stats.rho,
+            temp_c: temp,
+            time_s: 0.5 * (interval.t_start + interval.t_end),
+            accel_mean,
+            label: interval.label,
+        });
+    }
+    out
+}
+
+/// Magnetometer observations from the whole stream: consecutive windows of `window` samples
+/// (at most `max_windows` of them, evenly spread), each with the temperature of the nearest
+/// main-stream rows when the recording has a temperature column.
+pub fn window_observations(
+    recording: &Recording,
+    window: usize,
+    max_windows: usize,
+) -> Vec<Observation> {
+    let Some(mag) = &recording.mag else {
+        return Vec::new();
+    };
+    let window = window.max(4);
+    let count = mag.samples.len() / window;
+    if count == 0 || max_windows == 0 {
+        return Vec::new();
+    }
+    let stride = count.div_ceil(max_windows).max(1);
+    let mut out = Vec::new();
+    for w in (0..count).step_by(stride) {
+        let range = w * window..(w + 1) * window;
+        let Some(stats) = run_stats(&mag.samples[range.clone()]) else {
+            continue;
+        };
+        let t0 = mag.time[range.start];
+        let t1 = mag.time[range.end - 1];
+        let temp = recording.temp_c.as_ref().and_then(|temps| {
+            let lo = recording.time.partition_point(|t| *t < t0);
+            let hi = recording
+                .time
+                .partition_point(|t| *t <= t1)
+                .max(lo + 1)
+                .min(temps.len());
+            mean_of(temps.get(lo.min(hi)..hi).unwrap_or(&[]))
+        });
+        out.push(Observation {
+            mean: stats.mean,
+            sigma_mean: stats.sigma_mean,
+            n: window,
+            n_eff: stats.n_eff,
+            noise_correlation: stats.rho,
+            temp_c: temp,
+            time_s: 0.5 * (t0 + t1),
+            accel_mean: None,
+            label: None,
+        });
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic pseudo-normal numbers (sum of 12 uniforms from a linear congruential generator).
+    fn noise(seed: u64, n: usize) -> Vec<f64> {
+        let mut state = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (0..n)
+            .map(|_| {
+                (0..12)
+                    .map(|_| {
+                        state = state
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (state >> 11) as f64 / (1u64 << 53) as f64
+                    })
+                    .sum::<f64>()
+                    - 6.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn white_noise_gives_the_textbook_standard_error() {
+        let e = noise(7, 3 * 4000);
+        let samples: Vec<Vec3> = (0..4000)
+            .map(|i| Vec3::new(e[3 * i], e[3 * i + 1], e[3 * i + 2]) * 0.2)
+            .collect();
+        let s = run_stats(&samples).unwrap();
+        // σ/√n = 0.2/√4000 = 3.16e-3; the estimate of σ from 4000 samples is good to ~2 %,
+        // and ρ̂ of white noise scatters by ~1/√n, moving n_eff by a few %: allow 8 %.
+        for k in 0..3 {
+            assert!(
+                (s.sigma_mean[k] / 3.162e-3 - 1.0).abs() < 0.08,
+                "axis {k}: {}",
+                s.sigma_mean[k]
+            );
+        }
+        assert!(s.rho < 0.06, "rho = {}", s.rho);
+    }
+
+    #[test]
+    fn correlated_noise_inflates_the_standard_error_by_the_ar1_factor() {
+        // AR(1) with ρ = 0.6 and unit innovations: var = 1/(1 − 0.36); var of the mean ≈ var·(1.6/0.4)/n.
+        let e = noise(11, 20000);
+        let mut x = 0.0;
+        let samples: Vec<Vec3> = e
+            .iter()
+            .map(|v| {
+                x = 0.6 * x + v;
+                Vec3::repeat(x)
+            })
+            .collect();
+        let s = run_stats(&samples).unwrap();
+        let expected = (1.0 / 0.64 * 4.0 / 20000.0_f64).sqrt();
+        // ρ̂ is within ±0.03 for 20000 samples, which moves the AR(1) factor by up to ~15 %.
+        assert!(
+            (s.sigma_mean[0] / expected - 1.0).abs() < 0.15,
+            "{} vs {expected}",
+            s.sigma_mean[0]
+        );
+        assert!((s.rho - 0.6).abs() < 0.05, "rho = {}", s.rho);
+    }
+
+    #[test]
+    fn slow_sway_does_not_count_as_noise() {
+        let e = noise(3, 3 * 400);
+        let samples: Vec<Vec3> = (0..400)
+            .map(|i| {
+                let sway = 0.2 * (2.0 * std::f64::consts::PI * 0.2 * i as f64 / 100.0).sin();
+                Vec3::new(e[3 * i], e[3 * i + 1], e[3 * i + 2]) * 0.01 + Vec3::repeat(sway)
+            })
+            .collect();
+        let s = run_stats(&samples).unwrap();
+        // Noise 0.01/√400 = 5e-4. The sway's variance is 200× the noise's, but its sample-to-sample
+        // differences add ~2 % to theirs (and a little to ρ̂): allow 30 %.
+        for k in 0..3 {
+            assert!(
+                s.sigma_mean[k] < 5e-4 * 1.3,
+                "axis {k}: {}",
+                s.sigma_mean[k]
+            );
+        }
+    }
+
+    #[test]
+    fn too_few_or_non_finite_samples_give_no_statistics() {
+        assert!(run_stats(&[Vec3::zeros(); 3]).is_none());
+        assert!(run_stats(&[
+            Vec3::zeros(),
+            Vec3::zeros(),
+            Vec3::repeat(f64::NAN),
+            Vec3::zeros()
+        ])
+        .is_none());
+    }
+}
