@@ -1,0 +1,229 @@
+//! Closing the loop after a session: the residual analysis of its poses ("Closing the loop" in
+//! `ARCHITECTURE.md`, [`crate::analysis`]) and the parameter set extended with what it accepts.
+//!
+//! Each captured pose is one observation per sensor: the board's mean, its standard error
+//! `√(var/n)`, the mean die temperature and the board time of the hold. The accelerometer is
+//! analysed on the norm model `|A(v − b)| = g` (seed 003's twelve-position model), the gyroscope
+//! on the rest model `ω̄ = b` (seed 000 eq. 9) with the accelerometer's calibrated specific force
+//! for g-sensitivity. Candidates are accepted by held-out error, forward, as in `imucal analyze`.
+//! The magnetometer is not analysed here: its fit uses the tumble, not the poses.
+//!
+//! [`extend_set`] replaces `A`, `b` and the extended terms of each sensor with an accepted effect
+//! that the firmware can apply (bias temperature polynomial, scale temperature coefficient,
+//! non-linearity, gyro g-sensitivity) by the analysis's final model, fitted jointly with them;
+//! a sensor with nothing accepted keeps the session's values, so a set without accepted effects
+//! is written unchanged.
+
+use imucal_protocol::CalibrationSet;
+
+use super::solve::{accel_of, gyro_of, CapturedPose};
+use crate::analysis::dataset::Observation;
+use crate::analysis::effects::EffectKind;
+use crate::analysis::extended_fit::BaseKind;
+use crate::analysis::{
+    analyse_observations, AnalysisError, EffectStatus, RecordingAnalysis, SensorAnalysis,
+    SensorSetup,
+};
+use crate::fit::gyro_bias::fit_gyro_bias;
+use crate::fit::norm_lm::fit_accel_lm;
+use crate::fit::{Pose, Vec3};
+use crate::recording::Sensor;
+use imucal_protocol::PoseStats;
+
+/// Fewest poses the accelerometer analysis takes: the norm model has 9 parameters and a held-out
+/// test of a three-parameter effect needs residual degrees of freedom beyond them (one round of
+/// twelve leaves only three).
+pub const MIN_ACCEL_POSES: usize = 16;
+
+/// Fewest poses the gyroscope analysis takes (three components each; bias has 3 parameters).
+pub const MIN_GYRO_POSES: usize = 3;
+
+fn observation(pose: &CapturedPose, sensor: fn(&PoseStats) -> ([f32; 3], [f32; 3])) -> Observation {
+    let (mean, var) = sensor(&pose.stats);
+    let n = pose.stats.n.max(1) as usize;
+    let sigma_mean = Vec3::from(var.map(|v| (f64::from(v).max(0.0) / n as f64).sqrt()));
+    Observation {
+        mean: Vec3::from(mean.map(f64::from)),
+        sigma_mean,
+        n,
+        n_eff: n as f64,
+        noise_correlation: 0.0,
+        temp_c: Some(f64::from(pose.stats.temp_mean_c)),
+        time_s: pose.t_s,
+        accel_mean: Some(Vec3::from(pose.stats.accel_mean.map(f64::from))),
+        label: Some(pose.target.index as i64),
+    }
+}
+
+fn usable(pose: &CapturedPose) -> bool {
+    let s = &pose.stats;
+    s.n > 1
+        && s.accel_mean
+            .iter()
+            .chain(&s.accel_var)
+            .chain(&s.gyro_mean)
+            .chain(&s.gyro_var)
+            .chain(std::iter::once(&s.temp_mean_c))
+            .all(|v| v.is_finite())
+        && pose.t_s.is_finite()
+}
+
+fn to_poses(obs: &[Observation]) -> Vec<Pose> {
+    obs.iter()
+        .map(|o| Pose {
+            mean: o.mean,
+            var: o.sigma_mean.component_mul(&o.sigma_mean) * o.n as f64,
+            n: o.n,
+            label: o.label,
+        })
+        .collect()
+}
+
+/// Analyse the accelerometer and gyroscope of a session's poses (nominal units: m/s², rad/s)
+/// against local gravity `gravity_mps2`. Poses with non-finite statistics are left out.
+pub fn analyse_poses(poses: &[CapturedPose], gravity_mps2: f64) -> RecordingAnalysis {
+    let usable: Vec<&CapturedPose> = poses.iter().filter(|p| usable(p)).collect();
+    let too_few = |sensor: &'static str, needed: usize| AnalysisError::TooFewObservations {
+        sensor,
+        what: "still poses",
+        found: usable.len(),
+        needed,
+    };
+
+    let accel_obs: Vec<Observation> = usable.iter().map(|p| observation(p, accel_of)).collect();
+    let accel = if accel_obs.len() < MIN_ACCEL_POSES {
+        Err(too_few("accel", MIN_ACCEL_POSES))
+    } else {
+        match fit_accel_lm(&to_poses(&accel_obs), gravity_mps2) {
+            Ok(start) => analyse_observations(
+                SensorSetup {
+                    sensor: Sensor::Accel,
+                    base_model: "lm",
+                    base: BaseKind::Norm {
+                        reference: gravity_mps2,
+                    },
+                    start: start.cal,
+                    force: None,
+                    gravity: gravity_mps2,
+                    unit: "m/s²",
+                },
+                accel_obs,
+            ),
+            Err(source) => Err(AnalysisError::BaseFit {
+                sensor: "accel",
+                source,
+            }),
+        }
+    };
+
+    let gyro_obs: Vec<Observation> = usable.iter().map(|p| observation(p, gyro_of)).collect();
+    let gyro = if gyro_obs.len() < MIN_GYRO_POSES {
+        Err(too_few("gyro", MIN_GYRO_POSES))
+    } else {
+        match fit_gyro_bias(&to_poses(&gyro_obs), 1.0) {
+            Ok(start) => {
+                // Specific force of each pose from the accelerometer's final calibration, when
+                // it was analysed (g-sensitivity is then testable).
+                let force = accel.as_ref().ok().map(|a| {
+                    usable
+                        .iter()
+                        .map(|p| {
+                            a.calibration
+                                .apply(&Vec3::from(p.stats.accel_mean.map(f64::from)))
+                        })
+                        .collect()
+                });
+                analyse_observations(
+                    SensorSetup {
+                        sensor: Sensor::Gyro,
+                        base_model: "gyro-bias",
+                        base: BaseKind::Rest { scale: 1.0 },
+                        start: start.cal,
+                        force,
+                        gravity: gravity_mps2,
+                        unit: "rad/s",
+                    },
+                    gyro_obs,
+                )
+            }
+            Err(source) => Err(AnalysisError::BaseFit {
+                sensor: "gyro",
+                source,
+            }),
+        }
+    };
+    RecordingAnalysis {
+        sensors: vec![(Sensor::Accel, accel), (Sensor::Gyro, gyro)],
+    }
+}
+
+/// A parameter set with the accepted effects of an analysis added.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExtendedSet {
+    /// The set to write.
+    pub set: CalibrationSet,
+    /// The effects now in the set, e.g. `accel bias_temperature (degree 2)`.
+    pub added: Vec<String>,
+    /// Accepted effects the firmware has no term for (e.g. `gyro bias_drift`), left out.
+    pub left_out: Vec<String>,
+}
+
+impl ExtendedSet {
+    /// Whether the set differs from the one it was built from.
+    pub fn extended(&self) -> bool {
+        !self.added.is_empty()
+    }
+}
+
+fn describe(sensor: Sensor, kind: EffectKind) -> String {
+    match kind {
+        EffectKind::BiasTemperature(d) => {
+            format!("{} {} (degree {d})", sensor.name(), kind.name())
+        }
+        _ => format!("{} {}", sensor.name(), kind.name()),
+    }
+}
+
+/// `base` with every accepted effect of `analysis` that has a firmware term (see the module
+/// documentation). Only the accelerometer and gyroscope are taken from the analysis.
+pub fn extend_set(base: &CalibrationSet, analysis: &RecordingAnalysis) -> ExtendedSet {
+    let mut set = *base;
+    let mut added = Vec::new();
+    let mut left_out = Vec::new();
+    for (sensor, result) in &analysis.sensors {
+        let Ok(found) = result else { continue };
+        let (with_term, without): (Vec<EffectKind>, Vec<EffectKind>) = accepted(found)
+            .into_iter()
+            .partition(|k| !matches!(k, EffectKind::BiasDrift | EffectKind::BinnedBias(_)));
+        left_out.extend(without.iter().map(|k| describe(*sensor, *k)));
+        if with_term.is_empty() {
+            continue;
+        }
+        let terms = found.to_calibration_terms();
+        match sensor {
+            Sensor::Accel => set.accel = terms.sensor,
+            Sensor::Gyro => {
+                set.gyro = terms.sensor;
+                if terms.gyro_g_sensitivity.is_some() {
+                    set.gyro_g_sensitivity = terms.gyro_g_sensitivity;
+                }
+            }
+            Sensor::Mag => continue,
+        }
+        added.extend(with_term.iter().map(|k| describe(*sensor, *k)));
+    }
+    ExtendedSet {
+        set,
+        added,
+        left_out,
+    }
+}
+
+fn accepted(analysis: &SensorAnalysis) -> Vec<EffectKind> {
+    analysis
+        .effects
+        .iter()
+        .filter(|e| e.status == EffectStatus::Accepted)
+        .map(|e| e.kind)
+        .collect()
+}

@@ -1,0 +1,107 @@
+//! The at-rest check: statistics of samples streamed while the board lies still, as the
+//! errors a user sees — `| |ā| − g |` in mg, `| |m̄| − H |` in % of the field, and `|ω̄|` in °/s,
+//! each of the window's mean (so the white noise averages out; its contribution is reported as
+//! the standard error alongside).
+
+use serde::Serialize;
+
+use super::solve::STANDARD_GRAVITY;
+use crate::device::UnitSample;
+use crate::fit::Vec3;
+
+/// Errors of the readings at rest.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RestErrors {
+    /// Samples averaged.
+    pub samples: usize,
+    /// Board time spanned, s.
+    pub duration_s: f64,
+    /// `| |ā| − g |`, mg.
+    pub accel_error_mg: f64,
+    /// Standard error of `|ā|` from the sample scatter, mg.
+    pub accel_noise_mg: f64,
+    /// `| |m̄| − H |`, % of `H`.
+    pub mag_error_pct: f64,
+    /// Standard error of `|m̄|`, % of `H`.
+    pub mag_noise_pct: f64,
+    /// `|ω̄|`, °/s.
+    pub gyro_rate_dps: f64,
+    /// Largest per-axis accelerometer standard deviation of the samples (stillness), m/s².
+    pub accel_std_mps2: f64,
+}
+
+fn mean_and_std(values: impl Iterator<Item = Vec3> + Clone) -> (Vec3, Vec3) {
+    let n = values.clone().count().max(1) as f64;
+    let mean = values.clone().sum::<Vec3>() / n;
+    let var = values
+        .map(|v| (v - mean).component_mul(&(v - mean)))
+        .sum::<Vec3>()
+        / n;
+    (mean, var.map(|x| x.max(0.0).sqrt()))
+}
+
+/// The standard error of `|v̄|` for per-axis sample deviations `std` over `n` samples, along `v̄`.
+fn norm_standard_error(mean: &Vec3, std: &Vec3, n: usize) -> f64 {
+    let direction = mean.try_normalize(0.0).unwrap_or_else(Vec3::zeros);
+    let var = direction
+        .component_mul(&direction)
+        .dot(&std.component_mul(std));
+    (var / n.max(1) as f64).sqrt()
+}
+
+/// Errors of `samples` (calibrated, or raw for "before") against gravity `gravity_mps2` and
+/// field `field_ut`; `None` without samples.
+pub fn rest_errors(samples: &[UnitSample], gravity_mps2: f64, field_ut: f64) -> Option<RestErrors> {
+    let first = samples.first()?;
+    let last = samples.last()?;
+    let n = samples.len();
+    let (accel, accel_std) = mean_and_std(samples.iter().map(|s| Vec3::from(s.accel)));
+    let (mag, mag_std) = mean_and_std(samples.iter().map(|s| Vec3::from(s.mag)));
+    let (gyro, _) = mean_and_std(samples.iter().map(|s| Vec3::from(s.gyro)));
+    let mg = 1000.0 / STANDARD_GRAVITY;
+    let pct = 100.0 / field_ut;
+    Some(RestErrors {
+        samples: n,
+        duration_s: last.t_s - first.t_s,
+        accel_error_mg: (accel.norm() - gravity_mps2).abs() * mg,
+        accel_noise_mg: norm_standard_error(&accel, &accel_std, n) * mg,
+        mag_error_pct: (mag.norm() - field_ut).abs() * pct,
+        mag_noise_pct: norm_standard_error(&mag, &mag_std, n) * pct,
+        gyro_rate_dps: gyro.norm().to_degrees(),
+        accel_std_mps2: accel_std.max(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_are_those_of_the_means_against_the_references() {
+        // Two samples whose means are |a| = 9.81665 (1 mg·1.0197 high), |m| = 48.48 (1 % high)
+        // and ω = 0.01 rad/s about Z.
+        let make = |t_s: f64, dz: f64| UnitSample {
+            t_s,
+            accel: [0.0, 0.0, 9.816_65 + dz],
+            gyro: [0.0, 0.0, 0.01],
+            mag: [48.48, 0.0, 0.0],
+            temp_c: 25.0,
+        };
+        let samples = [make(0.0, -0.01), make(0.5, 0.01)];
+        let errors = rest_errors(&samples, 9.806_65, 48.0).expect("samples");
+        let expected_mg = 0.01 * 1000.0 / STANDARD_GRAVITY;
+        assert!((errors.accel_error_mg - expected_mg).abs() < 1e-9);
+        assert!((errors.mag_error_pct - 1.0).abs() < 1e-9);
+        assert!((errors.gyro_rate_dps - 0.01f64.to_degrees()).abs() < 1e-12);
+        // Sample std 0.01 m/s² along the mean's direction, over 2 samples.
+        assert!(
+            (errors.accel_noise_mg - 0.01 / 2f64.sqrt() * 1000.0 / STANDARD_GRAVITY).abs() < 1e-9
+        );
+        assert_eq!(errors.duration_s, 0.5);
+    }
+
+    #[test]
+    fn no_samples_give_no_errors() {
+        assert!(rest_errors(&[], 9.8, 48.0).is_none());
+    }
+}

@@ -1,0 +1,208 @@
+//! The session directory and the machine-readable summary.
+//!
+//! Files: `params.json` (the [`ParamsFile`] format, so `imucal flash params.json` writes it
+//! again), `poses.json` (every `PoseStats` with the orientation it was taken for and the board
+//! time of the hold; [`load_poses`] reads it back for `imucal analyze SESSION_DIR`),
+//! `mag_samples.csv` (`t_s,mx,my,mz,temp_c,phase`, raw µT on the board's clock) and
+//! `summary.json` (the [`SessionSummary`], as printed by `imucal calibrate --json`).
+
+use std::path::{Path, PathBuf};
+
+use imucal_protocol::PoseStats;
+use serde::{Deserialize, Serialize};
+
+use super::rest::RestErrors;
+use super::solve::{CapturedPose, FieldSource, Uncertainties, Verdict};
+use super::targets::Target;
+use super::{SessionError, SessionOutcome};
+use crate::device::ParamsFile;
+use crate::fit::Vec3;
+
+/// The summary of a session (`--json` and `summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct SessionSummary {
+    /// Whether the written set was read back and matched (CRC and every value).
+    pub verified: bool,
+    /// `| |ā| − g |` at rest with the written set, mg (`null` when not written).
+    pub accel_rest_error_mg: Option<f64>,
+    /// `| |m̄| − H |` at rest with the written set, % of `H`.
+    pub mag_rest_error_pct: Option<f64>,
+    /// `|ω̄|` at rest with the written set, °/s.
+    pub gyro_rest_error_dps: Option<f64>,
+    /// Board time from the first prompt to the verified write, s (simulated on a simulated
+    /// board).
+    pub session_seconds: f64,
+    /// Wall time of the same span, s.
+    pub wall_seconds: f64,
+    /// The set written.
+    pub params: ParamsFile,
+    /// CRC-32 of the set written.
+    pub params_crc: String,
+    /// Errors at rest without calibration (raw readings).
+    pub before: RestErrors,
+    /// Errors at rest with the written set.
+    pub after: Option<RestErrors>,
+    /// The port.
+    pub port: String,
+    /// The board's id.
+    pub device_id: String,
+    /// Poses captured.
+    pub poses: usize,
+    /// Why extra positions were or were not asked for.
+    pub extra_positions: String,
+    /// Magnetometer samples fitted from the tumble (before thinning) and regions covered.
+    pub mag_tumble_samples: usize,
+    /// Regions of the sphere with enough samples, of 26.
+    pub mag_regions_covered: usize,
+    /// Reference field, µT, and where it came from.
+    pub field_ut: f64,
+    /// Where the reference field came from.
+    pub field_source: FieldSource,
+    /// Local gravity used, m/s².
+    pub gravity_mps2: f64,
+    /// One-sigma uncertainties of the fit.
+    pub uncertainties: Uncertainties,
+    /// The verdict.
+    pub verdict: Verdict,
+    /// Calibrated samples per second of board time at rest.
+    pub stream_rate_hz: f64,
+    /// Samples lost in transit.
+    pub lost_samples: u64,
+}
+
+/// The summary of `outcome`.
+pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
+    let tumble = outcome
+        .mag_samples
+        .iter()
+        .filter(|m| m.phase == super::Phase::Tumble)
+        .count();
+    SessionSummary {
+        verified: outcome.verified,
+        accel_rest_error_mg: outcome.after.map(|a| a.accel_error_mg),
+        mag_rest_error_pct: outcome.after.map(|a| a.mag_error_pct),
+        gyro_rest_error_dps: outcome.after.map(|a| a.gyro_rate_dps),
+        session_seconds: outcome.session_seconds,
+        wall_seconds: outcome.wall_seconds,
+        params: ParamsFile::from(&outcome.fit.set),
+        params_crc: format!("{:#010x}", outcome.fit.set.crc32()),
+        before: outcome.before,
+        after: outcome.after,
+        port: outcome.port.clone(),
+        device_id: outcome.device_id.clone(),
+        poses: outcome.poses.len(),
+        extra_positions: outcome.extra_positions_note.clone(),
+        mag_tumble_samples: tumble,
+        mag_regions_covered: outcome.coverage.covered(1),
+        field_ut: outcome.fit.field_ut,
+        field_source: outcome.fit.field_source,
+        gravity_mps2: outcome.fit.gravity_mps2,
+        uncertainties: outcome.fit.uncertainties,
+        verdict: outcome.fit.verdict.clone(),
+        stream_rate_hz: outcome.stream_rate_hz,
+        lost_samples: outcome.lost_samples,
+    }
+}
+
+#[derive(Serialize)]
+struct PoseRecord<'a> {
+    target: &'a str,
+    target_index: usize,
+    target_up: [f64; 3],
+    t_s: f64,
+    stats: &'a PoseStats,
+}
+
+/// A pose as read back; files written before the index and time were saved lack them.
+#[derive(Deserialize)]
+struct PoseRecordIn {
+    target: String,
+    #[serde(default)]
+    target_index: Option<usize>,
+    target_up: [f64; 3],
+    #[serde(default)]
+    t_s: Option<f64>,
+    stats: PoseStats,
+}
+
+/// Read the poses of a session directory's `poses.json`. A file without hold times (written by
+/// an older version) gets one second per pose in file order, which keeps the capture order the
+/// analysis compares temperature with.
+pub fn load_poses(path: &Path) -> Result<Vec<CapturedPose>, SessionError> {
+    let load_error = |reason: String| SessionError::Load {
+        path: path.display().to_string(),
+        reason,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| load_error(e.to_string()))?;
+    let records: Vec<PoseRecordIn> =
+        serde_json::from_str(&text).map_err(|e| load_error(e.to_string()))?;
+    Ok(records
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| CapturedPose {
+            target: Target {
+                index: r.target_index.unwrap_or(i),
+                up: Vec3::from(r.target_up),
+                name: r.target,
+            },
+            stats: r.stats,
+            t_s: r.t_s.unwrap_or(i as f64),
+        })
+        .collect())
+}
+
+fn write_file(path: &Path, text: &str) -> Result<PathBuf, SessionError> {
+    std::fs::write(path, text).map_err(|cause| SessionError::Save {
+        path: path.display().to_string(),
+        cause,
+    })?;
+    Ok(path.to_path_buf())
+}
+
+fn json_text<T: Serialize>(value: &T) -> String {
+    // Plain data of numbers, strings and fixed keys; non-finite numbers become null.
+    serde_json::to_string_pretty(value).unwrap_or_default()
+}
+
+/// Write the session directory `dir` (created if missing); returns the files written.
+pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>, SessionError> {
+    std::fs::create_dir_all(dir).map_err(|cause| SessionError::Save {
+        path: dir.display().to_string(),
+        cause,
+    })?;
+    let mut written = Vec::new();
+    written.push(write_file(
+        &dir.join("params.json"),
+        &ParamsFile::from(&outcome.fit.set).to_json(),
+    )?);
+    let poses: Vec<PoseRecord<'_>> = outcome
+        .poses
+        .iter()
+        .map(|p| PoseRecord {
+            target: &p.target.name,
+            target_index: p.target.index,
+            target_up: [p.target.up.x, p.target.up.y, p.target.up.z],
+            t_s: p.t_s,
+            stats: &p.stats,
+        })
+        .collect();
+    written.push(write_file(&dir.join("poses.json"), &json_text(&poses))?);
+    let mut csv = String::from("t_s,mx,my,mz,temp_c,phase\n");
+    for m in &outcome.mag_samples {
+        csv.push_str(&format!(
+            "{:.6},{:.4},{:.4},{:.4},{:.3},{}\n",
+            m.t_s,
+            m.mag[0],
+            m.mag[1],
+            m.mag[2],
+            m.temp_c,
+            m.phase.name()
+        ));
+    }
+    written.push(write_file(&dir.join("mag_samples.csv"), &csv)?);
+    written.push(write_file(
+        &dir.join("summary.json"),
+        &json_text(&summary(outcome)),
+    )?);
+    Ok(written)
+}

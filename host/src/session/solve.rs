@@ -1,0 +1,455 @@
+//! Fitting the data of a guided session with the library's default methods, and how good the
+//! result is expected to be.
+//!
+//! - Accelerometer: Levenberg–Marquardt on the norm model `|A(vᵢ − b)| = g` over the captured
+//!   poses, weighted by each pose's noise (seed 003's twelve-position iteration, solved in the
+//!   upper-triangular gauge; [`crate::fit::norm_lm::fit_accel_lm`]).
+//! - Gyroscope: bias = noise-weighted mean of the pose means (seed 000 eq. 9;
+//!   [`crate::fit::gyro_bias::fit_gyro_bias`]); its σ is inflated by the Birge ratio of the pose
+//!   means, since slow hand sway leaves a correlated rate in each hold that `var/n` misses. Scale
+//!   and misalignment are not fitted here (they need the full-rate stream between holds).
+//! - Magnetometer: LM on `|A(mₖ − b)| = H` over the tumble samples, started from Li's ellipsoid
+//!   (seed 000 eq. 17–29; [`crate::fit::norm_lm::fit_mag_lm`]), then rotated into the
+//!   accelerometer frame by the dip-invariance alignment from the poses (`A ← R·A`,
+//!   [`crate::fit::alignment`]), because the norm fit's gauge leaves its output frame arbitrary.
+//!
+//! The expected error of `|a|` (or `|m|`) along an output direction `û` follows from the
+//! parameter covariance `Σ` by first-order propagation: `σ² = ∇θᵀ Σ ∇θ` with
+//! `∇θ|A(x − b)| = (ûᵢ·(x − b)ⱼ for the upper-triangular Aᵢⱼ, −Aᵀû)`; the largest over the 26
+//! cube directions is reported.
+
+use imucal_protocol::{
+    CalibrationSet, FitResiduals, PoseStats, ReferenceMagnitudes, SensorCalibration,
+    PARAMS_FORMAT_VERSION,
+};
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+use super::coverage::region_directions;
+use super::targets::Target;
+use crate::fit::alignment::{fit_alignment, Alignment};
+use crate::fit::gyro_bias::fit_gyro_bias;
+use crate::fit::norm_lm::{fit_accel_lm, fit_mag_lm};
+use crate::fit::{Calibration, Fit, FitError, Mat3, Pose, Vec3};
+
+/// Standard gravity, m/s² (the unit of "mg").
+pub const STANDARD_GRAVITY: f64 = 9.806_65;
+
+/// One captured pose and the target it was captured for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CapturedPose {
+    /// The orientation asked for.
+    pub target: Target,
+    /// What the board averaged, nominal units.
+    pub stats: PoseStats,
+    /// Board time at the middle of the averaged samples, s (for telling temperature from time).
+    pub t_s: f64,
+}
+
+/// Where the magnetometer's reference magnitude came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FieldSource {
+    /// Given by the user (`--field-ut`).
+    Given,
+    /// The geometric mean radius of the raw readings: keeps the sensor's mean sensitivity, since
+    /// without a reference the field's magnitude is not observable.
+    MeanRadius,
+}
+
+/// One-sigma uncertainties of the fitted set, in the units people read.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Uncertainties {
+    /// Accelerometer offset per axis, mg.
+    pub accel_bias_mg: [f64; 3],
+    /// Accelerometer scale (diagonal of `A`) per axis, ppm.
+    pub accel_scale_ppm: [f64; 3],
+    /// Largest expected error of `|a|` over all directions, mg.
+    pub accel_norm_mg: f64,
+    /// Gyroscope bias per axis, °/s.
+    pub gyro_bias_dps: [f64; 3],
+    /// Magnetometer offset per axis, µT.
+    pub mag_bias_ut: [f64; 3],
+    /// Largest expected error of `|m|` over all directions, % of the field.
+    pub mag_norm_pct: f64,
+    /// Magnetometer-to-accelerometer alignment (RMS over the three axes), degrees.
+    pub alignment_deg: f64,
+}
+
+/// How good the fit looks before it is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VerdictLevel {
+    /// Every check within its budget.
+    Good,
+    /// Usable, with the reasons listed.
+    Marginal,
+    /// Not worth writing; the reasons say what to redo.
+    Poor,
+}
+
+/// The verdict and its reasons.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Verdict {
+    /// Overall level.
+    pub level: VerdictLevel,
+    /// One sentence per check that missed its budget (empty when good).
+    pub reasons: Vec<String>,
+}
+
+/// Budgets the verdict compares against.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Budgets {
+    /// Allowed error of `|a|` at rest, mg.
+    pub accel_mg: f64,
+    /// Allowed error of `|m|` at rest, % of the field.
+    pub mag_pct: f64,
+}
+
+/// The fitted calibration of a session.
+#[derive(Debug, Clone)]
+pub struct SessionFit {
+    /// The parameter set to write.
+    pub set: CalibrationSet,
+    /// Accelerometer fit (m/s²).
+    pub accel: Fit,
+    /// Gyroscope bias fit (rad/s).
+    pub gyro: Fit,
+    /// Magnetometer fit in its own gauge, before the alignment (µT).
+    pub mag: Fit,
+    /// Rotation of the magnetometer frame into the accelerometer frame.
+    pub alignment: Option<Alignment>,
+    /// Reference field magnitude, µT.
+    pub field_ut: f64,
+    /// Where `field_ut` came from.
+    pub field_source: FieldSource,
+    /// Local gravity used, m/s².
+    pub gravity_mps2: f64,
+    /// One-sigma uncertainties.
+    pub uncertainties: Uncertainties,
+    /// The verdict.
+    pub verdict: Verdict,
+}
+
+/// A pose of one sensor from the board's statistics.
+pub fn pose_of(stats: &PoseStats, sensor: fn(&PoseStats) -> ([f32; 3], [f32; 3])) -> Pose {
+    let (mean, var) = sensor(stats);
+    Pose {
+        mean: Vec3::from(mean.map(f64::from)),
+        var: Vec3::from(var.map(f64::from)),
+        n: stats.n as usize,
+        label: None,
+    }
+}
+
+/// Accelerometer mean and variance of a pose.
+pub fn accel_of(stats: &PoseStats) -> ([f32; 3], [f32; 3]) {
+    (stats.accel_mean, stats.accel_var)
+}
+
+/// Gyroscope mean and variance of a pose.
+pub fn gyro_of(stats: &PoseStats) -> ([f32; 3], [f32; 3]) {
+    (stats.gyro_mean, stats.gyro_var)
+}
+
+/// Magnetometer mean and variance of a pose.
+pub fn mag_of(stats: &PoseStats) -> ([f32; 3], [f32; 3]) {
+    (stats.mag_mean, stats.mag_var)
+}
+
+/// Gradient of `|A(x − b)|` with respect to the upper-triangular parameters
+/// `A11 A12 A13 A22 A23 A33 b1 b2 b3`, at the raw reading that maps to `reference·û`.
+fn norm_gradient(cal: &Calibration, direction: &Vec3, reference: f64) -> Option<DVector<f64>> {
+    let u = cal.a.try_inverse()? * (direction * reference);
+    let d = direction;
+    let back = cal.a.transpose() * d;
+    Some(DVector::from_vec(vec![
+        d[0] * u[0],
+        d[0] * u[1],
+        d[0] * u[2],
+        d[1] * u[1],
+        d[1] * u[2],
+        d[2] * u[2],
+        -back[0],
+        -back[1],
+        -back[2],
+    ]))
+}
+
+/// One-sigma error of `|A(x − b)|` along the output direction `direction` (unit), in output
+/// units; `None` without a 9×9 covariance.
+pub fn norm_sigma_at(fit: &Fit, direction: &Vec3) -> Option<f64> {
+    let cov: &DMatrix<f64> = fit.covariance.as_ref()?;
+    if cov.shape() != (9, 9) {
+        return None;
+    }
+    let g = norm_gradient(&fit.cal, direction, fit.reference)?;
+    Some((g.transpose() * cov * &g)[(0, 0)].max(0.0).sqrt())
+}
+
+/// Largest one-sigma error of `|A(x − b)|` over the 26 cube directions, in output units;
+/// `None` without a 9×9 covariance.
+pub fn max_norm_sigma(fit: &Fit) -> Option<f64> {
+    region_directions()
+        .iter()
+        .filter_map(|d| norm_sigma_at(fit, d))
+        .reduce(f64::max)
+}
+
+/// Gyroscope bias σ per axis (rad/s), inflated by the Birge ratio `√(χ²/(N−1))` of the pose
+/// means when they scatter more than their `var/n` says.
+fn gyro_bias_sigma(fit: &Fit, poses: &[Pose]) -> Vec3 {
+    let base = fit.std.map(|s| s.b).unwrap_or_else(Vec3::zeros);
+    if poses.len() < 2 {
+        return base;
+    }
+    let mut out = base;
+    for axis in 0..3 {
+        let chi2: f64 = poses
+            .iter()
+            .map(|p| {
+                let v = p.var_of_mean()[axis];
+                if v > 0.0 {
+                    (p.mean[axis] - fit.cal.b[axis]).powi(2) / v
+                } else {
+                    0.0
+                }
+            })
+            .sum();
+        let birge = (chi2 / (poses.len() - 1) as f64).sqrt();
+        out[axis] = base[axis] * birge.max(1.0);
+    }
+    out
+}
+
+fn to_f32_rows(m: &Mat3) -> [[f32; 3]; 3] {
+    [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)] as f32))
+}
+
+fn to_f32_vec(v: &Vec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+fn sensor_calibration(cal: &Calibration) -> SensorCalibration {
+    SensorCalibration {
+        a: to_f32_rows(&cal.a),
+        b: to_f32_vec(&cal.b),
+        ..SensorCalibration::identity()
+    }
+}
+
+/// Evenly thin `points` to at most `max` (0 = keep all).
+pub fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
+    if max == 0 || points.len() <= max {
+        return points.to_vec();
+    }
+    let step = points.len() as f64 / max as f64;
+    (0..max)
+        .filter_map(|i| points.get((i as f64 * step) as usize).copied())
+        .collect()
+}
+
+/// The magnetometer fit with the reference chosen as described by [`FieldSource`].
+fn fit_mag(points: &[Vec3], field_ut: Option<f64>) -> Result<(Fit, f64, FieldSource), FitError> {
+    match field_ut {
+        Some(field) => Ok((fit_mag_lm(points, field)?, field, FieldSource::Given)),
+        None => {
+            // |A₁u| = 1 maps the ellipsoid to the unit sphere; its geometric mean radius in µT
+            // is det(A₁)^(−1/3).
+            let unit = fit_mag_lm(points, 1.0)?;
+            let det = unit.cal.a.determinant();
+            if !(det.is_finite() && det > 0.0) {
+                return Err(FitError::Underdetermined(
+                    "the magnetometer ellipsoid is degenerate; turn the board through more \
+                     directions"
+                        .into(),
+                ));
+            }
+            let field = det.powf(-1.0 / 3.0);
+            Ok((fit_mag_lm(points, field)?, field, FieldSource::MeanRadius))
+        }
+    }
+}
+
+/// Fit every sensor and build the parameter set; `mag_points` are raw magnetometer readings
+/// (µT) from the tumble, `created_unix_s` stamps the set.
+pub fn fit_session(
+    poses: &[CapturedPose],
+    mag_points: &[Vec3],
+    gravity_mps2: f64,
+    field_ut: Option<f64>,
+    budgets: Budgets,
+    created_unix_s: u64,
+) -> Result<SessionFit, FitError> {
+    let accel_poses: Vec<Pose> = poses.iter().map(|p| pose_of(&p.stats, accel_of)).collect();
+    let gyro_poses: Vec<Pose> = poses.iter().map(|p| pose_of(&p.stats, gyro_of)).collect();
+    let accel = fit_accel_lm(&accel_poses, gravity_mps2)?;
+    let gyro = fit_gyro_bias(&gyro_poses, 1.0)?;
+    let (mag, field, field_source) = fit_mag(mag_points, field_ut)?;
+
+    let accel_up: Vec<Vec3> = accel_poses
+        .iter()
+        .map(|p| accel.cal.apply(&p.mean))
+        .collect();
+    let mag_in_poses: Vec<Vec3> = poses
+        .iter()
+        .map(|p| mag.cal.apply(&pose_of(&p.stats, mag_of).mean))
+        .collect();
+    let alignment = fit_alignment(&accel_up, &mag_in_poses).ok();
+    let mag_final = alignment
+        .as_ref()
+        .map_or(mag.cal, |align| align.apply_to(&mag.cal));
+
+    let set = CalibrationSet {
+        format_version: PARAMS_FORMAT_VERSION,
+        created_unix_s,
+        accel: sensor_calibration(&accel.cal),
+        gyro: sensor_calibration(&gyro.cal),
+        mag: sensor_calibration(&mag_final),
+        gyro_g_sensitivity: None,
+        reference: ReferenceMagnitudes {
+            gravity_mps2: gravity_mps2 as f32,
+            field_ut: field as f32,
+        },
+        residuals: FitResiduals {
+            accel_rms: (accel.rms * gravity_mps2) as f32,
+            gyro_rms: gyro.rms as f32,
+            mag_rms: (mag.rms * field) as f32,
+        },
+    };
+
+    let accel_std = accel.std.map(|s| (s.a, s.b));
+    let gyro_sigma = gyro_bias_sigma(&gyro, &gyro_poses);
+    let mg = 1000.0 / STANDARD_GRAVITY;
+    let uncertainties = Uncertainties {
+        accel_bias_mg: accel_std.map_or([f64::NAN; 3], |(_, b)| [b.x, b.y, b.z].map(|v| v * mg)),
+        accel_scale_ppm: accel_std.map_or([f64::NAN; 3], |(a, _)| {
+            [0, 1, 2].map(|i| a[(i, i)] / accel.cal.a[(i, i)].abs().max(f64::MIN_POSITIVE) * 1e6)
+        }),
+        accel_norm_mg: max_norm_sigma(&accel).map_or(f64::NAN, |s| s * mg),
+        gyro_bias_dps: [gyro_sigma.x, gyro_sigma.y, gyro_sigma.z].map(f64::to_degrees),
+        mag_bias_ut: mag.std.map_or([f64::NAN; 3], |s| [s.b.x, s.b.y, s.b.z]),
+        mag_norm_pct: max_norm_sigma(&mag).map_or(f64::NAN, |s| s / field * 100.0),
+        alignment_deg: alignment.as_ref().map_or(f64::NAN, |a| {
+            (a.rotation_std.norm_squared() / 3.0).sqrt().to_degrees()
+        }),
+    };
+    let verdict = judge(
+        &accel,
+        &uncertainties,
+        alignment.is_some(),
+        budgets,
+        gravity_mps2,
+    );
+    Ok(SessionFit {
+        set,
+        accel,
+        gyro,
+        mag,
+        alignment,
+        field_ut: field,
+        field_source,
+        gravity_mps2,
+        uncertainties,
+        verdict,
+    })
+}
+
+/// The verdict: the expected errors (covariance) must stay within a quarter of the budgets, so
+/// that a 4σ error still meets them, and the held-out accelerometer residual within the budget.
+fn judge(
+    accel: &Fit,
+    u: &Uncertainties,
+    aligned: bool,
+    budgets: Budgets,
+    gravity_mps2: f64,
+) -> Verdict {
+    let mut reasons = Vec::new();
+    let mut poor = false;
+    let mg = 1000.0 / STANDARD_GRAVITY;
+    // A NaN σ (no covariance) counts as over budget.
+    let within = |value: f64, limit: f64| value.partial_cmp(&limit).is_some_and(|o| o.is_le());
+    if !within(u.accel_norm_mg, budgets.accel_mg / 4.0) {
+        reasons.push(format!(
+            "the accelerometer's expected |a| error is {:.2} mg (1σ), above a quarter of the \
+             {:.1} mg budget; hold each position longer or more still",
+            u.accel_norm_mg, budgets.accel_mg
+        ));
+    }
+    if let Some(loo) = accel.loo_rms {
+        let loo_mg = loo * gravity_mps2 * mg;
+        if loo_mg > budgets.accel_mg {
+            poor |= loo_mg > 5.0 * budgets.accel_mg;
+            reasons.push(format!(
+                "a position left out of the accelerometer fit is predicted with {loo_mg:.2} mg \
+                 RMS error, above the {:.1} mg budget: the model does not explain every pose \
+                 (a pose taken while moving, or an effect such as temperature drift)",
+                budgets.accel_mg
+            ));
+        }
+    }
+    if !within(u.mag_norm_pct, budgets.mag_pct / 4.0) {
+        poor |= !within(u.mag_norm_pct, budgets.mag_pct);
+        reasons.push(format!(
+            "the magnetometer's expected |m| error is {:.3} % (1σ), above a quarter of the \
+             {:.1} % budget; turn the board through more directions",
+            u.mag_norm_pct, budgets.mag_pct
+        ));
+    }
+    if !aligned {
+        reasons.push(
+            "the magnetometer could not be aligned to the accelerometer frame; the heading \
+             from this calibration may be off by the sensors' mounting angle"
+                .to_string(),
+        );
+    }
+    let level = if reasons.is_empty() {
+        VerdictLevel::Good
+    } else if poor {
+        VerdictLevel::Poor
+    } else {
+        VerdictLevel::Marginal
+    };
+    Verdict { level, reasons }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::covariance::UPPER_TRIANGULAR_LAYOUT;
+
+    #[test]
+    fn the_norm_sigma_of_an_offset_only_covariance_is_the_offset_sigma() {
+        // With Σ = σ²·I on b only (A exact, A = I), |a| along a cube face direction moves by the
+        // offset component along it: σ exactly, and the same along every unit direction.
+        let sigma = 0.003;
+        let mut cov = DMatrix::zeros(9, 9);
+        for i in 6..9 {
+            cov[(i, i)] = sigma * sigma;
+        }
+        let fit = Fit {
+            method: crate::fit::Method::Lm,
+            cal: Calibration::identity(),
+            residuals: vec![],
+            rms: 0.0,
+            loo_rms: None,
+            covariance: Some(cov),
+            param_names: crate::fit::covariance::param_names(&UPPER_TRIANGULAR_LAYOUT),
+            std: None,
+            condition_number: 1.0,
+            iterations: 0,
+            reference: 9.8,
+        };
+        let got = max_norm_sigma(&fit).expect("a covariance");
+        assert!((got - sigma).abs() < 1e-15, "{got}");
+    }
+
+    #[test]
+    fn thinning_keeps_the_requested_count_in_order() {
+        let points: Vec<Vec3> = (0..1000).map(|i| Vec3::new(i as f64, 0.0, 0.0)).collect();
+        let thinned = thin(&points, 300);
+        assert_eq!(thinned.len(), 300);
+        assert!(thinned.windows(2).all(|w| w[1].x > w[0].x));
+        assert_eq!(thin(&points, 0).len(), 1000);
+    }
+}

@@ -1,0 +1,181 @@
+//! The orientations a guided session asks for: the twelve positions of seed 003 (Chen et al.
+//! 2012, §2.2: the six faces up, then the XY, YZ and XZ planes at 45° and 135°), and the eight
+//! corner directions offered as extra positions when the covariance says they help. A target is
+//! the body-frame direction that points up; the board is "in" a target when its measured up
+//! direction is within [`MATCH_ANGLE_DEG`] of it.
+
+use crate::fit::Vec3;
+
+/// The board counts as being in a target when its up direction is within this angle of it.
+///
+/// Neighbouring targets are 45° apart, so 20° never matches two; a person places the board
+/// within a few degrees, and the raw (uncalibrated) reading tilts the direction by at most a
+/// few degrees more (±0.3 m/s² bias and ±3 % scale of a consumer part).
+pub const MATCH_ANGLE_DEG: f64 = 20.0;
+
+/// One orientation to capture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Target {
+    /// Index in the session's target list.
+    pub index: usize,
+    /// Body-frame direction that points up (unit).
+    pub up: Vec3,
+    /// Short name, e.g. `"+Z up"` or `"+X+Y up (45°)"`.
+    pub name: String,
+}
+
+fn axis_name(index: usize) -> char {
+    match index {
+        0 => 'X',
+        1 => 'Y',
+        _ => 'Z',
+    }
+}
+
+/// Name of an up direction from its signed components, e.g. `+X−Y`.
+fn direction_name(up: &Vec3) -> String {
+    let mut name = String::new();
+    for (i, v) in up.iter().enumerate() {
+        if v.abs() > 0.3 {
+            name.push(if *v > 0.0 { '+' } else { '-' });
+            name.push(axis_name(i));
+        }
+    }
+    name
+}
+
+impl Target {
+    fn new(index: usize, up: Vec3) -> Self {
+        let up = up.normalize();
+        let axes = up.iter().filter(|v| v.abs() > 0.3).count();
+        let name = match axes {
+            1 => format!("{} up", direction_name(&up)),
+            2 => format!("{} up (45° tilt)", direction_name(&up)),
+            _ => format!("{} corner up", direction_name(&up)),
+        };
+        Self { index, up, name }
+    }
+
+    /// A five-line picture of how to hold the board for this target.
+    pub fn picture(&self) -> [String; 5] {
+        let label = direction_name(&self.up);
+        let flat = self.up.z.abs() > 0.9;
+        let edge = self.up.x.abs() > 0.9 || self.up.y.abs() > 0.9;
+        if flat {
+            let side = if self.up.z > 0.0 {
+                "lying flat, components up"
+            } else {
+                "lying flat, upside down"
+            };
+            [
+                format!("        ^ {label} up"),
+                "    +----------+".to_string(),
+                format!("    |   IMU    |   {side}"),
+                "    +----------+".to_string(),
+                String::new(),
+            ]
+        } else if edge {
+            [
+                format!("        ^ {label} up"),
+                "       +--+".to_string(),
+                format!("       |  |   standing on its edge, the {label} edge at the top"),
+                "       |  |".to_string(),
+                "       +--+".to_string(),
+            ]
+        } else {
+            [
+                format!("        ^ {label} up"),
+                "          /\\".to_string(),
+                format!("         /  \\   tilted 45°, the {label} corner highest"),
+                "        /  /".to_string(),
+                "        \\ /".to_string(),
+            ]
+        }
+    }
+}
+
+/// The twelve positions of seed 003 (same order as the simulator's schedule).
+pub fn twelve_positions() -> Vec<Target> {
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    [
+        Vec3::new(0.0, 0.0, 1.0),
+        Vec3::new(0.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(-1.0, 0.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+        Vec3::new(0.0, -1.0, 0.0),
+        Vec3::new(h, h, 0.0),
+        Vec3::new(-h, h, 0.0),
+        Vec3::new(0.0, h, h),
+        Vec3::new(0.0, -h, h),
+        Vec3::new(h, 0.0, h),
+        Vec3::new(-h, 0.0, h),
+    ]
+    .into_iter()
+    .enumerate()
+    .map(|(i, up)| Target::new(i, up))
+    .collect()
+}
+
+/// The eight corner directions `(±1, ±1, ±1)/√3`, numbered from `first_index`: candidates for
+/// extra positions (each is at least 35° from every one of the twelve).
+pub fn corner_positions(first_index: usize) -> Vec<Target> {
+    let mut out = Vec::with_capacity(8);
+    for sx in [1.0, -1.0] {
+        for sy in [1.0, -1.0] {
+            for sz in [1.0, -1.0] {
+                out.push(Target::new(first_index + out.len(), Vec3::new(sx, sy, sz)));
+            }
+        }
+    }
+    out
+}
+
+/// The target within [`MATCH_ANGLE_DEG`] of the measured up direction, if any.
+pub fn target_at<'a>(targets: &'a [Target], up: &Vec3) -> Option<&'a Target> {
+    let up = up.try_normalize(0.0)?;
+    let cos_limit = MATCH_ANGLE_DEG.to_radians().cos();
+    targets
+        .iter()
+        .map(|t| (t, t.up.dot(&up)))
+        .filter(|(_, c)| *c >= cos_limit)
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(t, _)| t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_position_is_matched_by_its_own_direction_and_no_other() {
+        let mut all = twelve_positions();
+        all.extend(corner_positions(12));
+        for target in &all {
+            let found = target_at(&all, &(target.up * 9.8)).map(|t| t.index);
+            assert_eq!(found, Some(target.index), "{}", target.name);
+        }
+    }
+
+    #[test]
+    fn a_direction_25_degrees_from_every_target_matches_none() {
+        let targets = twelve_positions();
+        // 25° from +Z towards the +X−Y diagonal: 25° from +Z, more from the others.
+        let angle = 25f64.to_radians();
+        let dir = Vec3::new(angle.sin() * 0.6, -angle.sin() * 0.8, angle.cos());
+        assert!(target_at(&targets, &dir).is_none());
+    }
+
+    #[test]
+    fn a_zero_vector_matches_nothing_instead_of_failing() {
+        assert!(target_at(&twelve_positions(), &Vec3::zeros()).is_none());
+    }
+
+    #[test]
+    fn pictures_name_the_axis_that_points_up() {
+        let targets = twelve_positions();
+        assert!(targets[1].picture()[0].contains("-Z up"));
+        assert!(targets[6].picture()[0].contains("+X+Y up"));
+        assert_eq!(targets[6].name, "+X+Y up (45° tilt)");
+    }
+}

@@ -1,0 +1,230 @@
+//! End to end over the pseudo-terminal: an unattended guided session calibrates a simulated board
+//! with seeded truth (the real firmware core behind the pty, a simulated person following the
+//! prompts with hand tremor), and the result is checked against the truth, at rest, after a
+//! reboot, and for the stream's wire cost and rate.
+
+use std::time::{Duration, Instant};
+
+use imucal::device::DeviceClient;
+use imucal::fit::{Mat3, Vec3};
+use imucal::session::{run_session, SessionOptions, SessionOutcome, Unattended};
+use imucal_hil_sim::physics::SensorTruth;
+use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
+use imucal_protocol::StreamKind;
+
+/// Simulated seconds per wall second: fast enough for a modest test, slow enough that the
+/// serving loop keeps up on a shared two-core machine.
+const SPEED: f64 = 20.0;
+
+/// Tolerance in standard deviations of the fit's own covariance (a 5σ miss on one of the ~20
+/// compared numbers would happen by chance about once in 10⁵ runs).
+const K_SIGMA: f64 = 5.0;
+
+fn matrix(rows: &[[f64; 3]; 3]) -> Mat3 {
+    Mat3::from_fn(|r, c| rows[r][c])
+}
+
+fn matrix_f32(rows: &[[f32; 3]; 3]) -> Mat3 {
+    Mat3::from_fn(|r, c| f64::from(rows[r][c]))
+}
+
+/// `A = Q·R` with `R` upper-triangular with a positive diagonal: the gauge the norm fits use
+/// (`|A·u| = |R·u|`), so `R` is what a fit of `A` should return.
+fn upper_triangular_factor(a: &Mat3) -> (Mat3, Mat3) {
+    let qr = a.qr();
+    let (mut q, mut r) = (qr.q(), qr.r());
+    for i in 0..3 {
+        if r[(i, i)] < 0.0 {
+            for c in 0..3 {
+                r[(i, c)] = -r[(i, c)];
+                q[(c, i)] = -q[(c, i)];
+            }
+        }
+    }
+    (q, r)
+}
+
+/// Every entry of the fitted upper-triangular `A` and of `b` within `K_SIGMA` of its σ (plus
+/// `floor`, the f32 storage and quantisation floor) of the truth.
+fn assert_matches_truth(name: &str, fit: &imucal::fit::Fit, truth: &SensorTruth, floor: f64) {
+    let (_, r) = upper_triangular_factor(&matrix(&truth.a_true));
+    let std = fit.std.expect("the fit has a covariance");
+    for row in 0..3 {
+        for col in row..3 {
+            let error = (fit.cal.a[(row, col)] - r[(row, col)]).abs();
+            let tolerance = K_SIGMA * std.a[(row, col)] + floor;
+            assert!(
+                error <= tolerance,
+                "{name} A{}{}: fitted {}, true {}, error {error:.3e} > {tolerance:.3e}",
+                row + 1,
+                col + 1,
+                fit.cal.a[(row, col)],
+                r[(row, col)]
+            );
+        }
+        let error = (fit.cal.b[row] - truth.b_true[row]).abs();
+        let tolerance = K_SIGMA * std.b[row] + floor * truth.b_true[row].abs().max(1.0);
+        assert!(
+            error <= tolerance,
+            "{name} b{}: fitted {}, true {}, error {error:.3e} > {tolerance:.3e}",
+            row + 1,
+            fit.cal.b[row],
+            truth.b_true[row]
+        );
+    }
+}
+
+fn run_calibration(seed: u64) -> (SimHandle, DeviceClient, SessionOutcome) {
+    let mut sim_options = SimOptions::new(seed);
+    sim_options.speed = SPEED;
+    let sim = SimServer::start(sim_options).expect("the simulator starts");
+    let truth = sim.truth();
+    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let options = SessionOptions {
+        gravity_mps2: truth.world.gravity_mps2,
+        field_ut: Some(Vec3::from(truth.world.field_world_ut).norm()),
+        ..SessionOptions::default()
+    };
+    let outcome =
+        run_session(&mut client, &options, &mut Unattended).expect("the session completes");
+    (sim, client, outcome)
+}
+
+#[test]
+fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
+    let wall = Instant::now();
+    let (sim, mut client, outcome) = run_calibration(2024);
+    let truth = sim.truth();
+    let fit = &outcome.fit;
+
+    // Twelve positions, each captured once; the verified write.
+    assert_eq!(outcome.poses.len(), 12, "{}", outcome.extra_positions_note);
+    assert!(outcome.verified && outcome.written);
+    assert_eq!(outcome.lost_samples, 0);
+
+    // Fitted parameters against the truth, within K_SIGMA of each fit's own covariance. The
+    // floors: accelerometer and magnetometer entries 1e-6 relative for f64 round-off of the
+    // fits. The gyroscope bias has no floor: its σ already includes the scatter of the holds.
+    assert_matches_truth("accel", &fit.accel, &truth.imu.accel, 1e-6);
+    assert_matches_truth("mag", &fit.mag, &truth.imu.mag, 1e-6);
+    let gyro_sigma = fit.uncertainties.gyro_bias_dps.map(f64::to_radians);
+    for (axis, sigma) in gyro_sigma.iter().enumerate() {
+        let error = (fit.gyro.cal.b[axis] - truth.imu.gyro.b_true[axis]).abs();
+        eprintln!("gyro b{}: error {:.2}σ", axis + 1, error / sigma);
+        let tolerance = K_SIGMA * sigma;
+        assert!(
+            error <= tolerance,
+            "gyro b{}: error {error:.3e} rad/s > {tolerance:.3e}",
+            axis + 1
+        );
+    }
+
+    // The written magnetometer matrix is in the accelerometer's output frame: with
+    // A_acc = Q·R, the true magnetometer correction in that frame is Qᵀ·A_mag.
+    let (q_accel, _) = upper_triangular_factor(&matrix(&truth.imu.accel.a_true));
+    let mag_in_accel_frame = q_accel.transpose() * matrix(&truth.imu.mag.a_true);
+    let rotation_error = matrix_f32(&fit.set.mag.a) * mag_in_accel_frame.try_inverse().expect("A");
+    // The error is a small rotation times a near-identity stretch: the rotation angle is the
+    // length of its antisymmetric part (the symmetric part is scale, checked above).
+    let skew = (rotation_error - rotation_error.transpose()) / 2.0;
+    let angle = Vec3::new(skew[(2, 1)], skew[(0, 2)], skew[(1, 0)]).norm();
+    let align = fit
+        .alignment
+        .as_ref()
+        .expect("the magnetometer was aligned");
+    // The rotation's σ per axis from the alignment fit, plus the magnetometer fit's relative
+    // matrix σ (the non-rotation part of the error), both at K_SIGMA.
+    let mag_relative = fit.mag.std.map_or(0.0, |s| s.a.max()) / fit.mag.cal.a.diagonal().min();
+    let angle_tolerance = K_SIGMA * (align.rotation_std.norm() + mag_relative);
+    assert!(
+        angle <= angle_tolerance,
+        "magnetometer frame off by {:.3}° > {:.3}°",
+        angle.to_degrees(),
+        angle_tolerance.to_degrees()
+    );
+
+    // At rest: the targets of the product, and a clear improvement over the raw readings.
+    let after = outcome.after.expect("the calibrated rest measurement");
+    assert!(
+        after.accel_error_mg < 2.0,
+        "|a| error {:.3} mg",
+        after.accel_error_mg
+    );
+    assert!(
+        after.mag_error_pct < 0.5,
+        "|m| error {:.3} %",
+        after.mag_error_pct
+    );
+    assert!(outcome.before.accel_error_mg > 10.0 * after.accel_error_mg);
+    // Gyro at rest: the bias left after the fit, within K_SIGMA of its σ plus the standard
+    // error of a 3 s mean of white noise (σ/√n with n ≈ 357 samples).
+    let gyro_noise = truth.imu.gyro.noise_sigma / (after.samples as f64).sqrt();
+    let gyro_limit = (K_SIGMA * Vec3::from(gyro_sigma).norm() + 3.0 * gyro_noise).to_degrees();
+    assert!(
+        after.gyro_rate_dps < gyro_limit,
+        "gyro at rest {:.4} °/s > {gyro_limit:.4}",
+        after.gyro_rate_dps
+    );
+
+    // The set survives a power cycle.
+    sim.reboot().expect("the board reboots");
+    let back = client.get_params().expect("read back after the reboot");
+    assert_eq!(back, fit.set);
+    assert_eq!(client.status().expect("status").active_crc, fit.set.crc32());
+
+    // Wire cost and sustained rate over the pty, raw and calibrated.
+    let rate = f64::from(client.welcome().scales.sample_rate_hz);
+    for kind in [StreamKind::Raw, StreamKind::Calibrated] {
+        let before = sim.stats();
+        let started = Instant::now();
+        let samples = client
+            .collect_samples(kind, Duration::from_secs_f64(4.0 / SPEED), &mut |_| {})
+            .expect("stream");
+        let wall_s = started.elapsed().as_secs_f64();
+        let bytes = sim.stats().bytes_to_host - before.bytes_to_host;
+        let span = samples.last().map_or(0.0, |s| s.t_s) - samples.first().map_or(0.0, |s| s.t_s);
+        let board_rate = (samples.len() as f64 - 1.0) / span;
+        let per_sample = bytes as f64 / samples.len() as f64;
+        eprintln!(
+            "{kind:?} stream: {} samples, {per_sample:.1} bytes/sample on the wire, {board_rate:.1} \
+             samples per board second, {:.0} per wall second at speed {SPEED}",
+            samples.len(),
+            samples.len() as f64 / wall_s
+        );
+        // Every sample arrives (no index gap) at the board's rate; 1 % covers the rounding of
+        // the sample period to whole microseconds.
+        assert!(
+            (board_rate - rate).abs() < 0.01 * rate,
+            "{board_rate} vs {rate}"
+        );
+        // Packed sizes: raw 22 bytes, calibrated 10 f32 + time offset ≈ 43; plus per batch a
+        // header, CRC and COBS framing of at most ~40 bytes shared by 20 (raw) or 10 samples.
+        let limit = match kind {
+            StreamKind::Raw => 22.0 + 40.0 / 20.0,
+            StreamKind::Calibrated => 43.0 + 40.0 / 10.0,
+        };
+        assert!(per_sample <= limit, "{per_sample} bytes per sample");
+    }
+    assert_eq!(client.stats().lost_samples, 0);
+
+    eprintln!(
+        "session: {:.1} s simulated ({:.1} s wall), {} poses, {} tumble samples; after: |a| {:.3} \
+         mg, |m| {:.3} %, gyro {:.4} °/s; before: |a| {:.1} mg, |m| {:.2} %, gyro {:.3} °/s; \
+         test wall time {:.1} s",
+        outcome.session_seconds,
+        outcome.wall_seconds,
+        outcome.poses.len(),
+        outcome
+            .mag_samples
+            .iter()
+            .filter(|m| m.phase == imucal::session::Phase::Tumble)
+            .count(),
+        after.accel_error_mg,
+        after.mag_error_pct,
+        after.gyro_rate_dps,
+        outcome.before.accel_error_mg,
+        outcome.before.mag_error_pct,
+        outcome.before.gyro_rate_dps,
+        wall.elapsed().as_secs_f64()
+    );
+}
