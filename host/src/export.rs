@@ -1,0 +1,440 @@
+//! Exporting a calibration for firmware that is not imucal's: a C header, a Rust module, or a
+//! versioned JSON document (schema in `docs/PARAMS_FORMAT.md`).
+//!
+//! Every export carries the model of `imucal_protocol::CalibrationSet`, per sensor:
+//!
+//! ```text
+//! ΔT = T − T_ref                (T_ref = 0 without a bias temperature term)
+//! u  = x − (b + c1·ΔT + c2·ΔT² + c3·ΔT³)
+//! u' = u + q∘u² + k∘u³
+//! y  = (1 + s·ΔT)∘(A·u')        and for the gyroscope  y −= K·f  (f = calibrated accelerometer)
+//! ```
+//!
+//! which without extended terms is `y = A·(x − b)`. Values are exported as the `f32` numbers the
+//! board stores, printed with the shortest text that reads back to the same `f32`, so an export
+//! applies exactly what `imucal flash` would write. The generated code contains only the terms
+//! the file has, so a plain calibration yields a plain `y = A·(x − b)`.
+
+use imucal_protocol::{CalibrationSet, SensorCalibration};
+use serde_json::{json, Value};
+
+/// Version of the export JSON schema ([`ExportFormat::Json`]); raised on any incompatible change.
+pub const EXPORT_SCHEMA_VERSION: u32 = 1;
+
+/// Name of the export JSON schema, written in its `schema` field.
+pub const EXPORT_SCHEMA_NAME: &str = "imucal-calibration-export";
+
+/// What to generate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExportFormat {
+    /// A C99 header: `static const float` arrays and `static inline` apply functions.
+    CHeader,
+    /// A Rust module: `pub const` arrays and `pub fn` apply functions.
+    Rust,
+    /// The versioned JSON document.
+    Json,
+}
+
+/// The three sensors in export order, with their names and units.
+const SENSORS: [(&str, &str); 3] = [("accel", "m/s²"), ("gyro", "rad/s"), ("mag", "µT")];
+
+fn sensor<'a>(set: &'a CalibrationSet, name: &str) -> &'a SensorCalibration {
+    match name {
+        "accel" => &set.accel,
+        "gyro" => &set.gyro,
+        _ => &set.mag,
+    }
+}
+
+/// Whether a sensor's model depends on the temperature.
+fn uses_temperature(cal: &SensorCalibration) -> bool {
+    cal.bias_temp.is_some() || cal.scale_temp.is_some()
+}
+
+/// The export of `set` in `format`; `source` names the parameter file in the generated comment.
+pub fn export(set: &CalibrationSet, format: ExportFormat, source: &str) -> String {
+    match format {
+        ExportFormat::CHeader => c_header(set, source),
+        ExportFormat::Rust => rust_module(set, source),
+        ExportFormat::Json => {
+            // A tree of numbers and strings always serialises.
+            serde_json::to_string_pretty(&json_document(set, source)).unwrap_or_default() + "\n"
+        }
+    }
+}
+
+/// Applies one sensor's calibration (every term present) to a reading `x` at `temp_c`, in f64:
+/// the host's reference for what the exported code computes.
+pub fn apply_sensor(cal: &SensorCalibration, x: [f64; 3], temp_c: f64) -> [f64; 3] {
+    let t_ref = cal.bias_temp.map_or(0.0, |t| f64::from(t.t_ref_c));
+    let dt = temp_c - t_ref;
+    let mut u = [0.0; 3];
+    for (axis, value) in u.iter_mut().enumerate() {
+        let mut offset = f64::from(cal.b[axis]);
+        if let Some(t) = &cal.bias_temp {
+            let [c1, c2, c3] = [0, 1, 2].map(|k| f64::from(t.coeffs[k][axis]));
+            offset += dt * (c1 + dt * (c2 + dt * c3));
+        }
+        let mut v = x[axis] - offset;
+        if let Some(n) = &cal.nonlinearity {
+            v += v * v * (f64::from(n.quadratic[axis]) + f64::from(n.cubic[axis]) * v);
+        }
+        *value = v;
+    }
+    let mut y = [0.0; 3];
+    for (row, out) in y.iter_mut().enumerate() {
+        *out = (0..3).map(|c| f64::from(cal.a[row][c]) * u[c]).sum();
+        if let Some(s) = &cal.scale_temp {
+            *out *= 1.0 + f64::from(s[row]) * dt;
+        }
+    }
+    y
+}
+
+/// Applies the whole set to one sample: calibrated accelerometer, gyroscope (with the
+/// g-sensitivity correction from the calibrated accelerometer) and magnetometer.
+pub fn apply_set(
+    set: &CalibrationSet,
+    accel: [f64; 3],
+    gyro: [f64; 3],
+    mag: [f64; 3],
+    temp_c: f64,
+) -> [[f64; 3]; 3] {
+    let f = apply_sensor(&set.accel, accel, temp_c);
+    let mut w = apply_sensor(&set.gyro, gyro, temp_c);
+    if let Some(k) = &set.gyro_g_sensitivity {
+        for (row, out) in w.iter_mut().enumerate() {
+            *out -= (0..3).map(|c| f64::from(k[row][c]) * f[c]).sum::<f64>();
+        }
+    }
+    [f, w, apply_sensor(&set.mag, mag, temp_c)]
+}
+
+/// Shortest decimal text that reads back to the same `f32` (always with `.` or `e`).
+fn float_text(v: f32) -> String {
+    format!("{v:?}")
+}
+
+fn c_float(v: f32) -> String {
+    float_text(v) + "f"
+}
+
+fn list(values: &[f32], each: fn(f32) -> String) -> String {
+    values
+        .iter()
+        .map(|v| each(*v))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn c_vec(v: &[f32; 3]) -> String {
+    format!("{{{}}}", list(v, c_float))
+}
+
+fn c_mat(m: &[[f32; 3]; 3]) -> String {
+    format!(
+        "{{\n    {},\n    {},\n    {},\n}}",
+        c_vec(&m[0]),
+        c_vec(&m[1]),
+        c_vec(&m[2])
+    )
+}
+
+fn model_comment(prefix: &str) -> String {
+    [
+        "Model per sensor (as the imucal firmware applies it):",
+        "  dT = T - T_ref                      (T_ref = 0 without a bias temperature term)",
+        "  u  = x - (b + c1*dT + c2*dT^2 + c3*dT^3)",
+        "  u' = u + q.*u^2 + k.*u^3            (element-wise)",
+        "  y  = (1 + s*dT) .* (A * u')         gyroscope: y -= K * f (f = calibrated accel)",
+        "Without extended terms this is y = A * (x - b). Matrices are row-major: A[row][col].",
+        "Inputs x in the sensor's nominal unit, outputs y in m/s^2, rad/s, uT; T in degC.",
+    ]
+    .iter()
+    .map(|line| format!("{prefix}{line}").trim_end().to_string())
+    .collect::<Vec<_>>()
+    .join("\n")
+}
+
+/// The C header.
+fn c_header(set: &CalibrationSet, source: &str) -> String {
+    let mut out = String::new();
+    out.push_str(&format!(
+        "/*\n * IMU calibration exported by imucal from {source} (parameter format {}).\n *\n{}\n */\n#pragma once\n\n",
+        set.format_version,
+        model_comment(" * ")
+    ));
+    out.push_str(&format!(
+        "#define IMUCAL_PARAMS_FORMAT {}\n#define IMUCAL_GRAVITY_MPS2 {}\n#define IMUCAL_FIELD_UT {}\n",
+        set.format_version,
+        c_float(set.reference.gravity_mps2),
+        c_float(set.reference.field_ut)
+    ));
+    for (name, unit) in SENSORS {
+        let cal = sensor(set, name);
+        out.push_str(&format!("\n/* {name}: output in {unit} */\n"));
+        out.push_str(&format!(
+            "static const float imucal_{name}_A[3][3] = {};\n",
+            c_mat(&cal.a)
+        ));
+        out.push_str(&format!(
+            "static const float imucal_{name}_b[3] = {};\n",
+            c_vec(&cal.b)
+        ));
+        if let Some(t) = &cal.bias_temp {
+            out.push_str(&format!(
+                "static const float imucal_{name}_t_ref_c = {};\n/* bias_temp[k][axis]: degree k+1 offset coefficient per degC^(k+1) */\nstatic const float imucal_{name}_bias_temp[3][3] = {};\n",
+                c_float(t.t_ref_c),
+                c_mat(&t.coeffs)
+            ));
+        }
+        if let Some(s) = &cal.scale_temp {
+            out.push_str(&format!(
+                "static const float imucal_{name}_scale_temp[3] = {};\n",
+                c_vec(s)
+            ));
+        }
+        if let Some(n) = &cal.nonlinearity {
+            out.push_str(&format!(
+                "static const float imucal_{name}_quadratic[3] = {};\nstatic const float imucal_{name}_cubic[3] = {};\n",
+                c_vec(&n.quadratic),
+                c_vec(&n.cubic)
+            ));
+        }
+        if name == "gyro" {
+            if let Some(k) = &set.gyro_g_sensitivity {
+                out.push_str(&format!(
+                    "/* g-sensitivity K, rad/s per m/s^2 */\nstatic const float imucal_gyro_g_sensitivity[3][3] = {};\n",
+                    c_mat(k)
+                ));
+            }
+        }
+        out.push_str(&c_apply(set, name, cal));
+    }
+    out
+}
+
+fn c_apply(set: &CalibrationSet, name: &str, cal: &SensorCalibration) -> String {
+    let temperature = uses_temperature(cal);
+    let g_sensitivity = name == "gyro" && set.gyro_g_sensitivity.is_some();
+    let mut params = vec!["const float x[3]".to_string()];
+    if temperature {
+        params.push("float temp_c".to_string());
+    }
+    if g_sensitivity {
+        params.push("const float accel_calibrated[3]".to_string());
+    }
+    params.push("float y[3]".to_string());
+    let mut body = String::new();
+    if temperature {
+        let t_ref = if cal.bias_temp.is_some() {
+            format!("imucal_{name}_t_ref_c")
+        } else {
+            "0.0f".to_string()
+        };
+        body.push_str(&format!("    const float dt = temp_c - {t_ref};\n"));
+    }
+    body.push_str("    float u[3];\n    for (int i = 0; i < 3; i++) {\n");
+    body.push_str(&format!("        u[i] = x[i] - imucal_{name}_b[i];\n"));
+    if cal.bias_temp.is_some() {
+        body.push_str(&format!(
+            "        u[i] -= dt * (imucal_{name}_bias_temp[0][i] + dt * (imucal_{name}_bias_temp[1][i] + dt * imucal_{name}_bias_temp[2][i]));\n"
+        ));
+    }
+    if cal.nonlinearity.is_some() {
+        body.push_str(&format!(
+            "        u[i] += u[i] * u[i] * (imucal_{name}_quadratic[i] + imucal_{name}_cubic[i] * u[i]);\n"
+        ));
+    }
+    body.push_str("    }\n    for (int r = 0; r < 3; r++) {\n");
+    body.push_str(&format!(
+        "        y[r] = imucal_{name}_A[r][0] * u[0] + imucal_{name}_A[r][1] * u[1] + imucal_{name}_A[r][2] * u[2];\n"
+    ));
+    if cal.scale_temp.is_some() {
+        body.push_str(&format!(
+            "        y[r] *= 1.0f + imucal_{name}_scale_temp[r] * dt;\n"
+        ));
+    }
+    if g_sensitivity {
+        body.push_str(
+            "        y[r] -= imucal_gyro_g_sensitivity[r][0] * accel_calibrated[0] + imucal_gyro_g_sensitivity[r][1] * accel_calibrated[1] + imucal_gyro_g_sensitivity[r][2] * accel_calibrated[2];\n",
+        );
+    }
+    body.push_str("    }\n");
+    format!(
+        "/* Calibrated {name} reading y from the reading x. */\nstatic inline void imucal_apply_{name}({})\n{{\n{body}}}\n",
+        params.join(", ")
+    )
+}
+
+fn rust_vec(v: &[f32; 3]) -> String {
+    format!("[{}]", list(v, float_text))
+}
+
+fn rust_mat(m: &[[f32; 3]; 3]) -> String {
+    format!(
+        "[\n    {},\n    {},\n    {},\n]",
+        rust_vec(&m[0]),
+        rust_vec(&m[1]),
+        rust_vec(&m[2])
+    )
+}
+
+/// The Rust module (plain `//` comments, so it can be pasted or `include!`d anywhere).
+fn rust_module(set: &CalibrationSet, source: &str) -> String {
+    let mut out = format!(
+        "// IMU calibration exported by imucal from {source} (parameter format {}).\n//\n{}\n\n",
+        set.format_version,
+        model_comment("// ")
+    );
+    out.push_str(&format!(
+        "/// Parameter format of the source file.\npub const PARAMS_FORMAT: u16 = {};\n/// Local gravity of the fit, m/s².\npub const GRAVITY_MPS2: f32 = {};\n/// Local field magnitude of the fit, µT.\npub const FIELD_UT: f32 = {};\n",
+        set.format_version,
+        float_text(set.reference.gravity_mps2),
+        float_text(set.reference.field_ut)
+    ));
+    for (name, unit) in SENSORS {
+        let cal = sensor(set, name);
+        let upper = name.to_uppercase();
+        out.push_str(&format!(
+            "\n/// {name}: correction matrix `A` (row-major); output in {unit}.\npub const {upper}_A: [[f32; 3]; 3] = {};\n/// {name}: offset `b`, in the input unit.\npub const {upper}_B: [f32; 3] = {};\n",
+            rust_mat(&cal.a),
+            rust_vec(&cal.b)
+        ));
+        if let Some(t) = &cal.bias_temp {
+            out.push_str(&format!(
+                "/// {name}: reference temperature of the offset polynomial, °C.\npub const {upper}_T_REF_C: f32 = {};\n/// {name}: offset coefficients `[degree − 1][axis]`, per °C^degree.\npub const {upper}_BIAS_TEMP: [[f32; 3]; 3] = {};\n",
+                float_text(t.t_ref_c),
+                rust_mat(&t.coeffs)
+            ));
+        }
+        if let Some(s) = &cal.scale_temp {
+            out.push_str(&format!(
+                "/// {name}: relative scale change per °C, per output axis.\npub const {upper}_SCALE_TEMP: [f32; 3] = {};\n",
+                rust_vec(s)
+            ));
+        }
+        if let Some(n) = &cal.nonlinearity {
+            out.push_str(&format!(
+                "/// {name}: quadratic non-linearity per axis.\npub const {upper}_QUADRATIC: [f32; 3] = {};\n/// {name}: cubic non-linearity per axis.\npub const {upper}_CUBIC: [f32; 3] = {};\n",
+                rust_vec(&n.quadratic),
+                rust_vec(&n.cubic)
+            ));
+        }
+        if name == "gyro" {
+            if let Some(k) = &set.gyro_g_sensitivity {
+                out.push_str(&format!(
+                    "/// Gyroscope g-sensitivity `K`, rad/s per m/s² (row-major).\npub const GYRO_G_SENSITIVITY: [[f32; 3]; 3] = {};\n",
+                    rust_mat(k)
+                ));
+            }
+        }
+        out.push_str(&rust_apply(set, name, cal));
+    }
+    out
+}
+
+fn rust_apply(set: &CalibrationSet, name: &str, cal: &SensorCalibration) -> String {
+    let upper = name.to_uppercase();
+    let temperature = uses_temperature(cal);
+    let g_sensitivity = name == "gyro" && set.gyro_g_sensitivity.is_some();
+    let mut params = vec!["x: [f32; 3]".to_string()];
+    if temperature {
+        params.push("temp_c: f32".to_string());
+    }
+    if g_sensitivity {
+        params.push("accel_calibrated: [f32; 3]".to_string());
+    }
+    let mut body = String::new();
+    if temperature {
+        let t_ref = if cal.bias_temp.is_some() {
+            format!("{upper}_T_REF_C")
+        } else {
+            "0.0".to_string()
+        };
+        body.push_str(&format!("    let dt = temp_c - {t_ref};\n"));
+    }
+    body.push_str("    let mut u = [0.0f32; 3];\n    for i in 0..3 {\n");
+    body.push_str(&format!("        u[i] = x[i] - {upper}_B[i];\n"));
+    if cal.bias_temp.is_some() {
+        body.push_str(&format!(
+            "        u[i] -= dt * ({upper}_BIAS_TEMP[0][i] + dt * ({upper}_BIAS_TEMP[1][i] + dt * {upper}_BIAS_TEMP[2][i]));\n"
+        ));
+    }
+    if cal.nonlinearity.is_some() {
+        body.push_str(&format!(
+            "        u[i] += u[i] * u[i] * ({upper}_QUADRATIC[i] + {upper}_CUBIC[i] * u[i]);\n"
+        ));
+    }
+    body.push_str("    }\n    let mut y = [0.0f32; 3];\n    for r in 0..3 {\n");
+    body.push_str(&format!(
+        "        y[r] = {upper}_A[r][0] * u[0] + {upper}_A[r][1] * u[1] + {upper}_A[r][2] * u[2];\n"
+    ));
+    if cal.scale_temp.is_some() {
+        body.push_str(&format!(
+            "        y[r] *= 1.0 + {upper}_SCALE_TEMP[r] * dt;\n"
+        ));
+    }
+    if g_sensitivity {
+        body.push_str(
+            "        y[r] -= GYRO_G_SENSITIVITY[r][0] * accel_calibrated[0] + GYRO_G_SENSITIVITY[r][1] * accel_calibrated[1] + GYRO_G_SENSITIVITY[r][2] * accel_calibrated[2];\n",
+        );
+    }
+    body.push_str("    }\n    y\n");
+    format!(
+        "/// Calibrated {name} reading from the reading `x`.\n#[allow(clippy::needless_range_loop)]\npub fn apply_{name}({}) -> [f32; 3] {{\n{body}}}\n",
+        params.join(", ")
+    )
+}
+
+fn json_sensor(cal: &SensorCalibration, unit: &str) -> Value {
+    let mut object = json!({
+        "unit": unit,
+        "A": cal.a,
+        "b": cal.b,
+    });
+    if let Some(t) = &cal.bias_temp {
+        object["bias_temp"] = json!({ "t_ref_c": t.t_ref_c, "coeffs": t.coeffs });
+    }
+    if let Some(s) = &cal.scale_temp {
+        object["scale_temp"] = json!(s);
+    }
+    if let Some(n) = &cal.nonlinearity {
+        object["nonlinearity"] = json!({ "quadratic": n.quadratic, "cubic": n.cubic });
+    }
+    object
+}
+
+/// The JSON document of schema [`EXPORT_SCHEMA_NAME`] version [`EXPORT_SCHEMA_VERSION`].
+pub fn json_document(set: &CalibrationSet, source: &str) -> Value {
+    let mut document = json!({
+        "schema": EXPORT_SCHEMA_NAME,
+        "schema_version": EXPORT_SCHEMA_VERSION,
+        "source": source,
+        "params_format": set.format_version,
+        "created_unix_s": set.created_unix_s,
+        "model": "y = (1 + s*dT) .* (A * u'), u' = u + q.*u^2 + k.*u^3, u = x - (b + c1*dT + c2*dT^2 + c3*dT^3), dT = T - T_ref; gyroscope y -= K * f",
+        "matrix_order": "row-major",
+        "reference": {
+            "gravity_mps2": set.reference.gravity_mps2,
+            "field_ut": set.reference.field_ut,
+        },
+        "residuals_rms": {
+            "accel_mps2": set.residuals.accel_rms,
+            "gyro_rads": set.residuals.gyro_rms,
+            "mag_ut": set.residuals.mag_rms,
+        },
+    });
+    for (name, _) in SENSORS {
+        let unit = match name {
+            "accel" => "m/s^2",
+            "gyro" => "rad/s",
+            _ => "uT",
+        };
+        document[name] = json_sensor(sensor(set, name), unit);
+    }
+    if let Some(k) = &set.gyro_g_sensitivity {
+        document["gyro_g_sensitivity"] = json!(k);
+    }
+    document
+}

@@ -1,0 +1,366 @@
+//! The report's SVG plots, drawn with plotters' SVG backend into strings that the page inlines.
+//!
+//! Each function returns the SVG text of one figure, or a [`PlotError`] saying what could not
+//! be drawn. Data is thinned before drawing so that a page stays a few megabytes at most.
+
+use plotters::prelude::*;
+
+use crate::fit::{Mat3, Vec3};
+
+/// Why a plot could not be drawn.
+#[derive(Debug, thiserror::Error)]
+#[error("the {figure} plot could not be drawn: {detail}")]
+pub struct PlotError {
+    /// Which figure.
+    pub figure: &'static str,
+    /// The plotting library's message.
+    pub detail: String,
+}
+
+fn plot_error<E: std::fmt::Display>(figure: &'static str) -> impl Fn(E) -> PlotError {
+    move |e| PlotError {
+        figure,
+        detail: e.to_string(),
+    }
+}
+
+/// Colour of the data before calibration.
+const BEFORE: RGBColor = RGBColor(214, 96, 77);
+/// Colour of the data after calibration.
+const AFTER: RGBColor = RGBColor(33, 102, 172);
+/// Colour of fitted shapes (ellipse, sphere, zero line).
+const SHAPE: RGBColor = RGBColor(30, 30, 30);
+
+/// Points drawn per scatter at most.
+pub const MAX_POINTS: usize = 1500;
+
+/// Every `n`-th item so that at most `max` remain.
+pub fn thinned<T: Copy>(items: &[T], max: usize) -> Vec<T> {
+    let step = items.len().div_ceil(max.max(1)).max(1);
+    items.iter().step_by(step).copied().collect()
+}
+
+/// A range padded by 8 % on each side (and widened when empty or degenerate).
+fn padded(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !(lo.is_finite() && hi.is_finite()) {
+        return -1.0..1.0;
+    }
+    let span = (hi - lo).max(1e-9 * hi.abs().max(1.0));
+    (lo - 0.08 * span)..(hi + 0.08 * span)
+}
+
+/// Same span on both axes around each axis' centre, so circles look round.
+fn square(points: &[(f64, f64)]) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
+    let x = padded(points.iter().map(|p| p.0));
+    let y = padded(points.iter().map(|p| p.1));
+    let half = (x.end - x.start).max(y.end - y.start) / 2.0;
+    let (cx, cy) = ((x.start + x.end) / 2.0, (y.start + y.end) / 2.0);
+    ((cx - half)..(cx + half), (cy - half)..(cy + half))
+}
+
+/// The axis pairs of the three projections and their names.
+pub const PROJECTIONS: [(usize, usize, &str, &str); 3] =
+    [(0, 1, "x", "y"), (0, 2, "x", "z"), (1, 2, "y", "z")];
+
+/// Outline of the projection of the ellipsoid `{b + M·u : |u| = 1}` onto axes `(i, j)`: the
+/// ellipse `P·b + (S·Sᵀ)^½·v`, `S = P·M`, `|v| = 1`, as a closed polyline.
+pub fn ellipse_outline(centre: &Vec3, shape: &Mat3, i: usize, j: usize) -> Vec<(f64, f64)> {
+    let s_i = shape.row(i);
+    let s_j = shape.row(j);
+    let (c11, c12, c22) = (s_i.dot(&s_i), s_i.dot(&s_j), s_j.dot(&s_j));
+    // Square root of the symmetric 2×2 matrix by its eigen-decomposition.
+    let mean = (c11 + c22) / 2.0;
+    let radius = (((c11 - c22) / 2.0).powi(2) + c12 * c12).sqrt();
+    let (l1, l2) = ((mean + radius).max(0.0), (mean - radius).max(0.0));
+    let angle = 0.5 * (2.0 * c12).atan2(c11 - c22);
+    let (sin, cos) = angle.sin_cos();
+    (0..=96)
+        .map(|k| {
+            let t = std::f64::consts::TAU * f64::from(k) / 96.0;
+            let (a, b) = (l1.sqrt() * t.cos(), l2.sqrt() * t.sin());
+            (centre[i] + cos * a - sin * b, centre[j] + sin * a + cos * b)
+        })
+        .collect()
+}
+
+/// One projection of magnetometer samples with a closed outline (fitted ellipse or sphere).
+pub fn projection(
+    title: &str,
+    unit: &str,
+    points: &[Vec3],
+    outline: &[(f64, f64)],
+    axes: (usize, usize, &str, &str),
+    after: bool,
+) -> Result<String, PlotError> {
+    const FIGURE: &str = "magnetometer projection";
+    let (i, j, xname, yname) = axes;
+    let pairs: Vec<(f64, f64)> = thinned(points, MAX_POINTS)
+        .iter()
+        .map(|p| (p[i], p[j]))
+        .collect();
+    let all: Vec<(f64, f64)> = pairs.iter().chain(outline).copied().collect();
+    let (xr, yr) = square(&all);
+    let colour = if after { AFTER } else { BEFORE };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (340, 340)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error(FIGURE))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(48)
+            .build_cartesian_2d(xr, yr)
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("{xname} ({unit})"))
+            .y_desc(format!("{yname} ({unit})"))
+            .x_labels(5)
+            .y_labels(5)
+            .draw()
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .draw_series(
+                pairs
+                    .iter()
+                    .map(|p| Circle::new(*p, 2, colour.mix(0.45).filled())),
+            )
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .draw_series(LineSeries::new(
+                outline.iter().copied(),
+                SHAPE.stroke_width(2),
+            ))
+            .map_err(plot_error(FIGURE))?;
+        root.present().map_err(plot_error(FIGURE))?;
+    }
+    Ok(svg)
+}
+
+/// Bars per pose: the error of `|a|` before and after calibration, in mg.
+pub fn pose_bars(before_mg: &[f64], after_mg: &[f64]) -> Result<String, PlotError> {
+    const FIGURE: &str = "accelerometer residual per pose";
+    let n = before_mg.len().max(after_mg.len());
+    let yr = padded(before_mg.iter().chain(after_mg).copied().chain([0.0]));
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1020, 320)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error(FIGURE))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "accelerometer: |a| − g per pose (red before, blue after calibration)",
+                ("sans-serif", 15),
+            )
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(60)
+            .build_cartesian_2d(-0.5..(n as f64 - 0.5), yr)
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .configure_mesh()
+            .x_desc("pose")
+            .y_desc("error of |a| (mg)")
+            .x_labels(n.clamp(2, 30))
+            .x_label_formatter(&|v| format!("{}", v.round() as i64 + 1))
+            .draw()
+            .map_err(plot_error(FIGURE))?;
+        for (values, colour, shift) in [(before_mg, BEFORE, -0.2), (after_mg, AFTER, 0.2)] {
+            chart
+                .draw_series(values.iter().enumerate().map(|(k, v)| {
+                    let x = k as f64 + shift;
+                    Rectangle::new([(x - 0.18, 0.0), (x + 0.18, *v)], colour.filled())
+                }))
+                .map_err(plot_error(FIGURE))?;
+        }
+        chart
+            .draw_series(LineSeries::new(
+                [(-0.5, 0.0), (n as f64 - 0.5, 0.0)],
+                SHAPE.stroke_width(1),
+            ))
+            .map_err(plot_error(FIGURE))?;
+        root.present().map_err(plot_error(FIGURE))?;
+    }
+    Ok(svg)
+}
+
+/// Histogram of values (percent) with `bins` equal bins.
+pub fn histogram(
+    title: &str,
+    x_desc: &str,
+    values: &[f64],
+    after: bool,
+) -> Result<String, PlotError> {
+    const FIGURE: &str = "norm-error histogram";
+    const BINS: usize = 40;
+    let range = padded(values.iter().copied());
+    let width = (range.end - range.start) / BINS as f64;
+    let mut counts = [0u32; BINS];
+    for v in values.iter().filter(|v| v.is_finite()) {
+        let k = ((v - range.start) / width).floor() as usize;
+        if let Some(c) = counts.get_mut(k.min(BINS - 1)) {
+            *c += 1;
+        }
+    }
+    let top = counts.iter().copied().max().unwrap_or(1).max(1);
+    let colour = if after { AFTER } else { BEFORE };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (500, 300)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error(FIGURE))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(48)
+            .build_cartesian_2d(range.clone(), 0u32..(top + top / 10 + 1))
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc("samples")
+            .x_labels(6)
+            .draw()
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .draw_series(counts.iter().enumerate().map(|(k, c)| {
+                let x0 = range.start + k as f64 * width;
+                Rectangle::new([(x0, 0), (x0 + width, *c)], colour.mix(0.8).filled())
+            }))
+            .map_err(plot_error(FIGURE))?;
+        root.present().map_err(plot_error(FIGURE))?;
+    }
+    Ok(svg)
+}
+
+/// Residual (percent or mg) against a variable (time or temperature), before and after.
+pub fn residual_against(
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    before: &[(f64, f64)],
+    after: &[(f64, f64)],
+) -> Result<String, PlotError> {
+    const FIGURE: &str = "residual against a variable";
+    let before = thinned(before, MAX_POINTS);
+    let after = thinned(after, MAX_POINTS);
+    let xr = padded(before.iter().chain(&after).map(|p| p.0));
+    let yr = padded(before.iter().chain(&after).map(|p| p.1).chain([0.0]));
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (500, 300)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error(FIGURE))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(56)
+            .build_cartesian_2d(xr.clone(), yr)
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .x_labels(6)
+            .draw()
+            .map_err(plot_error(FIGURE))?;
+        for (points, colour) in [(&before, BEFORE), (&after, AFTER)] {
+            chart
+                .draw_series(
+                    points
+                        .iter()
+                        .map(|p| Circle::new(*p, 2, colour.mix(0.5).filled())),
+                )
+                .map_err(plot_error(FIGURE))?;
+        }
+        chart
+            .draw_series(LineSeries::new(
+                [(xr.start, 0.0), (xr.end, 0.0)],
+                SHAPE.stroke_width(1),
+            ))
+            .map_err(plot_error(FIGURE))?;
+        root.present().map_err(plot_error(FIGURE))?;
+    }
+    Ok(svg)
+}
+
+/// Cells of the coverage map: azimuth in 15° steps, elevation in 15° steps.
+const AZIMUTH_CELLS: usize = 24;
+const ELEVATION_CELLS: usize = 12;
+
+/// Sample count per (azimuth, elevation) cell of the directions of `points` (about the origin).
+pub fn coverage_counts(points: &[Vec3]) -> Vec<Vec<u32>> {
+    let mut counts = vec![vec![0u32; ELEVATION_CELLS]; AZIMUTH_CELLS];
+    for p in points {
+        let norm = p.norm();
+        if !(norm.is_finite() && norm > 0.0) {
+            continue;
+        }
+        let azimuth = p.y.atan2(p.x).to_degrees() + 180.0;
+        let elevation = (p.z / norm).clamp(-1.0, 1.0).asin().to_degrees() + 90.0;
+        let a = ((azimuth / 15.0) as usize).min(AZIMUTH_CELLS - 1);
+        let e = ((elevation / 15.0) as usize).min(ELEVATION_CELLS - 1);
+        if let Some(cell) = counts.get_mut(a).and_then(|col| col.get_mut(e)) {
+            *cell += 1;
+        }
+    }
+    counts
+}
+
+/// Map of sampled field directions: cells shaded by sample count, empty cells marked.
+pub fn coverage_map(points: &[Vec3]) -> Result<String, PlotError> {
+    const FIGURE: &str = "sphere coverage";
+    let counts = coverage_counts(points);
+    let top = counts.iter().flatten().copied().max().unwrap_or(1).max(1);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1020, 380)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error(FIGURE))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "sphere coverage of the calibrated field direction (white: never sampled)",
+                ("sans-serif", 15),
+            )
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(48)
+            .build_cartesian_2d(-180.0..180.0, -90.0..90.0)
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .configure_mesh()
+            .x_desc("azimuth atan2(y, x) (°)")
+            .y_desc("elevation (°)")
+            .x_labels(13)
+            .y_labels(7)
+            .draw()
+            .map_err(plot_error(FIGURE))?;
+        let cells = counts
+            .iter()
+            .enumerate()
+            .flat_map(|(a, column)| column.iter().enumerate().map(move |(e, c)| (a, e, *c)));
+        chart
+            .draw_series(cells.map(|(a, e, c)| {
+                let x0 = -180.0 + 15.0 * a as f64;
+                let y0 = -90.0 + 15.0 * e as f64;
+                // Square-root shading so that sparsely sampled cells stay visible.
+                let shade = (f64::from(c) / f64::from(top)).sqrt();
+                let colour = if c == 0 {
+                    WHITE
+                } else {
+                    let fade = |full: u8| {
+                        (255.0 - (255.0 - f64::from(full)) * (0.25 + 0.75 * shade)) as u8
+                    };
+                    RGBColor(fade(AFTER.0), fade(AFTER.1), fade(AFTER.2))
+                };
+                Rectangle::new([(x0, y0), (x0 + 15.0, y0 + 15.0)], colour.filled())
+            }))
+            .map_err(plot_error(FIGURE))?;
+        root.present().map_err(plot_error(FIGURE))?;
+    }
+    Ok(svg)
+}

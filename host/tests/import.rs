@@ -1,0 +1,140 @@
+//! Importers: MotionCal `Raw:` serial logs and delimited files read through a column mapping.
+
+use std::path::Path;
+
+use imucal::recording::mapping::{self, ColumnMapping};
+use imucal::recording::motioncal;
+use imucal::recording::{AccelUnit, GyroUnit, MagUnit, Units};
+
+/// A log as the Adafruit/PJRC calibration sketch prints it, with MotionCal's other lines mixed in.
+const MOTIONCAL_LOG: &str = "\
+Adafruit AHRS calibration
+Raw:0,0,8192,16,-32,0,250,-120,-400
+Uni:0.00,0.00,9.81,0.0175,-0.0349,0.0000,25.00,-12.00,-40.00
+Raw:-4096,8192,0,0,0,160,-250,120,401
+Ori: 0.0,0.0,0.0
+Raw:1,2,3,4,5,6,7,8,9
+";
+
+#[test]
+fn motioncal_raw_lines_convert_with_motioncal_scales_and_skip_other_lines() {
+    let recording = motioncal::parse(MOTIONCAL_LOG, Path::new("log.txt"), Some(50.0)).unwrap();
+    assert_eq!(recording.len(), 3);
+    let accel = recording.accel.as_ref().unwrap();
+    let gyro = recording.gyro.as_ref().unwrap();
+    let mag = &recording.mag.as_ref().unwrap().samples;
+    // 8192 counts = 1 g; 16 counts = 1 °/s; 10 counts = 1 µT. Exact in binary floating point
+    // for these values except the magnetometer's /10, hence the 1e-12 bound.
+    assert_eq!(accel[0].z, 1.0);
+    assert_eq!(accel[1].x, -0.5);
+    assert_eq!(gyro[0].y, -2.0);
+    assert_eq!(gyro[1].z, 10.0);
+    assert!((mag[0].x - 25.0).abs() < 1e-12 && (mag[1].z - 40.1).abs() < 1e-12);
+    assert_eq!(
+        recording.units,
+        Units {
+            accel: AccelUnit::G,
+            gyro: GyroUnit::Dps,
+            mag: MagUnit::Ut
+        }
+    );
+    assert_eq!(recording.time, vec![0.0, 0.02, 0.04]);
+    assert!(!recording.time_is_index);
+    assert!(motioncal::looks_like_motioncal(MOTIONCAL_LOG));
+}
+
+#[test]
+fn motioncal_without_rate_counts_rows_and_garbled_lines_are_named() {
+    let recording = motioncal::parse("Raw:1,2,3,4,5,6,7,8,9\n", Path::new("a"), None).unwrap();
+    assert!(recording.time_is_index);
+    let short = motioncal::parse("x\nRaw:1,2,3,4,5,6,7,8\n", Path::new("log.txt"), None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        short.contains("line 2") && short.contains("found 8"),
+        "{short}"
+    );
+    let garbled = motioncal::parse("Raw:1,2,3,4,5,6,7,8,9x\n", Path::new("log.txt"), None)
+        .unwrap_err()
+        .to_string();
+    assert!(garbled.contains("`9x` is not one"), "{garbled}");
+    let empty = motioncal::parse("hello\n", Path::new("log.txt"), None).unwrap_err();
+    assert!(
+        empty.to_string().contains("not a MotionCal serial log"),
+        "{empty}"
+    );
+}
+
+const SEMICOLON_CSV: &str = "\
+\"Timestamp\";\"AccX\";\"AccY\";\"AccZ\";\"GyrX\";\"GyrY\";\"GyrZ\";\"Temperature\";\"Extra\"
+1000;0.01;-0.02;9.81;0.001;0.002;-0.003;24.5;x
+1010;0.02;-0.01;9.80;0.000;0.001;-0.002;24.6;y
+1025;9.81;0.00;0.10;0.000;0.000;0.000;24.6;z
+";
+
+#[test]
+fn mapped_columns_are_read_with_the_time_unit_of_the_key() {
+    let mapping: ColumnMapping =
+        "t_ms=Timestamp,ax=AccX,ay=AccY,az=AccZ,gx=GyrX,gy=GyrY,gz=GyrZ,temp_c=temperature"
+            .parse()
+            .unwrap();
+    let recording = mapping::parse(
+        SEMICOLON_CSV,
+        Path::new("export.csv"),
+        &mapping,
+        Units::default(),
+        None,
+    )
+    .unwrap();
+    assert_eq!(recording.len(), 3);
+    // Milliseconds to seconds: 1000 ms → 1 s; 1 ulp of 1.025 bounds the product's rounding.
+    assert!((recording.time[2] - 1.025).abs() < 1e-15);
+    assert_eq!(recording.accel.as_ref().unwrap()[2].x, 9.81);
+    assert_eq!(recording.gyro.as_ref().unwrap()[0].z, -0.003);
+    assert_eq!(recording.temp_c.as_ref().unwrap()[1], 24.6);
+    assert!(recording.mag.is_none());
+    assert!(!recording.time_is_index);
+}
+
+#[test]
+fn mapping_errors_name_the_problem_and_the_available_columns() {
+    let partial = "ax=AccX,ay=AccY"
+        .parse::<ColumnMapping>()
+        .unwrap_err()
+        .to_string();
+    assert!(partial.contains("all three"), "{partial}");
+    let unknown = "qx=AccX".parse::<ColumnMapping>().unwrap_err().to_string();
+    assert!(
+        unknown.contains("`qx` is not an imucal column"),
+        "{unknown}"
+    );
+    let mapping: ColumnMapping = "ax=AccelX,ay=AccY,az=AccZ".parse().unwrap();
+    let missing = mapping::parse(
+        SEMICOLON_CSV,
+        Path::new("e.csv"),
+        &mapping,
+        Units::default(),
+        None,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        missing.contains("`AccelX`") && missing.contains("AccX, AccY"),
+        "{missing}"
+    );
+    let bad_row = "a,b,c\n1,2,3\n1,zz,3\n";
+    let mapping: ColumnMapping = "ax=a,ay=b,az=c".parse().unwrap();
+    let error = mapping::parse(
+        bad_row,
+        Path::new("e.csv"),
+        &mapping,
+        Units::default(),
+        Some(10.0),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        error.contains("line 3") && error.contains("`zz`"),
+        "{error}"
+    );
+}
