@@ -14,6 +14,10 @@
 //! 3. A rest in the first position, with the hand off the board (no tremor), until stopped: what
 //!    the host's at-rest verification needs.
 //!
+//! [`PersonSchedule::Rounds`] is the same with step 1 repeated: the twelve positions are gone
+//! through `n` times over (position 0 follows position 11), so that a session can capture each
+//! of them at several moments, e.g. across a temperature sweep.
+//!
 //! [`PersonSchedule::Rest`] keeps the board in the first position without tremor all the time.
 //!
 //! A hold ends smoothly: the tremor fades out over its edge ramp after the capture, so orientation
@@ -37,8 +41,21 @@ pub enum PersonSchedule {
     /// Twelve positions as prompted, a tumble, then rest (see the module documentation).
     #[default]
     Guided,
+    /// As `Guided`, with the twelve positions gone through this many times (0 counts as 1).
+    Rounds(u8),
     /// Rest in the first position all the time.
     Rest,
+}
+
+impl PersonSchedule {
+    /// How many times the twelve positions are held (0 for `Rest`).
+    pub fn rounds(self) -> usize {
+        match self {
+            Self::Guided => 1,
+            Self::Rounds(n) => usize::from(n.max(1)),
+            Self::Rest => 0,
+        }
+    }
 }
 
 impl std::str::FromStr for PersonSchedule {
@@ -48,7 +65,10 @@ impl std::str::FromStr for PersonSchedule {
         match s {
             "guided" => Ok(Self::Guided),
             "rest" => Ok(Self::Rest),
-            other => Err(SimError::UnknownSchedule(other.to_string())),
+            other => match other.strip_prefix("rounds:").map(str::parse::<u8>) {
+                Some(Ok(n)) if n > 0 => Ok(Self::Rounds(n)),
+                _ => Err(SimError::UnknownSchedule(other.to_string())),
+            },
         }
     }
 }
@@ -56,14 +76,14 @@ impl std::str::FromStr for PersonSchedule {
 /// Where the person is in the schedule.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PersonPhase {
-    /// Holding position `index` (0–11) of the twelve.
+    /// Holding hold `index` of the schedule: position `index % 12` of the twelve.
     Hold {
-        /// Position index.
+        /// Hold index (the position index in the first round).
         index: usize,
     },
-    /// Turning towards position `index` of the twelve.
+    /// Turning towards hold `index` of the schedule.
     TurnToHold {
-        /// Position index being approached.
+        /// Hold index being approached.
         index: usize,
     },
     /// Tumbling towards waypoint `index`.
@@ -94,6 +114,8 @@ struct HoldPlan {
 #[derive(Debug, Clone)]
 pub struct Person {
     holds: Vec<HoldPlan>,
+    /// Holds in the whole schedule: the twelve times the rounds.
+    hold_count: usize,
     tumble: Vec<(UnitQuaternion<f64>, f64)>,
     rest: UnitQuaternion<f64>,
     turn_peak_rate_dps: f64,
@@ -153,8 +175,10 @@ impl Person {
         }
         let first = holds.first().cloned().ok_or(SimError::EmptyTrajectory)?;
         let rest = first.orientation;
+        let hold_count = holds.len() * schedule.rounds();
         let mut person = Self {
             holds,
+            hold_count,
             tumble: waypoints,
             rest,
             turn_peak_rate_dps: options.turn_peak_rate_dps,
@@ -168,7 +192,7 @@ impl Person {
             hold_captures_at_start: None,
             first_prompt_s: None,
         };
-        if schedule == PersonSchedule::Guided {
+        if hold_count > 0 {
             person.begin_hold(0, 0.0, 0)?;
         }
         Ok(person)
@@ -212,8 +236,16 @@ impl Person {
         self.segment.motion_at(t_s - self.segment_start_s)
     }
 
+    /// The plan of hold `index` of the schedule, `None` after the last round.
+    fn hold_plan(&self, index: usize) -> Option<&HoldPlan> {
+        if index >= self.hold_count {
+            return None;
+        }
+        self.holds.get(index.checked_rem(self.holds.len())?)
+    }
+
     fn begin_hold(&mut self, index: usize, start_s: f64, captures: u64) -> Result<(), SimError> {
-        let Some(plan) = self.holds.get(index) else {
+        let Some(plan) = self.hold_plan(index) else {
             return self.begin_tumble(0, start_s);
         };
         self.segment = TrajectoryBuilder::new(plan.orientation)
@@ -232,7 +264,7 @@ impl Person {
         let PersonPhase::Hold { index } = self.phase else {
             return Ok(());
         };
-        let Some(plan) = self.holds.get(index) else {
+        let Some(plan) = self.hold_plan(index) else {
             return Ok(());
         };
         let ramp = plan.tremor.as_ref().map_or(0.0, |t| t.edge_ramp_s);
@@ -250,8 +282,8 @@ impl Person {
         let start = self.segment_end_s;
         match self.phase {
             PersonPhase::Hold { index } => {
-                let from = self.holds.get(index).map_or(self.rest, |h| h.orientation);
-                match self.holds.get(index + 1) {
+                let from = self.hold_plan(index).map_or(self.rest, |h| h.orientation);
+                match self.hold_plan(index + 1) {
                     Some(next) => {
                         let to = next.orientation;
                         self.turn(from, to, start)?;
@@ -313,5 +345,25 @@ impl Person {
         self.segment_start_s = start_s;
         self.segment_end_s = start_s + duration;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_rounds_schedule_is_read_from_its_name_and_counts_its_rounds() {
+        assert_eq!(
+            "rounds:3".parse::<PersonSchedule>().ok(),
+            Some(PersonSchedule::Rounds(3))
+        );
+        assert_eq!(PersonSchedule::Rounds(3).rounds(), 3);
+        assert_eq!(PersonSchedule::Rounds(0).rounds(), 1);
+        assert_eq!(PersonSchedule::Guided.rounds(), 1);
+        assert_eq!(PersonSchedule::Rest.rounds(), 0);
+        for bad in ["rounds:0", "rounds:x", "rounds:300", "rounds"] {
+            assert!(bad.parse::<PersonSchedule>().is_err(), "{bad} was accepted");
+        }
     }
 }

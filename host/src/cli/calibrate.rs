@@ -503,15 +503,18 @@ fn temperature_profile(
     if text == "constant" {
         return Ok(None);
     }
-    let numbers: Vec<&str> = match text.strip_prefix("sweep") {
-        Some("") => vec!["10", "40", "90"],
-        Some(rest) => rest.trim_start_matches(':').split(':').collect(),
-        None => Vec::new(),
+    let values: Option<Vec<f64>> = match text.strip_prefix("sweep") {
+        Some("") => Some(vec![10.0, 40.0, 90.0]),
+        Some(rest) => rest
+            .strip_prefix(':')
+            .and_then(|r| r.split(':').map(|n| n.parse().ok()).collect()),
+        None => None,
     };
-    let values: Vec<f64> = numbers.iter().filter_map(|n| n.parse().ok()).collect();
-    match values[..] {
-        [low_c, high_c, period_s]
-            if values.iter().all(|v| v.is_finite()) && low_c < high_c && period_s > 0.0 =>
+    match values.as_deref() {
+        Some(&[low_c, high_c, period_s])
+            if [low_c, high_c, period_s].iter().all(|v| v.is_finite())
+                && low_c < high_c
+                && period_s > 0.0 =>
         {
             Ok(Some(TemperatureProfile::Sweep {
                 low_c,
@@ -690,10 +693,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         print!("{}", before_after_table(&outcome));
         if let Some(Some(extended)) = &closed {
             println!(
-                "{:<16}{:>14}{:>14}   (extended set)",
-                "",
-                format!("{:.3} mg", extended.accel_error_mg),
-                format!("{:.4} °/s", extended.gyro_rate_dps)
+                "With the extended set at rest: |a| error {:.3} mg, |m| error {:.3} %, gyro rate \
+                 {:.4} °/s",
+                extended.accel_error_mg, extended.mag_error_pct, extended.gyro_rate_dps
             );
         }
         println!(
@@ -721,4 +723,45 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(all(test, feature = "sim"))]
+mod tests {
+    use super::temperature_profile;
+    use imucal_hil_sim::world::TemperatureProfile;
+
+    #[test]
+    fn sweep_profiles_are_read_with_defaults_or_given_numbers() {
+        let sweep = |low_c, high_c, period_s| {
+            Some(TemperatureProfile::Sweep {
+                low_c,
+                high_c,
+                period_s,
+            })
+        };
+        assert_eq!(temperature_profile("constant").ok(), Some(None));
+        assert_eq!(
+            temperature_profile("sweep").ok(),
+            Some(sweep(10.0, 40.0, 90.0))
+        );
+        assert_eq!(
+            temperature_profile("sweep:-5:55.5:120").ok(),
+            Some(sweep(-5.0, 55.5, 120.0))
+        );
+    }
+
+    #[test]
+    fn malformed_or_inverted_sweeps_are_refused_with_an_example() {
+        for bad in [
+            "sweepx:1:2:3",
+            "sweep:40:10:90",
+            "sweep:10:40:0",
+            "sweep:10:40",
+            "sweep:10:NaN:90",
+            "hot",
+        ] {
+            let error = temperature_profile(bad).expect_err(bad).to_string();
+            assert!(error.contains("sweep:10:40:90"), "{bad}: {error}");
+        }
+    }
 }

@@ -227,3 +227,73 @@ fn accepted(analysis: &SensorAnalysis) -> Vec<EffectKind> {
         .map(|e| e.kind)
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::session::targets::twelve_positions;
+
+    /// Poses of an ideal board at rest in the twelve positions at 25 °C, one second apart.
+    fn ideal_poses(gravity: f64) -> Vec<CapturedPose> {
+        twelve_positions()
+            .into_iter()
+            .enumerate()
+            .map(|(i, target)| {
+                let accel = (target.up * gravity).map(|v| v as f32);
+                let stats = PoseStats {
+                    n: 200,
+                    accel_mean: [accel.x, accel.y, accel.z],
+                    accel_var: [4e-4; 3],
+                    gyro_mean: [0.0; 3],
+                    gyro_var: [1e-5; 3],
+                    mag_mean: [20.0, 0.0, 40.0],
+                    mag_var: [0.1; 3],
+                    temp_mean_c: 25.0,
+                    temp_min_c: 25.0,
+                    temp_max_c: 25.0,
+                    duration_ms: 1500,
+                };
+                CapturedPose {
+                    target,
+                    stats,
+                    t_s: i as f64,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn one_round_is_too_few_for_the_accelerometer_and_says_how_many_are_needed() {
+        let analysis = analyse_poses(&ideal_poses(9.81), 9.81);
+        match &analysis.sensors[0] {
+            (Sensor::Accel, Err(AnalysisError::TooFewObservations { found, needed, .. })) => {
+                assert_eq!((*found, *needed), (12, MIN_ACCEL_POSES));
+            }
+            (sensor, other) => panic!("{sensor:?}: {other:?}"),
+        }
+        assert!(matches!(analysis.sensors[1], (Sensor::Gyro, Ok(_))));
+    }
+
+    #[test]
+    fn non_finite_poses_are_left_out_instead_of_poisoning_the_analysis() {
+        let mut poses = ideal_poses(9.81);
+        poses[3].stats.gyro_mean[1] = f32::NAN;
+        let analysis = analyse_poses(&poses, 9.81);
+        let Ok(gyro) = &analysis.sensors[1].1 else {
+            panic!(
+                "the gyroscope was not analysed: {:?}",
+                analysis.sensors[1].1
+            );
+        };
+        assert_eq!(gyro.observations.len(), 11);
+    }
+
+    #[test]
+    fn an_analysis_without_accepted_effects_leaves_the_set_unchanged() {
+        let base = CalibrationSet::identity();
+        let analysis = analyse_poses(&ideal_poses(9.81), 9.81);
+        let extended = extend_set(&base, &analysis);
+        assert_eq!(extended.set, base);
+        assert!(!extended.extended() && extended.left_out.is_empty());
+    }
+}

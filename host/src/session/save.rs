@@ -206,3 +206,71 @@ pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>
     )?);
     Ok(written)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stats_json(n: u32) -> serde_json::Value {
+        serde_json::to_value(PoseStats {
+            n,
+            accel_mean: [0.0, 0.0, 9.81],
+            accel_var: [4e-4; 3],
+            gyro_mean: [0.0; 3],
+            gyro_var: [1e-5; 3],
+            mag_mean: [20.0, 0.0, 40.0],
+            mag_var: [0.1; 3],
+            temp_mean_c: 25.0,
+            temp_min_c: 24.9,
+            temp_max_c: 25.1,
+            duration_ms: 1500,
+        })
+        .unwrap_or_default()
+    }
+
+    fn temp_file(name: &str, text: &str) -> PathBuf {
+        let path = std::env::temp_dir().join(format!("imucal-{}-{name}", std::process::id()));
+        std::fs::write(&path, text).expect("the temporary file is writable");
+        path
+    }
+
+    #[test]
+    fn poses_with_index_and_time_are_read_back_as_saved() {
+        let text = serde_json::json!([{
+            "target": "-Z up", "target_index": 5, "target_up": [0.0, 0.0, -1.0],
+            "t_s": 12.5, "stats": stats_json(180)
+        }])
+        .to_string();
+        let path = temp_file("poses-new.json", &text);
+        let poses = load_poses(&path).expect("the file is read");
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(poses.len(), 1);
+        assert_eq!((poses[0].target.index, poses[0].t_s), (5, 12.5));
+        assert_eq!(poses[0].target.name, "-Z up");
+        assert_eq!(poses[0].stats.n, 180);
+    }
+
+    #[test]
+    fn poses_without_hold_times_get_their_file_order_as_time() {
+        let text = serde_json::json!([
+            { "target": "+Z up", "target_up": [0.0, 0.0, 1.0], "stats": stats_json(150) },
+            { "target": "-Z up", "target_up": [0.0, 0.0, -1.0], "stats": stats_json(160) }
+        ])
+        .to_string();
+        let path = temp_file("poses-old.json", &text);
+        let poses = load_poses(&path).expect("the file is read");
+        let _ = std::fs::remove_file(&path);
+        let order: Vec<(usize, f64)> = poses.iter().map(|p| (p.target.index, p.t_s)).collect();
+        assert_eq!(order, vec![(0, 0.0), (1, 1.0)]);
+    }
+
+    #[test]
+    fn a_broken_poses_file_is_an_error_naming_the_file() {
+        let path = temp_file("poses-broken.json", "[{\"target\": 3}");
+        let error = load_poses(&path).expect_err("a broken file is refused");
+        let _ = std::fs::remove_file(&path);
+        let message = error.to_string();
+        assert!(message.contains(&path.display().to_string()), "{message}");
+        assert!(message.contains("poses.json"), "{message}");
+    }
+}
