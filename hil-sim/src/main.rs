@@ -1,7 +1,8 @@
 //! `imucal-hil-sim`: the simulated imucal board on the command line.
 //!
 //! `record` writes a simulated recording (CSV) and its truth (JSON) without any serial link.
-//! `serve` (the default) runs the board behind a pseudo-terminal and prints its path.
+//! `serve` (the default) runs the board behind a pseudo-terminal and prints its path; serve's
+//! options given without a command (`imucal-hil-sim --seed 3`) run `serve` with them.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -15,10 +16,17 @@ use imucal_hil_sim::world::TemperatureProfile;
 
 /// A simulated IMU board (LSM9DS1-like accelerometer, gyroscope, magnetometer and thermometer).
 #[derive(Debug, Parser)]
-#[command(name = "imucal-hil-sim", version)]
+#[command(
+    name = "imucal-hil-sim",
+    version,
+    args_conflicts_with_subcommands = true
+)]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// Options of `serve`, used when no command is given.
+    #[command(flatten)]
+    serve: imucal_hil_sim::serve::ServeArgs,
 }
 
 #[derive(Debug, Subcommand)]
@@ -87,7 +95,8 @@ hold label during static holds and empty while moving.")]
 }
 
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
-    match cli.command.unwrap_or_default() {
+    let command = cli.command.unwrap_or(Command::Serve(cli.serve));
+    match command {
         Command::Serve(args) => Ok(imucal_hil_sim::serve::run_command(&args)?),
         Command::Feed(args) => Ok(imucal_hil_sim::feed::run_command(&args)?),
         Command::Record {
@@ -129,12 +138,6 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     }
 }
 
-impl Default for Command {
-    fn default() -> Self {
-        Self::Serve(imucal_hil_sim::serve::ServeArgs::default())
-    }
-}
-
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
@@ -142,5 +145,47 @@ fn main() -> ExitCode {
             eprintln!("error: {error}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn command_line_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn serve_options_without_a_command_run_serve_with_them() {
+        let cli = Cli::try_parse_from(["imucal-hil-sim", "--seed", "3", "--speed", "10"])
+            .expect("serve options parse without a command");
+        assert!(cli.command.is_none());
+        assert_eq!(cli.serve.seed, 3);
+        assert_eq!(cli.serve.speed, 10.0);
+    }
+
+    #[test]
+    fn bare_invocation_serves_with_the_defaults() {
+        let cli = Cli::try_parse_from(["imucal-hil-sim"]).expect("no arguments parse");
+        assert!(cli.command.is_none());
+        assert_eq!(cli.serve, imucal_hil_sim::serve::ServeArgs::default());
+    }
+
+    #[test]
+    fn explicit_commands_still_parse_and_do_not_mix_with_top_level_options() {
+        let cli = Cli::try_parse_from(["imucal-hil-sim", "serve", "--seed", "5"])
+            .expect("serve command parses");
+        assert!(matches!(cli.command, Some(Command::Serve(ref a)) if a.seed == 5));
+        let cli = Cli::try_parse_from(["imucal-hil-sim", "record", "--seed", "4", "-o", "r.csv"])
+            .expect("record command parses");
+        assert!(matches!(cli.command, Some(Command::Record { seed: 4, .. })));
+        // Options before a command would be silently ignored; they are refused instead.
+        assert!(
+            Cli::try_parse_from(["imucal-hil-sim", "--seed", "3", "record", "-o", "r.csv"])
+                .is_err()
+        );
     }
 }

@@ -20,7 +20,8 @@ pub enum Command {
     #[command(after_help = "Examples:\n  \
         imucal fit data/real/imucal_nilspod_ferraris.csv --gyro-unit dps\n  \
         imucal fit data/real/imutk_xsens_multipos.csv --accel-unit counts --gyro-unit counts --sensor accel --method chen --json\n  \
-        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --field-ut 48.5")]
+        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --field-ut 48.5\n  \
+        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --accel-unit g --gyro-unit dps --mag-unit gauss --location 48.14,11.58")]
     Fit(FitArgs),
     /// List the still intervals of a recording and the gravity directions they cover.
     #[command(
@@ -33,7 +34,9 @@ pub enum Command {
     #[command(flatten)]
     Device(super::device::DeviceCommand),
     /// Guided calibration of a board (or `--sim`): positions, magnetometer, fit, write, verify.
-    #[command(after_help = "Examples:\n  imucal calibrate --sim --yes\n  imucal calibrate --port /dev/ttyACM0 --field-ut 48.5")]
+    #[command(
+        after_help = "Examples:\n  imucal calibrate --sim --yes\n  imucal calibrate --port /dev/ttyACM0 --field-ut 48.5"
+    )]
     Calibrate(super::calibrate::CalibrateArgs),
     /// Write an HTML report (plots, parameters, verdict) of a session directory or a recording.
     #[command(after_help = super::report::EXAMPLES)]
@@ -185,6 +188,11 @@ pub struct FitArgs {
     /// magnetometer output is normalised to 1.
     #[arg(long)]
     pub field_ut: Option<f64>,
+    /// Where the recording was made, `LAT,LON[,ALT_M]` (degrees, metres): the World Magnetic
+    /// Model's field there today is the magnetometer reference when --field-ut is not given, and
+    /// the fitted raw radius is checked against it.
+    #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
+    pub location: Option<imucal::geomag::Location>,
     /// Gyroscope scale in rad/s per count, for `--gyro-unit counts`.
     #[arg(long)]
     pub gyro_scale: Option<f64>,

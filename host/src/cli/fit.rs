@@ -2,13 +2,26 @@
 //!
 //! Accelerometer and gyroscope fits use still-interval poses (from a `pose` column or
 //! detected); the magnetometer uses all its samples (it needs orientation coverage, which
-//! still holds do not give), evenly thinned to a bounded number.
+//! still holds do not give), evenly thinned to a bounded number. Each sensor is judged on its
+//! own: an input check or fit that refuses one sensor is reported for that sensor while the
+//! others are fitted, and the exit code is non-zero when any requested sensor failed.
+//!
+//! With both an accelerometer and a magnetometer, the magnetometer is rotated into the
+//! accelerometer's frame by the dot-product-invariance alignment of `fit::alignment` (gravity
+//! and field keep the same angle, the dip, in every still pose). With `--location`, the World
+//! Magnetic Model's field there (`geomag`) is the magnetometer reference unless `--field-ut` is
+//! given, and the fitted raw radius is compared with it.
 
 use anyhow::{bail, Context};
-use imucal::fit::{Fit, Method, Pose, Vec3};
+use imucal::fit::alignment::{fit_alignment, Alignment};
+use imucal::fit::norm_lm::{refine_lm, NormLmOptions, NormObservations};
+use imucal::fit::validate::{measure_coverage, EllipsoidModel, MAX_RELATIVE_SIGMA};
+use imucal::fit::{Fit, FitError, Method, Pose, Vec3};
+use imucal::geomag::{self, LocalField, Location, RadiusCheck};
 use imucal::input_checks;
 use imucal::recording::{Recording, Sensor};
 use imucal::still::{find_still, StillReport};
+use nalgebra::Rotation3;
 use serde_json::{json, Value};
 
 use super::args::{FitArgs, SensorChoice};
@@ -24,8 +37,55 @@ struct SensorResult {
     output_unit: String,
     /// Relative (or absolute, for the gyroscope) residual expected from the noise alone.
     noise_floor: Option<f64>,
-    /// Why a method other than the default was used.
-    note: Option<String>,
+    /// Why a method other than the default was used, and other findings worth a line.
+    notes: Vec<String>,
+    /// Magnetometer only: the rotation into the accelerometer frame, or why there is none.
+    alignment: Option<Result<Alignment, String>>,
+    /// Magnetometer only: the modelled field used as reference or for the radius check.
+    field_model: Option<LocalField>,
+    /// Magnetometer only: the fitted raw radius against the modelled field.
+    radius_check: Option<RadiusCheck>,
+}
+
+impl SensorResult {
+    /// A sensor refused before fitting (input checks), with the sentence saying why.
+    fn refused(sensor: Sensor, recording: &Recording, reason: String) -> Self {
+        Self {
+            fit: Err(reason),
+            ..Self::not_yet_fitted(sensor, recording)
+        }
+    }
+
+    /// A sensor about to be fitted: counts and units are filled in by the fit.
+    fn not_yet_fitted(sensor: Sensor, recording: &Recording) -> Self {
+        Self {
+            sensor,
+            fit: Err("not fitted".to_string()),
+            n_poses: 0,
+            n_samples: 0,
+            input_unit: recording.units.symbol(sensor),
+            output_unit: String::new(),
+            noise_floor: None,
+            notes: Vec::new(),
+            alignment: None,
+            field_model: None,
+            radius_check: None,
+        }
+    }
+
+    /// Whether `A`'s entries still carry the fit's per-entry uncertainties (a rotated `A` does
+    /// not: its uncertainty is the rotation's, reported with the alignment).
+    fn a_std_applies(&self) -> bool {
+        !matches!(self.alignment, Some(Ok(_)))
+    }
+}
+
+/// The magnetometer's reference field: from `--field-ut`, else from the model at `--location`.
+struct FieldReference {
+    /// Magnitude in µT, if known.
+    ut: Option<f64>,
+    /// The World Magnetic Model's field at `--location` today, if a location was given.
+    model: Option<LocalField>,
 }
 
 /// Unknowns of the norm model with the upper-triangular gauge: it needs this many distinct
@@ -98,98 +158,219 @@ fn pose_noise_floor(poses: &[Pose], fit: &Fit) -> Option<f64> {
         .then(|| (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt())
 }
 
+/// Per-axis one-sigma noise of each pose mean, in data units (for the coverage measure).
+fn pose_mean_noise(poses: &[Pose]) -> Vec<f64> {
+    poses
+        .iter()
+        .map(|p| (p.var_of_mean().sum() / 3.0).sqrt())
+        .collect()
+}
+
+/// The default accelerometer fit and, when it is not `lm`, why: the six-position method when
+/// there are fewer distinct directions than the norm model's unknowns, and the axis-aligned
+/// model (6 unknowns) when `lm` is refused because the poses cannot determine the cross-axis
+/// terms.
+fn default_accel_fit(
+    poses: &[Pose],
+    gravity: f64,
+    directions: usize,
+) -> (Result<Fit, FitError>, Option<String>) {
+    if directions < NORM_MODEL_UNKNOWNS {
+        return (
+            methods::fit_accel(Method::SixPosition, poses, gravity),
+            Some(format!(
+                "lm needs at least {NORM_MODEL_UNKNOWNS} distinct directions and {directions} were found, so the six-position method was used"
+            )),
+        );
+    }
+    let reason = match methods::fit_accel(Method::Lm, poses, gravity) {
+        Err(FitError::Underdetermined(reason)) => reason,
+        other => return (other, None),
+    };
+    let refusal = FitError::Underdetermined(reason.clone());
+    let Ok(axis_aligned) = methods::fit_accel(Method::AxisAligned, poses, gravity) else {
+        return (Err(refusal), None);
+    };
+    // Judge the general model as lm did, through its own (unchecked) solution where it converges.
+    let observations = NormObservations::from_poses(poses, &axis_aligned.cal.b);
+    let general = refine_lm(
+        &observations,
+        &axis_aligned.cal,
+        gravity,
+        &NormLmOptions::default(),
+    )
+    .map_or(axis_aligned.cal, |f| f.cal);
+    let coverage = measure_coverage(
+        &observations.points,
+        Some(&pose_mean_noise(poses)),
+        &general,
+        gravity,
+        EllipsoidModel::General,
+    );
+    let why = if coverage.max_relative_sigma.is_finite()
+        && coverage.max_relative_sigma > MAX_RELATIVE_SIGMA
+    {
+        format!(
+            "the {} orientations cannot determine the cross-axis terms to {:.1} % (they leave them uncertain by {:.1} %)",
+            coverage.distinct,
+            100.0 * MAX_RELATIVE_SIGMA,
+            100.0 * coverage.max_relative_sigma
+        )
+    } else if !coverage.max_relative_sigma.is_finite() {
+        format!(
+            "the {} orientations cannot determine the cross-axis terms at all",
+            coverage.distinct
+        )
+    } else {
+        format!("lm was refused ({reason})")
+    };
+    (
+        Ok(axis_aligned),
+        Some(format!(
+            "{why}; fitted the axis-aligned model (scales and offsets, 6 unknowns) instead; record more tilted poses for a full fit"
+        )),
+    )
+}
+
+/// Fit one sensor that passed the input checks with `method` (`None`: the default chain).
 fn fit_sensor(
     args: &FitArgs,
     recording: &Recording,
     still: Option<&StillReport>,
+    field: &FieldReference,
     sensor: Sensor,
-) -> anyhow::Result<SensorResult> {
-    let mut method = method_for(args, sensor)?;
-    let mut note = None;
-    if let (Sensor::Accel, None, Some(still)) = (sensor, &args.method, still) {
-        let directions = still.directions.len();
-        if directions < NORM_MODEL_UNKNOWNS {
-            method = Method::SixPosition;
-            note = Some(format!(
-                "lm needs at least {NORM_MODEL_UNKNOWNS} distinct directions and {directions} were found, so the six-position method was used"
-            ));
-        }
-    }
-    let input_unit = recording.units.symbol(sensor);
-    Ok(match sensor {
+    method: Option<Method>,
+) -> SensorResult {
+    let mut result = SensorResult::not_yet_fitted(sensor, recording);
+    match sensor {
         Sensor::Accel | Sensor::Gyro => {
-            let still = still.context("still intervals are needed for this sensor")?;
+            let Some(still) = still else {
+                result.fit = Err("still intervals are needed for this sensor".to_string());
+                return result;
+            };
             let poses = still.poses(sensor);
-            let n_samples = poses.iter().map(|p| p.n).sum();
-            let (fit, output_unit) = if sensor == Sensor::Accel {
-                (
-                    methods::fit_accel(method, &poses, args.gravity),
-                    "m/s²".to_string(),
-                )
+            result.n_poses = poses.len();
+            result.n_samples = poses.iter().map(|p| p.n).sum();
+            let fit = if sensor == Sensor::Accel {
+                result.output_unit = "m/s²".to_string();
+                let (fit, note) = match method {
+                    Some(m) => (methods::fit_accel(m, &poses, args.gravity), None),
+                    None => default_accel_fit(&poses, args.gravity, still.directions.len()),
+                };
+                result.notes.extend(note);
+                if let Ok(f) = &fit {
+                    result.noise_floor = pose_noise_floor(&poses, f);
+                }
+                fit
             } else {
                 let (scale, unit) = match (recording.units.to_si(Sensor::Gyro), args.gyro_scale) {
-                    (Some(s), _) => (s, "rad/s".to_string()),
-                    (None, Some(s)) => (s, "rad/s".to_string()),
-                    (None, None) => (1.0, "counts (no --gyro-scale given)".to_string()),
+                    (Some(s), _) | (None, Some(s)) => (s, "rad/s"),
+                    (None, None) => (1.0, "counts (no --gyro-scale given)"),
                 };
-                let fit = if method == Method::GyroScale {
-                    gyro_scale_fit(recording, still, args.gravity, scale)
-                } else {
-                    methods::fit_gyro(method, &poses, scale)
-                };
-                (fit, unit)
+                result.output_unit = unit.to_string();
+                match method.unwrap_or(Method::GyroBias) {
+                    Method::GyroScale => gyro_scale_fit(recording, still, args.gravity, scale),
+                    m => methods::fit_gyro(m, &poses, scale),
+                }
             };
-            let noise_floor = match (&fit, sensor) {
-                (Ok(f), Sensor::Accel) => pose_noise_floor(&poses, f),
-                _ => None,
-            };
-            SensorResult {
-                sensor,
-                fit: fit.map_err(|e| e.to_string()),
-                n_poses: poses.len(),
-                n_samples,
-                input_unit,
-                output_unit,
-                noise_floor,
-                note,
-            }
+            result.fit = fit.map_err(|e| e.to_string());
         }
         Sensor::Mag => {
             let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
             let points: Vec<Vec3> = methods::thin(all, args.max_mag_samples);
-            let reference = args.field_ut.unwrap_or(1.0);
-            let output_unit = if args.field_ut.is_some() {
-                "µT".to_string()
-            } else {
-                "field = 1".to_string()
+            result.n_samples = points.len();
+            result.output_unit = match field.ut {
+                Some(_) => "µT".to_string(),
+                None => "field = 1".to_string(),
             };
-            let fit = methods::fit_mag(method, &points, reference);
-            SensorResult {
-                sensor,
-                fit: fit.map_err(|e| e.to_string()),
-                n_poses: 0,
-                n_samples: points.len(),
-                input_unit,
-                output_unit,
-                noise_floor: None,
-                note,
+            result.field_model = field.model;
+            let fit = methods::fit_mag(
+                method.unwrap_or(Method::Lm),
+                &points,
+                field.ut.unwrap_or(1.0),
+            );
+            if let (Ok(f), Some(model), Some(to_ut)) =
+                (&fit, &field.model, recording.units.mag.to_si())
+            {
+                // Mean distance of the raw readings from the fitted offset: the sphere's radius.
+                let radius = points.iter().map(|p| (p - f.cal.b).norm()).sum::<f64>()
+                    / points.len().max(1) as f64;
+                let check = RadiusCheck::new(radius * to_ut, model);
+                result.notes.push(check.sentence());
+                result.radius_check = Some(check);
             }
+            result.fit = fit.map_err(|e| e.to_string());
         }
-    })
+    }
+    result
 }
 
-/// Tedaldi's gyroscope scale: gravity directions from the default accelerometer fit (lm, or the
-/// six-position fit when lm refuses), then the motions between the holds.
+/// Tedaldi's gyroscope scale: gravity directions from the default accelerometer fit, then the
+/// motions between the holds.
 fn gyro_scale_fit(
     recording: &Recording,
     still: &StillReport,
     gravity: f64,
     scale: f64,
-) -> Result<Fit, imucal::fit::FitError> {
+) -> Result<Fit, FitError> {
     let accel_poses = still.poses(Sensor::Accel);
-    let accel = methods::fit_accel(Method::Lm, &accel_poses, gravity)
-        .or_else(|_| methods::fit_accel(Method::SixPosition, &accel_poses, gravity))?;
-    imucal::fit::gyro_scale::fit_gyro_scale_recording(recording, still, &accel.cal, scale)
+    let (accel, _) = default_accel_fit(&accel_poses, gravity, still.directions.len());
+    imucal::fit::gyro_scale::fit_gyro_scale_recording(recording, still, &accel?.cal, scale)
+}
+
+/// Rotate the magnetometer fit into the accelerometer frame from the still holds that have
+/// both sensors: calibrated gravity directions against calibrated field means.
+fn align_mag(still: &StillReport, accel: &Fit, mag: &Fit) -> Result<Alignment, String> {
+    let (gravity, field): (Vec<Vec3>, Vec<Vec3>) = still
+        .intervals
+        .iter()
+        .filter_map(|i| {
+            Some((
+                accel.cal.apply(&i.accel.as_ref()?.mean),
+                mag.cal.apply(&i.mag.as_ref()?.mean),
+            ))
+        })
+        .unzip();
+    fit_alignment(&gravity, &field).map_err(|e| e.to_string())
+}
+
+/// Rotation angle and axis of an alignment, with the angle's one-sigma uncertainty (the
+/// rotation-vector covariance projected on the axis; a left perturbation `exp([δw]×)·R` changes
+/// the angle by `axis·δw` to first order).
+fn angle_axis(alignment: &Alignment) -> (f64, Vec3, Option<f64>) {
+    let rotation = Rotation3::from_matrix_unchecked(alignment.rotation);
+    let (axis, angle) = rotation
+        .axis_angle()
+        .map_or((Vec3::z(), 0.0), |(axis, angle)| (axis.into_inner(), angle));
+    let std = alignment.covariance.as_ref().and_then(|c| {
+        (c.nrows() >= 3 && c.ncols() >= 3).then(|| {
+            let block = c.fixed_view::<3, 3>(0, 0);
+            (axis.transpose() * block * axis)[(0, 0)].max(0.0).sqrt()
+        })
+    });
+    (angle, axis, std)
+}
+
+fn alignment_json(outcome: &Result<Alignment, String>) -> Value {
+    match outcome {
+        Err(e) => json!({"error": e, "applied": false}),
+        Ok(al) => {
+            let (angle, axis, angle_std) = angle_axis(al);
+            let rows: Vec<Vec<f64>> = (0..3)
+                .map(|r| (0..3).map(|c| al.rotation[(r, c)]).collect())
+                .collect();
+            json!({
+                "applied": true,
+                "rotation": rows,
+                "angle_deg": angle.to_degrees(),
+                "angle_std_deg": angle_std.map(f64::to_degrees),
+                "axis": [axis.x, axis.y, axis.z],
+                "dip_deg": al.dip.to_degrees(),
+                "dip_std_deg": al.dip_std.to_degrees(),
+                "rms": al.rms,
+            })
+        }
+    }
 }
 
 /// A short judgement of a fit: residual against the noise floor, and held-out error against fit error.
@@ -231,7 +412,8 @@ fn verdict(result: &SensorResult, fit: &Fit) -> String {
 }
 
 fn to_json(result: &SensorResult) -> Value {
-    match &result.fit {
+    let note = (!result.notes.is_empty()).then(|| result.notes.join("; "));
+    let mut object = match &result.fit {
         Err(e) => json!({"error": e, "n_poses": result.n_poses, "n_samples": result.n_samples}),
         Ok(fit) => json!({
             "method": fit.method.name(),
@@ -241,16 +423,31 @@ fn to_json(result: &SensorResult) -> Value {
             "loo_rms": fit.loo_rms,
             "n_poses": result.n_poses,
             "n_samples": result.n_samples,
-            "param_std": fit.std.map(|s| json!({"A": row_major(&s.a), "b": [s.b.x, s.b.y, s.b.z]})),
+            "param_std": fit.std.map(|s| json!({
+                "A": result.a_std_applies().then(|| row_major(&s.a)),
+                "b": [s.b.x, s.b.y, s.b.z],
+            })),
             "reference": fit.reference,
             "input_unit": result.input_unit,
             "output_unit": result.output_unit,
             "condition_number": fit.condition_number,
             "iterations": fit.iterations,
             "verdict": verdict(result, fit),
-            "note": result.note,
+            "note": note,
         }),
+    };
+    if let Some(map) = object.as_object_mut() {
+        if let Some(alignment) = &result.alignment {
+            map.insert("alignment".into(), alignment_json(alignment));
+        }
+        if let Some(model) = &result.field_model {
+            map.insert("field_model".into(), json!(model));
+        }
+        if let Some(check) = &result.radius_check {
+            map.insert("radius_check".into(), json!(check));
+        }
     }
+    object
 }
 
 /// A number with 7 significant digits: fixed point for ordinary magnitudes, scientific for
@@ -271,6 +468,28 @@ fn with_std(value: f64, std: Option<f64>) -> String {
     }
 }
 
+fn print_alignment(outcome: &Result<Alignment, String>) {
+    match outcome {
+        Err(e) => println!(
+            "  not aligned to the accelerometer ({e}); A is left in the magnetometer's own frame"
+        ),
+        Ok(al) => {
+            let (angle, axis, angle_std) = angle_axis(al);
+            let angle_std =
+                angle_std.map_or("n/a".to_string(), |s| format!("{:.2}°", s.to_degrees()));
+            println!(
+                "  aligned to the accelerometer: rotated {:.2}° ± {angle_std} about ({:.3}, {:.3}, {:.3}); dip {:.2}° ± {:.2}°; A is in the accelerometer frame (its uncertainty is the rotation's)",
+                angle.to_degrees(),
+                axis.x,
+                axis.y,
+                axis.z,
+                al.dip.to_degrees(),
+                al.dip_std.to_degrees()
+            );
+        }
+    }
+}
+
 fn print_table(recording: &Recording, still: Option<&StillReport>, results: &[SensorResult]) {
     println!("{}", recording.source.display());
     if let Some(still) = still {
@@ -278,7 +497,7 @@ fn print_table(recording: &Recording, still: Option<&StillReport>, results: &[Se
     }
     for result in results {
         println!();
-        if let Some(note) = &result.note {
+        for note in &result.notes {
             println!("{}: {note}", result.sensor);
         }
         let fit = match &result.fit {
@@ -302,9 +521,10 @@ fn print_table(recording: &Recording, still: Option<&StillReport>, results: &[Se
             result.input_unit,
             result.output_unit
         );
+        let a_std = fit.std.filter(|_| result.a_std_applies());
         for r in 0..3 {
             let a: Vec<String> = (0..3)
-                .map(|c| with_std(fit.cal.a[(r, c)], fit.std.map(|s| s.a[(r, c)])))
+                .map(|c| with_std(fit.cal.a[(r, c)], a_std.map(|s| s.a[(r, c)])))
                 .collect();
             println!(
                 "  A[{r}] {}   b[{r}] {}",
@@ -319,34 +539,38 @@ fn print_table(recording: &Recording, still: Option<&StillReport>, results: &[Se
             "  RMS {:.3e} ({rms_unit})   leave-one-out RMS {loo}   condition {:.1e}",
             fit.rms, fit.condition_number
         );
+        if let Some(alignment) = &result.alignment {
+            print_alignment(alignment);
+        }
         println!("  verdict: {}", verdict(result, fit));
     }
 }
 
-/// Checks that need no still intervals: the accelerometer's unit, and the magnetometer's
-/// coverage, unit and field magnitude (on the samples the fit will use). Returns warnings.
-fn check_inputs(
+/// Still intervals with the holds that cannot be used left out; refuses (for every sensor
+/// that needs them) when none is found or none is usable. Returns warnings.
+fn still_intervals(
     args: &FitArgs,
     recording: &Recording,
-    sensors: &[Sensor],
-) -> anyhow::Result<Vec<String>> {
-    let mut warnings = Vec::new();
-    if sensors.contains(&Sensor::Accel) {
-        if let Some(accel) = &recording.accel {
-            input_checks::check_accel_unit(accel, recording.units.accel)?;
-        }
-    }
-    if sensors.contains(&Sensor::Mag) {
-        let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
-        let points = methods::thin(all, args.max_mag_samples);
-        input_checks::check_mag_coverage(&points)?;
-        warnings.extend(input_checks::check_mag_field(
-            &points,
-            recording.units.mag,
-            args.field_ut,
-        )?);
-    }
-    Ok(warnings)
+) -> Result<(StillReport, Vec<String>), String> {
+    let mut still = find_still(recording, &super::still_options(&args.input))
+        .map_err(|e| format!("still intervals could not be found: {e}"))?;
+    input_checks::require_still(recording, &still, args.input.min_hold)
+        .map_err(|e| e.to_string())?;
+    let warnings = input_checks::screen_holds(recording, &mut still, args.input.direction_angle)
+        .map_err(|e| e.to_string())?;
+    Ok((still, warnings))
+}
+
+/// The magnetometer reference: `--field-ut`, else the model's field at `--location` today.
+fn field_reference(args: &FitArgs, location: Option<&Location>) -> anyhow::Result<FieldReference> {
+    let model = location
+        .map(geomag::local_field_today)
+        .transpose()
+        .context("the field at --location could not be modelled")?;
+    Ok(FieldReference {
+        ut: args.field_ut.or(model.map(|m| m.total_ut)),
+        model,
+    })
 }
 
 /// Run the command.
@@ -370,37 +594,110 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let recording = super::load(&args.input)?;
     let sensors = requested(args, &recording)?;
     // A wrong --method is an argument error: report it before anything about the data.
-    for sensor in &sensors {
-        method_for(args, *sensor)?;
-    }
-    let mut warnings = check_inputs(args, &recording, &sensors)?;
-    let needs_still = sensors.iter().any(|s| *s != Sensor::Mag);
-    let still = if needs_still {
-        let mut still = find_still(&recording, &super::still_options(&args.input))
-            .context("still intervals could not be found")?;
-        input_checks::require_still(&recording, &still, args.input.min_hold)?;
-        warnings.extend(input_checks::screen_holds(
-            &recording,
-            &mut still,
-            args.input.direction_angle,
-        )?);
-        if sensors.contains(&Sensor::Gyro) {
-            input_checks::check_gyro_unit(&recording, &still)?;
-        }
-        if sensors.contains(&Sensor::Accel) {
-            input_checks::check_accel_poses(&still)?;
-        }
-        Some(still)
+    let chosen: Vec<Option<Method>> = sensors
+        .iter()
+        .map(|s| {
+            args.method
+                .as_ref()
+                .map(|_| method_for(args, *s))
+                .transpose()
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let field = if sensors.contains(&Sensor::Mag) {
+        field_reference(args, args.location.as_ref())?
     } else {
-        None
+        FieldReference {
+            ut: args.field_ut,
+            model: None,
+        }
     };
+
+    // Input checks: a refusal concerns only the sensor(s) it names.
+    let mut refusals: Vec<(Sensor, String)> = Vec::new();
+    let mut warnings = Vec::new();
+    if let (true, Some(accel)) = (sensors.contains(&Sensor::Accel), &recording.accel) {
+        if let Err(e) = input_checks::check_accel_unit(accel, recording.units.accel) {
+            refusals.push((Sensor::Accel, e.to_string()));
+        }
+    }
+    if sensors.contains(&Sensor::Mag) {
+        let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
+        let points = methods::thin(all, args.max_mag_samples);
+        // Only a field stated on the command line is refused when the data contradict it; a
+        // modelled one is compared with the fitted radius instead.
+        let checked = input_checks::check_mag_coverage(&points).and_then(|()| {
+            input_checks::check_mag_field(&points, recording.units.mag, args.field_ut)
+        });
+        match checked {
+            Ok(w) => warnings.extend(w),
+            Err(e) => refusals.push((Sensor::Mag, e.to_string())),
+        }
+    }
+    let inertial: Vec<Sensor> = sensors
+        .iter()
+        .copied()
+        .filter(|s| *s != Sensor::Mag)
+        .collect();
+    let still = if inertial.is_empty() {
+        None
+    } else {
+        match still_intervals(args, &recording) {
+            Ok((still, w)) => {
+                warnings.extend(w);
+                Some(still)
+            }
+            Err(reason) => {
+                refusals.extend(inertial.iter().map(|s| (*s, reason.clone())));
+                None
+            }
+        }
+    };
+    if let Some(still) = &still {
+        if inertial.contains(&Sensor::Gyro) {
+            if let Err(e) = input_checks::check_gyro_unit(&recording, still) {
+                refusals.push((Sensor::Gyro, e.to_string()));
+            }
+        }
+        if inertial.contains(&Sensor::Accel) {
+            if let Err(e) = input_checks::check_accel_poses(still) {
+                refusals.push((Sensor::Accel, e.to_string()));
+            }
+        }
+    }
     for warning in &warnings {
         eprintln!("imucal: warning: {warning}");
     }
-    let results = sensors
+
+    let mut results: Vec<SensorResult> = sensors
         .iter()
-        .map(|s| fit_sensor(args, &recording, still.as_ref(), *s))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .zip(&chosen)
+        .map(
+            |(sensor, method)| match refusals.iter().find(|(s, _)| s == sensor) {
+                Some((_, reason)) => SensorResult::refused(*sensor, &recording, reason.clone()),
+                None => fit_sensor(args, &recording, still.as_ref(), &field, *sensor, *method),
+            },
+        )
+        .collect();
+
+    // Magnetometer into the accelerometer frame, when both were fitted.
+    let accel_fit = results
+        .iter()
+        .find(|r| r.sensor == Sensor::Accel)
+        .and_then(|r| r.fit.as_ref().ok().cloned());
+    let accel_requested = sensors.contains(&Sensor::Accel);
+    if let Some(mag) = results.iter_mut().find(|r| r.sensor == Sensor::Mag) {
+        if let (true, Ok(mag_fit)) = (accel_requested, &mut mag.fit) {
+            let outcome = match (&accel_fit, &still) {
+                (Some(accel_fit), Some(still)) => align_mag(still, accel_fit, mag_fit),
+                _ => Err("the accelerometer was not fitted".to_string()),
+            };
+            if let Ok(alignment) = &outcome {
+                mag_fit.cal = alignment.apply_to(&mag_fit.cal);
+            }
+            mag.alignment = Some(outcome);
+        }
+    }
+
     if args.json {
         let object: serde_json::Map<String, Value> = results
             .iter()
