@@ -11,6 +11,10 @@
 //! The thread keeps the slave side open itself, so the master never sees a hang-up while no host
 //! is connected and a host may close and reopen the port. Bytes the board sends while nobody reads
 //! wait in the pty, as they would on a real serial line.
+//!
+//! With [`SimOptions::faults`] active, both directions pass a [`FaultyLink`] (see
+//! [`crate::link_faults`]) between the pty and the board, and the pty can be closed on purpose
+//! ([`SimHandle::vanish`] or `vanish_after`), as when a board is unplugged.
 
 use std::io::{ErrorKind, Read, Write};
 use std::path::PathBuf;
@@ -26,6 +30,7 @@ use thiserror::Error;
 use crate::board::{BoardConfig, BoardError, PersonSchedule, SimBoard};
 use crate::effects::EffectRequest;
 use crate::error::SimError;
+use crate::link_faults::{FaultStats, FaultyLink, LinkFaults, ParamTamper};
 use crate::recording::{write_truth_file, Truth};
 
 /// Largest simulated time run in one turn of the serving loop, µs (50 ms).
@@ -78,6 +83,8 @@ pub struct SimOptions {
     /// Every other setting of the board; its seed, effects and schedule are replaced by the
     /// fields above.
     pub board: BoardConfig,
+    /// Faults injected on the serial link (none by default).
+    pub faults: LinkFaults,
 }
 
 impl SimOptions {
@@ -89,6 +96,7 @@ impl SimOptions {
             speed: 1.0,
             schedule: PersonSchedule::Guided,
             board: BoardConfig::new(seed),
+            faults: LinkFaults::default(),
         }
     }
 
@@ -130,12 +138,16 @@ pub struct ServeStats {
 enum Command {
     Reboot(Sender<Result<(), BoardError>>),
     CutPower(Option<u32>, Sender<()>),
+    Tamper(Option<ParamTamper>, Sender<()>),
 }
 
 struct Shared {
     stop: AtomicBool,
+    vanish: AtomicBool,
     sim_time_us: AtomicU64,
     stats: Mutex<ServeStats>,
+    faults: Mutex<FaultStats>,
+    notes: Mutex<Vec<String>>,
 }
 
 /// Starts simulated boards.
@@ -149,9 +161,17 @@ impl SimServer {
         if !(speed.is_finite() && speed > 0.0) {
             return Err(ServeError::InvalidSpeed(speed));
         }
+        let faulty = if options.faults.is_active() {
+            Some(FaultyLink::new(options.faults, options.seed)?)
+        } else {
+            None
+        };
         let board = SimBoard::new(options.board_config())?;
         let truth = board.truth();
         let (mut master, slave) = TTYPort::pair().map_err(ServeError::Pty)?;
+        close_on_exec(&master)?;
+        close_on_exec(&slave)?;
+        never_block(&master)?;
         master
             .set_timeout(Duration::ZERO)
             .map_err(ServeError::Pty)?;
@@ -163,17 +183,23 @@ impl SimServer {
         })?;
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
+            vanish: AtomicBool::new(false),
             sim_time_us: AtomicU64::new(0),
             stats: Mutex::new(ServeStats::default()),
+            faults: Mutex::new(FaultStats::default()),
+            notes: Mutex::new(Vec::new()),
         });
         let (commands, receiver) = mpsc::channel();
         let thread_shared = Arc::clone(&shared);
         let thread = std::thread::Builder::new()
             .name("imucal-hil-sim".into())
             .spawn(move || {
-                // The slave stays open for the thread's life (see the module documentation).
-                let _slave = slave;
-                serve(board, master, speed, &thread_shared, &receiver)
+                let pty = Pty {
+                    master,
+                    // The slave stays open while serving (see the module documentation).
+                    slave,
+                };
+                serve(board, pty, faulty, speed, &thread_shared, &receiver)
             })
             .map_err(ServeError::Io)?;
         Ok(SimHandle {
@@ -250,6 +276,43 @@ impl SimHandle {
         answer.recv().map_err(|_| ServeError::Stopped)
     }
 
+    /// Faults injected on the link so far (all zero without [`SimOptions::faults`]).
+    pub fn fault_stats(&self) -> FaultStats {
+        *self
+            .shared
+            .faults
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// What the board side noticed since the last call (a refused `Hello`, the port closed), as
+    /// sentences, oldest first.
+    pub fn take_notes(&self) -> Vec<String> {
+        std::mem::take(
+            &mut *self
+                .shared
+                .notes
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner),
+        )
+    }
+
+    /// Close the pseudo-terminal now, as when the board is unplugged: the host's reads and
+    /// writes fail and serving ends.
+    pub fn vanish(&self) {
+        self.shared.vanish.store(true, Ordering::Relaxed);
+    }
+
+    /// Change the parameter tampering from now on (`None` stops it). Has an effect only when
+    /// the board was started with active [`SimOptions::faults`].
+    pub fn set_param_tamper(&self, tamper: Option<ParamTamper>) -> Result<(), ServeError> {
+        let (reply, answer) = mpsc::channel();
+        self.commands
+            .send(Command::Tamper(tamper, reply))
+            .map_err(|_| ServeError::Stopped)?;
+        answer.recv().map_err(|_| ServeError::Stopped)
+    }
+
     /// Whether the serving thread is still running.
     pub fn is_running(&self) -> bool {
         self.thread.as_ref().is_some_and(|t| !t.is_finished())
@@ -284,15 +347,61 @@ fn is_not_ready(error: &std::io::Error) -> bool {
     )
 }
 
+/// Keep `port`'s descriptor out of child processes: a child holding a copy of the master would
+/// keep the pty alive after the board vanishes, so its host would never see the hang-up.
+fn close_on_exec(port: &TTYPort) -> Result<(), ServeError> {
+    use std::os::fd::AsRawFd;
+    nix::fcntl::fcntl(
+        port.as_raw_fd(),
+        nix::fcntl::FcntlArg::F_SETFD(nix::fcntl::FdFlag::FD_CLOEXEC),
+    )
+    .map(|_| ())
+    .map_err(|errno| ServeError::Io(std::io::Error::from(errno)))
+}
+
+/// Make writes to `port` return `WouldBlock` instead of waiting when the pty can take only part
+/// of a chunk (a ready poll does not promise room for all of it), so the loop never stalls.
+fn never_block(port: &TTYPort) -> Result<(), ServeError> {
+    use nix::fcntl::{fcntl, FcntlArg, OFlag};
+    use std::os::fd::AsRawFd;
+    let fd = port.as_raw_fd();
+    let to_io = |errno: nix::errno::Errno| ServeError::Io(std::io::Error::from(errno));
+    let flags = OFlag::from_bits_truncate(fcntl(fd, FcntlArg::F_GETFL).map_err(to_io)?);
+    fcntl(fd, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK)).map_err(to_io)?;
+    Ok(())
+}
+
+/// Both sides of the pseudo-terminal, closed together when dropped.
+struct Pty {
+    master: TTYPort,
+    slave: TTYPort,
+}
+
+/// Bytes on their way to the host through a [`FaultyLink`], and those the pty has not taken yet.
+struct FaultPath {
+    link: FaultyLink,
+    unsent: Vec<u8>,
+}
+
 /// The serving loop (see the module documentation).
 fn serve(
     mut board: SimBoard,
-    mut master: TTYPort,
+    pty: Pty,
+    faulty: Option<FaultyLink>,
     speed: f64,
     shared: &Shared,
     commands: &Receiver<Command>,
 ) -> Result<(), ServeError> {
     let start = Instant::now();
+    let vanish_at = faulty
+        .as_ref()
+        .and_then(|f| f.faults().vanish_after)
+        .and_then(|after| start.checked_add(after));
+    let mut faults = faulty.map(|link| FaultPath {
+        link,
+        unsent: Vec::new(),
+    });
+    let Pty { mut master, slave } = pty;
     let sim_start_us = board.time_us();
     let mut buffer = [0u8; CHUNK];
     let mut stats = ServeStats::default();
@@ -307,7 +416,30 @@ fn serve(
                     board.cut_power_at_flash_step(step);
                     let _ = reply.send(());
                 }
+                Command::Tamper(tamper, reply) => {
+                    if let Some(path) = faults.as_mut() {
+                        path.link.set_param_tamper(tamper);
+                    }
+                    let _ = reply.send(());
+                }
             }
+        }
+        let now = Instant::now();
+        if shared.vanish.load(Ordering::Relaxed) || vanish_at.is_some_and(|at| now >= at) {
+            let port = slave.name().unwrap_or_default();
+            drop(master);
+            drop(slave);
+            let mut fault_stats = faults.as_ref().map(|p| p.link.stats()).unwrap_or_default();
+            fault_stats.vanished = true;
+            *shared.faults.lock().unwrap_or_else(PoisonError::into_inner) = fault_stats;
+            shared
+                .notes
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(format!(
+                    "closed the port {port}, as if the board were unplugged"
+                ));
+            return Ok(());
         }
 
         loop {
@@ -315,12 +447,18 @@ fn serve(
                 Ok(0) => break,
                 Ok(count) => {
                     let bytes = buffer.get(..count).unwrap_or_default();
-                    board.link().send_to_device(bytes);
+                    match faults.as_mut() {
+                        Some(path) => path.link.push_from_host(bytes, now),
+                        None => board.link().send_to_device(bytes),
+                    }
                     stats.bytes_from_host += count as u64;
                 }
                 Err(error) if is_not_ready(&error) => break,
                 Err(error) => return Err(ServeError::Io(error)),
             }
+        }
+        if let Some(path) = faults.as_mut() {
+            board.link().send_to_device(&path.link.take_for_device(now));
         }
 
         let wall_s = start.elapsed().as_secs_f64();
@@ -329,20 +467,22 @@ fn serve(
         board.advance_to(step_to)?;
         let lag_s = target_us.saturating_sub(step_to) as f64 * 1e-6;
 
-        loop {
-            let count = board.link().peek_from_device(&mut buffer);
-            if count == 0 {
-                break;
-            }
-            match master.write(buffer.get(..count).unwrap_or_default()) {
-                Ok(0) => break,
-                Ok(written) => {
-                    board.link().consume_from_device(written);
-                    stats.bytes_to_host += written as u64;
+        match faults.as_mut() {
+            Some(path) => {
+                pull_through_faults(&mut board, path);
+                // Counters and notes first, so they are current once the host has the bytes.
+                *shared.faults.lock().unwrap_or_else(PoisonError::into_inner) = path.link.stats();
+                let notes = path.link.take_notes();
+                if !notes.is_empty() {
+                    shared
+                        .notes
+                        .lock()
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .extend(notes);
                 }
-                Err(error) if is_not_ready(&error) => break,
-                Err(error) => return Err(ServeError::Io(error)),
+                stats.bytes_to_host += write_through_faults(&mut master, path)?;
             }
+            None => stats.bytes_to_host += send_direct(&mut board, &mut master, &mut buffer)?,
         }
 
         shared.sim_time_us.store(board.time_us(), Ordering::Relaxed);
@@ -360,6 +500,60 @@ fn serve(
         }
     }
     Ok(())
+}
+
+/// Write what the board sent to the pty without blocking; returns the bytes written. Bytes the
+/// pty cannot take stay in the board's transmit buffer.
+fn send_direct(
+    board: &mut SimBoard,
+    master: &mut TTYPort,
+    buffer: &mut [u8; CHUNK],
+) -> Result<u64, ServeError> {
+    let mut total = 0;
+    loop {
+        let count = board.link().peek_from_device(buffer);
+        if count == 0 {
+            break;
+        }
+        match master.write(buffer.get(..count).unwrap_or_default()) {
+            Ok(0) => break,
+            Ok(written) => {
+                board.link().consume_from_device(written);
+                total += written as u64;
+            }
+            Err(error) if is_not_ready(&error) => break,
+            Err(error) => return Err(ServeError::Io(error)),
+        }
+    }
+    Ok(total)
+}
+
+/// Pass what the board sent into the faults. The board's bytes are taken only while little
+/// waits on the way, so a host that does not read still fills the board's transmit buffer.
+fn pull_through_faults(board: &mut SimBoard, path: &mut FaultPath) {
+    let now = Instant::now();
+    if path.unsent.len() + path.link.pending_for_host() < CHUNK {
+        let bytes = board.link().take_from_device();
+        path.link.push_from_device(&bytes, now);
+    }
+    path.unsent.extend(path.link.take_for_host(now));
+}
+
+/// Write the bytes due for the host to the pty without blocking; returns the bytes written.
+fn write_through_faults(master: &mut TTYPort, path: &mut FaultPath) -> Result<u64, ServeError> {
+    let mut total = 0;
+    while !path.unsent.is_empty() {
+        match master.write(&path.unsent) {
+            Ok(0) => break,
+            Ok(written) => {
+                path.unsent.drain(..written.min(path.unsent.len()));
+                total += written as u64;
+            }
+            Err(error) if is_not_ready(&error) => break,
+            Err(error) => return Err(ServeError::Io(error)),
+        }
+    }
+    Ok(total)
 }
 
 /// Arguments of the `serve` command.
@@ -392,6 +586,27 @@ pub struct ServeArgs {
     /// Write every true parameter as JSON here at the start.
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// Probability that a byte is lost, per byte, in both directions (e.g. 1e-3).
+    #[arg(long = "drop-rate", default_value_t = 0.0)]
+    pub drop_rate: f64,
+    /// Probability that a byte has one bit flipped, per byte, in both directions.
+    #[arg(long = "flip-rate", default_value_t = 0.0)]
+    pub flip_rate: f64,
+    /// Probability that a frame is sent twice, per frame, in both directions.
+    #[arg(long = "dup-rate", default_value_t = 0.0)]
+    pub dup_rate: f64,
+    /// Hold frames back by this many milliseconds of wall time (see --delay-rate).
+    #[arg(long = "delay-ms", default_value_t = 0)]
+    pub delay_ms: u64,
+    /// Probability that a frame is held back by --delay-ms, per frame, in both directions.
+    #[arg(long = "delay-rate", default_value_t = 0.05)]
+    pub delay_rate: f64,
+    /// Close the port after this many wall-clock seconds, as if the board were unplugged.
+    #[arg(long = "vanish-after-s")]
+    pub vanish_after_s: Option<f64>,
+    /// Speak this protocol major version at Hello (to try a host against another version).
+    #[arg(long = "protocol-major")]
+    pub protocol_major: Option<u16>,
 }
 
 impl Default for ServeArgs {
@@ -407,6 +622,13 @@ impl Default for ServeArgs {
             seconds: None,
             ignore_stdin: false,
             truth: None,
+            drop_rate: 0.0,
+            flip_rate: 0.0,
+            dup_rate: 0.0,
+            delay_ms: 0,
+            delay_rate: 0.05,
+            vanish_after_s: None,
+            protocol_major: None,
         }
     }
 }
@@ -420,6 +642,19 @@ impl ServeArgs {
         options.schedule = self.schedule;
         options.board.max_hold_s = self.max_hold_s;
         options.board.poser.tremor = !self.no_tremor;
+        options.faults = LinkFaults {
+            drop_rate: self.drop_rate,
+            flip_rate: self.flip_rate,
+            dup_rate: self.dup_rate,
+            delay_rate: self.delay_rate,
+            delay: Duration::from_millis(self.delay_ms),
+            // `run_command` refuses a negative or non-finite time before this is used.
+            vanish_after: self
+                .vanish_after_s
+                .map(|s| Duration::try_from_secs_f64(s).unwrap_or(Duration::MAX)),
+            protocol_major: self.protocol_major,
+            param_tamper: None,
+        };
         options
     }
 }
@@ -431,6 +666,9 @@ pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
         .seconds
         .map(|s| crate::error::require_non_negative("--seconds", s).map(Duration::from_secs_f64))
         .transpose()?;
+    if let Some(seconds) = args.vanish_after_s {
+        crate::error::require_non_negative("--vanish-after-s", seconds)?;
+    }
     let handle = SimServer::start(args.options())?;
     if let Some(path) = &args.truth {
         write_truth_file(&handle.truth(), path)?;
@@ -454,7 +692,13 @@ pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
         && stdin_closed.try_recv().is_err()
         && wall_limit.is_none_or(|limit| started.elapsed() < limit)
     {
+        for note in handle.take_notes() {
+            eprintln!("board: {note}");
+        }
         std::thread::sleep(Duration::from_millis(20));
+    }
+    for note in handle.take_notes() {
+        eprintln!("board: {note}");
     }
     let stats = handle.stop()?;
     eprintln!(

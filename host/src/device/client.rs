@@ -7,7 +7,9 @@
 //! `seq` (so a late reply to an earlier try also counts). `WriteParams` stages the same set
 //! again, so it is idempotent too. `CommitParams` is resent with the same CRC; a lost reply
 //! followed by `NothingStaged` on the retry is resolved by asking `Status` whether the set with
-//! that CRC is now active. `CapturePose` is never resent (a second capture would be `Busy`).
+//! that CRC is now active. `CapturePose` is resent with the same `seq` only as
+//! [`DeviceClient::capture_pose`] describes: a `Busy` answer then shows the capture running, and a
+//! `Busy` to the first send makes it wait for the other capture to end.
 
 use std::collections::VecDeque;
 use std::io::{ErrorKind, Read, Write};
@@ -101,6 +103,10 @@ struct CaptureResend {
     restarts: u32,
     /// Whether a `Busy` since the last send showed the capture running.
     running: bool,
+    /// Whether the first send found another capture running, not yet seen to end.
+    busy_elsewhere: bool,
+    /// Whether a `Busy` answered since the last send.
+    busy_answered: bool,
     /// Frame errors counted at the last send.
     frame_errors: u64,
 }
@@ -527,8 +533,10 @@ impl<L: Read + Write> DeviceClient<L> {
     /// Asks the board to average a still pose; `progress` is called about every read poll
     /// and on each stillness change while the board waits for stillness and averages.
     ///
-    /// A lost request or reply is recovered by resending with the same `seq` (see
-    /// [`Self::capture_resend_due`]): a `Busy` answer to a resend means the capture runs.
+    /// A lost request or reply is recovered by resending with the same `seq`: every reply
+    /// timeout until a `Busy` answer shows the capture running, then only after a lost frame (at
+    /// most `tries − 1` times, each may start a new capture). A `Busy` to the first send (another
+    /// capture runs) is waited out by resending until that capture ends.
     pub fn capture_pose(
         &mut self,
         pose: &PoseRequest,
@@ -550,6 +558,8 @@ impl<L: Read + Write> DeviceClient<L> {
             sends: 1,
             restarts: 0,
             running: false,
+            busy_elsewhere: false,
+            busy_answered: false,
             frame_errors: self.stats.frame_errors,
         };
         let reply = loop {
@@ -563,15 +573,29 @@ impl<L: Read + Write> DeviceClient<L> {
                 still: self.still,
             });
             match waited {
+                // Busy to the first send: another capture runs (perhaps one a resend started
+                // just as the previous capture ended); resend until it is over.
+                Some(ResponseBody::Error(ErrorCode::Busy)) if resend.sends == 1 => {
+                    resend.busy_elsewhere = true;
+                    continue;
+                }
                 // Busy to a resend: the capture an earlier send started is still running.
-                Some(ResponseBody::Error(ErrorCode::Busy)) if resend.sends > 1 => {
-                    resend.running = true;
+                Some(ResponseBody::Error(ErrorCode::Busy)) => {
+                    resend.running = !resend.busy_elsewhere;
+                    resend.busy_answered = true;
                     continue;
                 }
                 Some(reply) => break reply,
                 None => {}
             }
             let now = Instant::now();
+            if now >= deadline && resend.busy_elsewhere {
+                return Err(DeviceError::Device {
+                    port: self.port.clone(),
+                    request: "CapturePose",
+                    code: ErrorCode::Busy,
+                });
+            }
             if now >= deadline {
                 return Err(DeviceError::NoAnswer {
                     port: self.port.clone(),
@@ -580,6 +604,11 @@ impl<L: Read + Write> DeviceClient<L> {
                 });
             }
             if let Some(restart) = self.capture_resend_due(&resend, now) {
+                if resend.busy_elsewhere && resend.sends > 1 && !resend.busy_answered {
+                    // The last resend drew no Busy: the other capture is over and ours runs.
+                    resend.busy_elsewhere = false;
+                    deadline = deadline.max(deadline_after(one_capture));
+                }
                 if restart {
                     // The board may start a whole new capture.
                     resend.restarts += 1;
@@ -591,6 +620,7 @@ impl<L: Read + Write> DeviceClient<L> {
                     sent_at: now,
                     sends: resend.sends + 1,
                     running: false,
+                    busy_answered: false,
                     frame_errors: self.stats.frame_errors,
                     ..resend
                 };
