@@ -2,10 +2,10 @@
 //! and (in later modules) talking to a board.
 #![forbid(unsafe_code)]
 
-pub mod device;
 pub mod analysis;
-pub mod fit;
+pub mod device;
 pub mod export;
+pub mod fit;
 pub mod geomag;
 pub mod input_checks;
 pub mod recording;

@@ -1,8 +1,8 @@
 //! The `imucal` command line: argument parsing and thin commands over the library.
 
 pub mod analyze;
-pub mod calibrate;
 pub mod args;
+pub mod calibrate;
 pub mod device;
 pub mod export;
 pub mod fit;
