@@ -1,5 +1,5 @@
 //! imucal host library: fitting calibration models to IMU data, reading recordings,
-//! and (in later modules) talking to a board.
+//! talking to a board, guided calibration, residual analysis and reports.
 #![forbid(unsafe_code)]
 
 pub mod analysis;
