@@ -85,3 +85,36 @@ fn unix_time_maps_to_the_utc_calendar_date() {
         Date::from_calendar_date(1969, Month::December, 31).ok()
     );
 }
+
+/// `calibrate --location` takes the magnetometer reference from the model and writes it into the
+/// parameter set (f32 on the wire, hence the tolerance).
+#[test]
+fn calibrate_location_writes_the_modelled_field_as_the_reference() {
+    let location: imucal::geomag::Location = "48.14,11.58".parse().expect("valid location");
+    let field = imucal::geomag::local_field_today(&location)
+        .expect("location inside the model")
+        .total_ut;
+    let dir = std::env::temp_dir().join(format!("imucal-location-{}", std::process::id()));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim", "--yes", "--json", "--speed", "30"])
+        .args(["--location", "48.14,11.58", "-o"])
+        .arg(&dir)
+        .output()
+        .expect("run imucal");
+    let _ = std::fs::remove_dir_all(&dir);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "calibrate failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_str(&text).expect("summary JSON");
+    let written = json["params"]["reference"]["field_ut"]
+        .as_f64()
+        .expect("reference field in the written set");
+    assert!(
+        (written - field).abs() < 1e-4 * field,
+        "wrote {written} µT, model {field} µT"
+    );
+    assert_eq!(json["verified"], true);
+}

@@ -28,6 +28,10 @@ pub struct AnalyzeArgs {
     /// Local field magnitude in µT (without it the magnetometer is normalised to 1).
     #[arg(long)]
     pub field_ut: Option<f64>,
+    /// Where the data was recorded (latitude, longitude in degrees, optional altitude in m): the
+    /// World Magnetic Model's field there today is the reference unless --field-ut is given.
+    #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
+    pub location: Option<imucal::geomag::Location>,
     /// Gyroscope scale in rad/s per count, for `--gyro-unit counts`.
     #[arg(long)]
     pub gyro_scale: Option<f64>,
@@ -180,7 +184,15 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
     };
     let options = AnalysisOptions {
         gravity: args.gravity,
-        field_ut: args.field_ut,
+        field_ut: match (args.field_ut, &args.location) {
+            (Some(h), _) => Some(h),
+            (None, Some(location)) => Some(
+                imucal::geomag::local_field_today(location)
+                    .context("the field at --location could not be modelled")?
+                    .total_ut,
+            ),
+            (None, None) => None,
+        },
         gyro_scale,
         ..AnalysisOptions::default()
     };

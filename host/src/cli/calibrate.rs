@@ -77,6 +77,10 @@ pub struct CalibrateArgs {
     /// keeps its mean sensitivity (with `--sim`: the simulated site's field).
     #[arg(long)]
     pub field_ut: Option<f64>,
+    /// Where the board is (latitude, longitude in degrees, optional altitude in m): the World
+    /// Magnetic Model's field there today is the magnetometer reference unless --field-ut is given.
+    #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
+    pub location: Option<imucal::geomag::Location>,
     /// Still time averaged per position, s.
     #[arg(long, default_value_t = 1.5)]
     pub hold: f64,
@@ -620,8 +624,21 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         (None, Some(port)) => port.clone(),
         (None, None) => choose_port(&list_ports()?)?.path.clone(),
     };
+    let modelled = args
+        .location
+        .as_ref()
+        .map(imucal::geomag::local_field_today)
+        .transpose()
+        .context("the field at --location could not be modelled")?;
+    if let (Some(model), None) = (&modelled, args.field_ut) {
+        eprintln!(
+            "Reference field from the World Magnetic Model at --location: {:.2} µT, dip {:.1}°",
+            model.total_ut, model.inclination_deg
+        );
+    }
     let field_ut = args
         .field_ut
+        .or(modelled.as_ref().map(|m| m.total_ut))
         .or(simulated.as_ref().map(Simulated::field_ut));
     if simulated.is_some() {
         eprintln!(
@@ -629,7 +646,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             args.sim_seed,
             args.speed,
             field_ut.unwrap_or_default(),
-            if args.field_ut.is_some() {
+            if args.field_ut.is_some() || modelled.is_some() {
                 " (given)"
             } else {
                 " (the simulated site's, as if looked up for the location)"
