@@ -189,7 +189,12 @@ impl Board {
         ])
         .arg("-kernel")
         .arg(elf)
-        .stdout(Stdio::null())
+        // The guest's semihosting output: defmt frames, decoded by `defmt_logs_decode`.
+        .stdout(
+            std::fs::File::create(dir.join(format!("qemu-{run}.defmt"))).map_err(|e| {
+                format!("cannot create the defmt log file in {}: {e}", dir.display())
+            })?,
+        )
         .stderr(Stdio::null());
         let qemu = cmd.spawn().map_err(|e| {
             format!(
@@ -377,10 +382,12 @@ pub fn run(elf: &Path) -> Result<(), String> {
     println!("qemu-test: firmware {}", elf.display());
     let mut report = Report { lines: Vec::new() };
     let started = Instant::now();
-    let result = checks(elf, &dir, &mut report).and_then(|()| {
-        println!("qemu-test: end-to-end calibration");
-        end_to_end(elf, &dir, &mut report)
-    });
+    let result = checks(elf, &dir, &mut report)
+        .map(|()| defmt_logs_decode(elf, &dir.join("qemu-1.defmt"), &mut report))
+        .and_then(|()| {
+            println!("qemu-test: end-to-end calibration");
+            end_to_end(elf, &dir, &mut report)
+        });
     let _ = std::fs::remove_dir_all(&dir);
     let failed = report.lines.iter().filter(|(_, r)| r.is_err()).count();
     println!(
@@ -395,6 +402,54 @@ pub fn run(elf: &Path) -> Result<(), String> {
     }
     println!("qemu-test: all {} checks passed", report.lines.len());
     Ok(())
+}
+
+/// Decodes the first board's defmt log with `defmt-print` and looks for its start-up lines.
+/// Without `defmt-print` the check is reported as not run (it is never counted as passed).
+fn defmt_logs_decode(elf: &Path, log: &Path, report: &mut Report) {
+    let Ok(input) = std::fs::File::open(log) else {
+        report.check(
+            "defmt logs decode",
+            Err(format!("no log at {}", log.display())),
+        );
+        return;
+    };
+    let output = std::process::Command::new("defmt-print")
+        .arg("-e")
+        .arg(elf)
+        .stdin(input)
+        .stderr(Stdio::null())
+        .output();
+    let output = match output {
+        Ok(output) => output,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            println!(
+                "  SKIP  defmt logs decode: defmt-print is not installed \
+                 (scripts/setup-firmware-toolchain.sh --with-defmt-print)"
+            );
+            return;
+        }
+        Err(e) => {
+            report.check(
+                "defmt logs decode",
+                Err(format!("defmt-print failed to start: {e}")),
+            );
+            return;
+        }
+    };
+    let text = String::from_utf8_lossy(&output.stdout);
+    let lines = text.lines().filter(|l| !l.trim().is_empty()).count();
+    let result = if text.contains("sensor feed up at") {
+        Ok(format!(
+            "{lines} log lines decoded, including the sensor feed start-up"
+        ))
+    } else {
+        Err(format!(
+            "decoded {lines} lines but not the sensor feed start-up: {}",
+            text.lines().take(3).collect::<Vec<_>>().join(" | ")
+        ))
+    };
+    report.check("defmt logs decode", result);
 }
 
 /// Feed options of the protocol checks: the person never starts, so the board lies still.
