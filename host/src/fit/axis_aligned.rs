@@ -12,7 +12,7 @@ use std::cmp::Ordering;
 
 use nalgebra::DMatrix;
 
-use super::linalg::{least_squares, rms};
+use super::linalg::least_squares;
 use super::loo::leave_one_out_rms;
 use super::validate::{
     check_finite_points, check_finite_poses, check_reference, guard_fit, CoverageHint,
@@ -37,23 +37,13 @@ pub fn fit_axis_aligned(points: &[Vec3], reference: f64) -> Result<Fit, FitError
 
 fn fit_axis_aligned_unchecked(points: &[Vec3], reference: f64) -> Result<Fit, FitError> {
     let (cal, condition_number) = solve(points, reference)?;
-    let residuals: Vec<f64> = points
-        .iter()
-        .map(|p| (cal.apply(p).norm() - reference) / reference)
-        .collect();
-    Ok(Fit {
-        method: Method::AxisAligned,
+    Ok(Fit::closed_form(
+        Method::AxisAligned,
         cal,
-        rms: rms(&residuals),
-        residuals,
-        loo_rms: None,
-        covariance: None,
-        param_names: Vec::new(),
-        std: None,
-        condition_number,
-        iterations: 0,
+        points,
         reference,
-    })
+        condition_number,
+    ))
 }
 
 /// [`fit_axis_aligned`] on static pose means, with the leave-one-pose-out RMS.

@@ -28,7 +28,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::linalg::{rms, singular_values, sqrt_spd, RANK_TOLERANCE};
+use super::linalg::{singular_values, sqrt_spd, RANK_TOLERANCE};
 use super::validate::{
     check_finite_points, check_reference, guard_fit, CoverageHint, EllipsoidModel,
 };
@@ -137,23 +137,13 @@ pub(crate) fn fit_li_unchecked(
         return Err(no_ellipsoid("the fitted parameters are not finite"));
     }
 
-    let residuals: Vec<f64> = points
-        .iter()
-        .map(|p| (cal.apply(p).norm() - reference) / reference)
-        .collect();
-    Ok(Fit {
-        method: Method::Li,
+    Ok(Fit::closed_form(
+        Method::Li,
         cal,
-        rms: rms(&residuals),
-        residuals,
-        loo_rms: None,
-        covariance: None,
-        param_names: Vec::new(),
-        std: None,
-        condition_number,
-        iterations: 0,
+        points,
         reference,
-    })
+        condition_number,
+    ))
 }
 
 /// Li & Griffiths' constraint matrix `C₁` for `k = 4`.

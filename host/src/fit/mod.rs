@@ -113,6 +113,36 @@ pub struct Fit {
     pub reference: f64,
 }
 
+impl Fit {
+    /// A closed-form ellipsoid fit of samples: the relative norm residual of every point, no
+    /// covariance (the algebraic methods have none of their own).
+    pub(crate) fn closed_form(
+        method: Method,
+        cal: Calibration,
+        points: &[Vec3],
+        reference: f64,
+        condition_number: f64,
+    ) -> Fit {
+        let residuals: Vec<f64> = points
+            .iter()
+            .map(|p| (cal.apply(p).norm() - reference) / reference)
+            .collect();
+        Fit {
+            method,
+            cal,
+            rms: linalg::rms(&residuals),
+            residuals,
+            loo_rms: None,
+            covariance: None,
+            param_names: Vec::new(),
+            std: None,
+            condition_number,
+            iterations: 0,
+            reference,
+        }
+    }
+}
+
 /// Every fitting method the library implements.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Method {
