@@ -5,11 +5,12 @@
 #![allow(clippy::needless_range_loop)]
 
 use std::cell::{Cell, RefCell};
-use std::collections::VecDeque;
-use std::convert::Infallible;
 use std::rc::Rc;
 
-use imucal_firmware::device::{Clock, Device, DeviceInfo};
+mod bench;
+use bench::{MemoryLink, StepClock};
+
+use imucal_firmware::device::{Device, DeviceInfo};
 use imucal_firmware::imu::{Imu, RawSample, SensorScales};
 use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
@@ -29,7 +30,7 @@ const ACCEL_NOISE: i32 = 20;
 const GYRO_NOISE: i32 = 10;
 
 type Flash = RamFlash<8192, 1024, 4>;
-type TestDevice = Device<ScriptedImu, MemoryLink, Flash, TestClock, 32>;
+type TestDevice = Device<ScriptedImu, MemoryLink, Flash, StepClock, 32>;
 
 fn scales() -> SensorScales {
     // LSM9DS1 at ±2 g, 245 °/s, ±4 gauss.
@@ -126,52 +127,6 @@ impl Imu for ScriptedImu {
     }
 }
 
-#[derive(Clone, Default)]
-struct MemoryLink {
-    to_device: Rc<RefCell<VecDeque<u8>>>,
-    from_device: Rc<RefCell<Vec<u8>>>,
-}
-
-impl embedded_io::ErrorType for MemoryLink {
-    type Error = Infallible;
-}
-
-impl embedded_io::Read for MemoryLink {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let mut queue = self.to_device.borrow_mut();
-        let count = buf.len().min(queue.len());
-        for slot in buf.iter_mut().take(count) {
-            *slot = queue.pop_front().unwrap();
-        }
-        Ok(count)
-    }
-}
-
-impl embedded_io::ReadReady for MemoryLink {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.to_device.borrow().is_empty())
-    }
-}
-
-impl embedded_io::Write for MemoryLink {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.from_device.borrow_mut().extend_from_slice(buf);
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-
-struct TestClock(Rc<Cell<u64>>);
-
-impl Clock for TestClock {
-    fn now_us(&mut self) -> u64 {
-        self.0.get()
-    }
-}
-
 /// A device on the bench with the host side of its link.
 struct Bench {
     device: TestDevice,
@@ -219,7 +174,7 @@ impl Bench {
         let link = MemoryLink::default();
         let store = ParamStore::new(flash, 0, 2048).unwrap();
         let device =
-            Device::new(imu, link.clone(), store, TestClock(time.clone()), info()).unwrap();
+            Device::new(imu, link.clone(), store, StepClock(time.clone()), info()).unwrap();
         Self {
             device,
             time,

@@ -13,12 +13,12 @@
 //! `cargo test --release -p imucal-firmware --test fuzz_device_storm -- --nocapture` to see
 //! the figures.
 
-mod fuzz_harness;
+mod bench;
 
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use fuzz_harness::*;
+use bench::*;
 use imucal_firmware::apply::Correction;
 use imucal_firmware::validate::validate;
 use imucal_protocol::{

@@ -6,9 +6,9 @@
 //! `A` within `GAIN_LIMITS`, Frobenius condition number `κ_F ≤ 30`, offsets within the sensor's
 //! full-scale range, extended terms bounded over `|ΔT| ≤ 125 °C` with `T_ref` in −55…125 °C.
 
-mod fuzz_harness;
+mod bench;
 
-use fuzz_harness::*;
+use bench::*;
 use imucal_firmware::validate::{
     condition_frobenius, MAX_CONDITION_FROBENIUS, MAX_DELTA_T_C, MAX_G_SENSITIVITY,
     REFERENCE_TEMP_RANGE_C,

@@ -7,9 +7,9 @@
 //! one), so a cut during boot cannot change the flash: the boot tests show that no boot writes,
 //! and that a slot torn at any byte, in any program order, is ignored.
 
-mod fuzz_harness;
+mod bench;
 
-use fuzz_harness::*;
+use bench::*;
 use imucal_firmware::store::HEADER_LEN;
 use imucal_protocol::{CalibrationSet, ErrorCode, RequestBody, ResponseBody};
 

@@ -1,4 +1,4 @@
-//! Shared bench for the robustness tests of the device: a fake IMU, an in-memory link, a step
+//! Shared bench for the device tests: a fake IMU, an in-memory link, a step
 //! clock and a RAM flash around a real [`Device`], a seeded PRNG, an independent COBS/CRC frame
 //! builder (so raw payloads with unknown variants or truncated bodies can be framed), and
 //! generators of plausible and hostile calibration sets.
