@@ -14,8 +14,6 @@
 
 use anyhow::{bail, Context};
 use imucal::fit::alignment::{fit_alignment, Alignment};
-use imucal::fit::norm_lm::{refine_lm, NormLmOptions, NormObservations};
-use imucal::fit::validate::{measure_coverage, EllipsoidModel, MAX_RELATIVE_SIGMA};
 use imucal::fit::{Fit, FitError, Method, Pose, Vec3};
 use imucal::geomag::{self, LocalField, Location, RadiusCheck};
 use imucal::input_checks;
@@ -88,10 +86,6 @@ struct FieldReference {
     model: Option<LocalField>,
 }
 
-/// Unknowns of the norm model with the upper-triangular gauge: it needs this many distinct
-/// directions.
-const NORM_MODEL_UNKNOWNS: usize = 9;
-
 fn row_major(m: &imucal::fit::Mat3) -> Vec<f64> {
     (0..3)
         .flat_map(|r| (0..3).map(move |c| m[(r, c)]))
@@ -158,80 +152,6 @@ fn pose_noise_floor(poses: &[Pose], fit: &Fit) -> Option<f64> {
         .then(|| (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt())
 }
 
-/// Per-axis one-sigma noise of each pose mean, in data units (for the coverage measure).
-fn pose_mean_noise(poses: &[Pose]) -> Vec<f64> {
-    poses
-        .iter()
-        .map(|p| (p.var_of_mean().sum() / 3.0).sqrt())
-        .collect()
-}
-
-/// The default accelerometer fit and, when it is not `lm`, why: the six-position method when
-/// there are fewer distinct directions than the norm model's unknowns, and the axis-aligned
-/// model (6 unknowns) when `lm` is refused because the poses cannot determine the cross-axis
-/// terms.
-fn default_accel_fit(
-    poses: &[Pose],
-    gravity: f64,
-    directions: usize,
-) -> (Result<Fit, FitError>, Option<String>) {
-    if directions < NORM_MODEL_UNKNOWNS {
-        return (
-            methods::fit_accel(Method::SixPosition, poses, gravity),
-            Some(format!(
-                "lm needs at least {NORM_MODEL_UNKNOWNS} distinct directions and {directions} were found, so the six-position method was used"
-            )),
-        );
-    }
-    let reason = match methods::fit_accel(Method::Lm, poses, gravity) {
-        Err(FitError::Underdetermined(reason)) => reason,
-        other => return (other, None),
-    };
-    let refusal = FitError::Underdetermined(reason.clone());
-    let Ok(axis_aligned) = methods::fit_accel(Method::AxisAligned, poses, gravity) else {
-        return (Err(refusal), None);
-    };
-    // Judge the general model as lm did, through its own (unchecked) solution where it converges.
-    let observations = NormObservations::from_poses(poses, &axis_aligned.cal.b);
-    let general = refine_lm(
-        &observations,
-        &axis_aligned.cal,
-        gravity,
-        &NormLmOptions::default(),
-    )
-    .map_or(axis_aligned.cal, |f| f.cal);
-    let coverage = measure_coverage(
-        &observations.points,
-        Some(&pose_mean_noise(poses)),
-        &general,
-        gravity,
-        EllipsoidModel::General,
-    );
-    let why = if coverage.max_relative_sigma.is_finite()
-        && coverage.max_relative_sigma > MAX_RELATIVE_SIGMA
-    {
-        format!(
-            "the {} orientations cannot determine the cross-axis terms to {:.1} % (they leave them uncertain by {:.1} %)",
-            coverage.distinct,
-            100.0 * MAX_RELATIVE_SIGMA,
-            100.0 * coverage.max_relative_sigma
-        )
-    } else if !coverage.max_relative_sigma.is_finite() {
-        format!(
-            "the {} orientations cannot determine the cross-axis terms at all",
-            coverage.distinct
-        )
-    } else {
-        format!("lm was refused ({reason})")
-    };
-    (
-        Ok(axis_aligned),
-        Some(format!(
-            "{why}; fitted the axis-aligned model (scales and offsets, 6 unknowns) instead; record more tilted poses for a full fit"
-        )),
-    )
-}
-
 /// Fit one sensor that passed the input checks with `method` (`None`: the default chain).
 fn fit_sensor(
     args: &FitArgs,
@@ -255,7 +175,9 @@ fn fit_sensor(
                 result.output_unit = "m/s²".to_string();
                 let (fit, note) = match method {
                     Some(m) => (methods::fit_accel(m, &poses, args.gravity), None),
-                    None => default_accel_fit(&poses, args.gravity, still.directions.len()),
+                    None => {
+                        methods::default_accel_fit(&poses, args.gravity, still.directions.len())
+                    }
                 };
                 result.notes.extend(note);
                 if let Ok(f) = &fit {
@@ -314,7 +236,7 @@ fn gyro_scale_fit(
     scale: f64,
 ) -> Result<Fit, FitError> {
     let accel_poses = still.poses(Sensor::Accel);
-    let (accel, _) = default_accel_fit(&accel_poses, gravity, still.directions.len());
+    let (accel, _) = methods::default_accel_fit(&accel_poses, gravity, still.directions.len());
     imucal::fit::gyro_scale::fit_gyro_scale_recording(recording, still, &accel?.cal, scale)
 }
 

@@ -3,6 +3,8 @@
 //! means), magnetometer methods take samples over many orientations, the gyroscope takes the
 //! still poses. Shared by the command line and the real-data example.
 
+use imucal::fit::norm_lm::{refine_lm, NormLmOptions, NormObservations};
+use imucal::fit::validate::{measure_coverage, EllipsoidModel, MAX_RELATIVE_SIGMA};
 use imucal::fit::{self, Fit, FitError, Method, Pose, Vec3};
 
 /// Methods offered for the accelerometer, the default first.
@@ -142,4 +144,82 @@ pub fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
     (0..max)
         .filter_map(|i| points.get(i * points.len() / max).copied())
         .collect()
+}
+
+/// Unknowns of the norm model with the upper-triangular gauge: it needs this many distinct
+/// directions.
+pub const NORM_MODEL_UNKNOWNS: usize = 9;
+
+/// Per-axis one-sigma noise of each pose mean, in data units (for the coverage measure).
+pub fn pose_mean_noise(poses: &[Pose]) -> Vec<f64> {
+    poses
+        .iter()
+        .map(|p| (p.var_of_mean().sum() / 3.0).sqrt())
+        .collect()
+}
+
+/// The default accelerometer fit and, when it is not `lm`, why: the six-position method when
+/// there are fewer distinct directions than the norm model's unknowns, and the axis-aligned
+/// model (6 unknowns) when `lm` is refused because the poses cannot determine the cross-axis
+/// terms.
+pub fn default_accel_fit(
+    poses: &[Pose],
+    gravity: f64,
+    directions: usize,
+) -> (Result<Fit, FitError>, Option<String>) {
+    if directions < NORM_MODEL_UNKNOWNS {
+        return (
+            fit_accel(Method::SixPosition, poses, gravity),
+            Some(format!(
+                "lm needs at least {NORM_MODEL_UNKNOWNS} distinct directions and {directions} were found, so the six-position method was used"
+            )),
+        );
+    }
+    let reason = match fit_accel(Method::Lm, poses, gravity) {
+        Err(FitError::Underdetermined(reason)) => reason,
+        other => return (other, None),
+    };
+    let refusal = FitError::Underdetermined(reason.clone());
+    let Ok(axis_aligned) = fit_accel(Method::AxisAligned, poses, gravity) else {
+        return (Err(refusal), None);
+    };
+    // Judge the general model as lm did, through its own (unchecked) solution where it converges.
+    let observations = NormObservations::from_poses(poses, &axis_aligned.cal.b);
+    let general = refine_lm(
+        &observations,
+        &axis_aligned.cal,
+        gravity,
+        &NormLmOptions::default(),
+    )
+    .map_or(axis_aligned.cal, |f| f.cal);
+    let coverage = measure_coverage(
+        &observations.points,
+        Some(&pose_mean_noise(poses)),
+        &general,
+        gravity,
+        EllipsoidModel::General,
+    );
+    let why = if coverage.max_relative_sigma.is_finite()
+        && coverage.max_relative_sigma > MAX_RELATIVE_SIGMA
+    {
+        format!(
+            "the {} orientations cannot determine the cross-axis terms to {:.1} % (they leave them uncertain by {:.1} %)",
+            coverage.distinct,
+            100.0 * MAX_RELATIVE_SIGMA,
+            100.0 * coverage.max_relative_sigma
+        )
+    } else if !coverage.max_relative_sigma.is_finite() {
+        format!(
+            "the {} orientations cannot determine the cross-axis terms at all",
+            coverage.distinct
+        )
+    } else {
+        format!("lm was refused ({reason})")
+    };
+    (
+        Ok(axis_aligned),
+        Some(format!(
+            "{why}; fitted the axis-aligned model (scales and offsets, 6 unknowns) instead; record more tilted poses for a full fit"
+        )),
+    )
 }

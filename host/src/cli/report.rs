@@ -24,10 +24,6 @@ pub const EXAMPLES: &str = "Examples:\n  \
     imucal report data/real/sf_mpu6050_hmc5883l_full_sphere.csv --mag-unit gauss --location 46.05,14.51 -o report/\n  \
     imucal report motioncal_log.txt --format motioncal --rate 100 -o report/";
 
-/// Unknowns of the norm model with the upper-triangular gauge, as in `imucal fit`: fewer distinct
-/// directions than this and the accelerometer falls back to the six-position method.
-const NORM_MODEL_UNKNOWNS: usize = 9;
-
 /// Arguments of `imucal report`.
 #[derive(Debug, Args)]
 pub struct ReportArgs {
@@ -116,16 +112,12 @@ fn from_recording(
         bar.set_message("fitting the accelerometer and gyroscope");
         if recording.has(Sensor::Accel) {
             let poses = still.poses(Sensor::Accel);
-            let method = if still.directions.len() < NORM_MODEL_UNKNOWNS {
-                data.notes.push(format!(
-                    "accelerometer: {} distinct directions (< {NORM_MODEL_UNKNOWNS}), so the six-position method was used",
-                    still.directions.len()
-                ));
-                Method::SixPosition
-            } else {
-                methods::ACCEL_METHODS[0]
-            };
-            match methods::fit_accel(method, &poses, args.gravity) {
+            let (fit, note) =
+                methods::default_accel_fit(&poses, args.gravity, still.directions.len());
+            if let Some(note) = note {
+                data.notes.push(format!("accelerometer: {note}"));
+            }
+            match fit {
                 Ok(fit) => {
                     let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
                     // Raw readings in m/s²; counts are scaled so that their mean norm is g.
