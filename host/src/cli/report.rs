@@ -46,6 +46,10 @@ pub struct ReportArgs {
     /// Magnetometer fits use at most this many samples, evenly thinned (0 = all).
     #[arg(long, default_value_t = 2000)]
     pub max_mag_samples: usize,
+    /// History database whose records of the session's board are plotted over time
+    /// (default: `$IMUCAL_DB`, else the default file when it exists).
+    #[arg(long, value_name = "URL")]
+    pub db: Option<String>,
 }
 
 fn progress(steps: u64) -> ProgressBar {
@@ -282,6 +286,12 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
                 data.notes
                     .push(RadiusCheck::new(mean_radius(&mag.raw, &centre), field).sentence());
             }
+        }
+    }
+    if is_session {
+        match super::history::report_figures(args.db.as_deref(), path) {
+            Ok(figures) => data.history = figures,
+            Err(note) => data.notes.push(note),
         }
     }
     bar.set_message("drawing the plots");
