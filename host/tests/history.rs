@@ -87,7 +87,9 @@ fn changes_since_the_previous_calibration_are_in_combined_sigma() {
         after.recorded_unix_ms += 86_400_000;
         // Offset moved by 0.05 m/s²; σ 1 mg·g before and 2 mg·g after.
         after.params.accel.b[0] += 0.05;
-        after.sigma.insert("accel.b.x".into(), 2.0 * before.sigma["accel.b.x"]);
+        after
+            .sigma
+            .insert("accel.b.x".into(), 2.0 * before.sigma["accel.b.x"]);
         store.record(&before).expect("write");
         store.record(&after).expect("write");
         let history = device_changes(store.records(None).expect("read"));

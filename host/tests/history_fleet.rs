@@ -193,6 +193,9 @@ fn fleet_and_history_commands_list_outliers_and_changes_as_json() {
         let change = &records[1]["changes"][0];
         assert_eq!(change["parameter"], "accel.b.y");
         let sigma = change["change_sigma"].as_f64().expect("σ");
-        assert!((sigma + 2.0 / (2f64.sqrt() * 9.806_65e-3)).abs() < 1.0, "{sigma}");
+        assert!(
+            (sigma + 2.0 / (2f64.sqrt() * 9.806_65e-3)).abs() < 1.0,
+            "{sigma}"
+        );
     }
 }

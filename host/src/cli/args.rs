@@ -45,10 +45,14 @@ pub enum Command {
     #[command(after_help = super::export::EXAMPLES)]
     Export(super::export::ExportArgs),
     /// Every recorded calibration of a board (or all), with each parameter's change in σ units.
-    #[command(after_help = "Examples:\n  imucal history\n  imucal history 00000000000000000000000000001234 --json\n  imucal history --db postgres://imucal@db.plant/line")]
+    #[command(
+        after_help = "Examples:\n  imucal history\n  imucal history 00000000000000000000000000001234 --json\n  imucal history --db postgres://imucal@db.plant/line"
+    )]
     History(super::history::HistoryArgs),
     /// Fleet statistics per parameter and the boards far outside the fleet, with likely causes.
-    #[command(after_help = "Examples:\n  imucal fleet\n  imucal fleet --db sqlite:///srv/line/history.sqlite --json")]
+    #[command(
+        after_help = "Examples:\n  imucal fleet\n  imucal fleet --db sqlite:///srv/line/history.sqlite --json"
+    )]
     Fleet(super::fleet::FleetArgs),
 }
 

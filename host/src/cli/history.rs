@@ -8,8 +8,7 @@ use std::time::{Duration, UNIX_EPOCH};
 use clap::Args;
 use imucal::history::plot::parameters_over_time;
 use imucal::history::{
-    device_changes, record_calibration, CalibrationRecord, DbLocation, HistoryStore,
-    RecordChanges,
+    device_changes, record_calibration, CalibrationRecord, DbLocation, HistoryStore, RecordChanges,
 };
 
 /// Arguments of `imucal history`.
@@ -77,7 +76,10 @@ pub fn record(args: &RecordArgs, mut record: CalibrationRecord) -> anyhow::Resul
 /// The report's figures of the board calibrated in `session_dir` over its recorded
 /// calibrations (`summary.json` names the board), or a note why there are none. A missing
 /// default database is not created just to be found empty.
-pub fn report_figures(db: Option<&str>, session_dir: &Path) -> Result<Vec<(String, String)>, String> {
+pub fn report_figures(
+    db: Option<&str>,
+    session_dir: &Path,
+) -> Result<Vec<(String, String)>, String> {
     let summary = std::fs::read_to_string(session_dir.join("summary.json"))
         .map_err(|e| format!("no calibration history shown: summary.json unreadable ({e})"))?;
     let summary: serde_json::Value = serde_json::from_str(&summary)

@@ -204,7 +204,10 @@ impl FleetModel {
         }
         let mut parameters = Vec::new();
         for (name, values) in columns {
-            let mut z: Vec<f64> = values.iter().filter_map(|v| transformed(&name, *v)).collect();
+            let mut z: Vec<f64> = values
+                .iter()
+                .filter_map(|v| transformed(&name, *v))
+                .collect();
             if z.len() < options.min_boards {
                 continue;
             }

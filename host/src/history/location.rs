@@ -35,7 +35,10 @@ impl DbLocation {
         if url.starts_with("postgres://") || url.starts_with("postgresql://") {
             return Ok(Self::Postgres(url.to_string()));
         }
-        Err(bad_url(url, "it is neither a sqlite:// nor a postgres:// URL"))
+        Err(bad_url(
+            url,
+            "it is neither a sqlite:// nor a postgres:// URL",
+        ))
     }
 
     /// `--db` if given, else `$IMUCAL_DB`, else the default SQLite file
@@ -125,12 +128,17 @@ mod tests {
     #[test]
     fn other_schemes_are_refused_with_the_accepted_forms_named() {
         let error = DbLocation::parse("mysql://x/y").unwrap_err().to_string();
-        assert!(error.contains("sqlite://") && error.contains("postgres://"), "{error}");
+        assert!(
+            error.contains("sqlite://") && error.contains("postgres://"),
+            "{error}"
+        );
     }
 
     #[test]
     fn passwords_are_not_shown() {
-        let shown = DbLocation::parse("postgres://u:secret@h/db").unwrap().display();
+        let shown = DbLocation::parse("postgres://u:secret@h/db")
+            .unwrap()
+            .display();
         assert_eq!(shown, "postgres://u:***@h/db");
     }
 }

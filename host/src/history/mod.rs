@@ -30,7 +30,8 @@ pub mod tail;
 
 pub use changes::{device_changes, ParameterChange, RecordChanges};
 pub use fleet::{
-    fleet_report, is_outlier_against_fleet, FleetCheck, FleetError, FleetOptions, FleetReport, Finding,
+    fleet_report, is_outlier_against_fleet, Finding, FleetCheck, FleetError, FleetOptions,
+    FleetReport,
 };
 pub use location::DbLocation;
 pub use record::{CalibrationRecord, RecordSource, RecordVerdict, TemperatureSpan};

@@ -9,7 +9,7 @@ use super::schema::{self, ColumnKind, Dialect, SqlValue, COLUMNS, SCHEMA_VERSION
 use super::store::Backend;
 
 /// Key of the advisory lock that serialises schema creation between stations.
-const MIGRATION_LOCK: i64 = 0x1_4D55_CA1;
+const MIGRATION_LOCK: i64 = 0x14D5_5CA1;
 
 /// A PostgreSQL history database.
 pub struct PostgresBackend {

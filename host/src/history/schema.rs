@@ -201,7 +201,10 @@ impl RowReader {
     fn int(&mut self, name: &str) -> Result<i64, HistoryError> {
         match self.next(name)? {
             SqlValue::Int(i) => Ok(i),
-            other => Err(corrupt(self.id, format!("{name} is {other:?}, not a number"))),
+            other => Err(corrupt(
+                self.id,
+                format!("{name} is {other:?}, not a number"),
+            )),
         }
     }
 
@@ -216,7 +219,9 @@ impl RowReader {
     ) -> Result<Option<T>, HistoryError> {
         let id = self.id;
         self.opt_text(name)?
-            .map(|text| serde_json::from_str(&text).map_err(|e| corrupt(id, format!("{name}: {e}"))))
+            .map(|text| {
+                serde_json::from_str(&text).map_err(|e| corrupt(id, format!("{name}: {e}")))
+            })
             .transpose()
     }
 }

@@ -1,35 +1,8 @@
 //! Tail probabilities and quantiles of Student's t distribution, for outlier thresholds that
 //! follow from a stated false-alarm rate. The t CDF is the regularised incomplete beta function
-//! (Abramowitz & Stegun 26.7.1), evaluated by its continued fraction (modified Lentz); ln Γ by
-//! the Lanczos approximation (g = 7, 9 terms; relative error below 1e-13).
+//! (Abramowitz & Stegun 26.7.1), evaluated by its continued fraction (modified Lentz).
 
-/// ln Γ(x) for x > 0.
-fn ln_gamma(x: f64) -> f64 {
-    const G: f64 = 7.0;
-    const C: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        // Reflection: Γ(x)Γ(1−x) = π / sin(πx).
-        let pi = std::f64::consts::PI;
-        return (pi / (pi * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let t = x + G + 0.5;
-    let sum = C[1..]
-        .iter()
-        .enumerate()
-        .fold(C[0], |acc, (i, c)| acc + c / (x + i as f64 + 1.0));
-    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + sum.ln()
-}
+use crate::analysis::noise::ln_gamma;
 
 /// Continued fraction of the incomplete beta function (modified Lentz).
 fn beta_fraction(a: f64, b: f64, x: f64) -> f64 {
@@ -112,13 +85,6 @@ pub fn t_upper_quantile(upper: f64, dof: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn ln_gamma_matches_factorials() {
-        // Γ(n) = (n−1)!; Γ(1/2) = √π.
-        assert!((ln_gamma(5.0) - 24f64.ln()).abs() < 1e-12);
-        assert!((ln_gamma(0.5) - std::f64::consts::PI.sqrt().ln()).abs() < 1e-12);
-    }
 
     #[test]
     fn t_tail_matches_tables() {

@@ -83,7 +83,12 @@ pub fn board_record(seed: u64) -> CalibrationRecord {
     let truth = ImuTruth::draw(seed, &ImuErrorRanges::default(), &[], 100.0, 0.0)
         .expect("default ranges are valid");
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed ^ 0x5eed);
-    let sigma = |prefix: &str| SIGMA.iter().find(|(p, _)| *p == prefix).map_or(0.0, |s| s.1);
+    let sigma = |prefix: &str| {
+        SIGMA
+            .iter()
+            .find(|(p, _)| *p == prefix)
+            .map_or(0.0, |s| s.1)
+    };
     let params = ParamsFile {
         format: PARAMS_FILE_FORMAT,
         created_unix_s: 0,
@@ -110,7 +115,9 @@ pub fn board_record(seed: u64) -> CalibrationRecord {
         record
             .sigma
             .insert(format!("accel.A.{axis}{axis}"), sigma("accel.A"));
-        record.sigma.insert(format!("gyro.b.{axis}"), sigma("gyro.b"));
+        record
+            .sigma
+            .insert(format!("gyro.b.{axis}"), sigma("gyro.b"));
         record.sigma.insert(format!("mag.b.{axis}"), sigma("mag.b"));
         for (name, s) in [
             ("accel", truth.accel.noise_sigma),
