@@ -20,8 +20,8 @@
 use serde::Serialize;
 
 use super::record::CalibrationRecord;
+use super::stats::{median, t_upper_quantile};
 use super::store::{HistoryStore, RecordId, StoredRecord};
-use super::tail::t_upper_quantile;
 use super::HistoryError;
 
 /// Consistency factor of the MAD for the normal distribution: `1/Φ⁻¹(3/4)`.
@@ -147,20 +147,6 @@ pub enum FleetError {
         /// Boards needed.
         needed: usize,
     },
-}
-
-/// Median of `values` (reordered); `None` when empty.
-pub fn median(values: &mut [f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    Some(if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    })
 }
 
 /// Whether a parameter is compared as a logarithm.
@@ -395,13 +381,6 @@ pub fn is_outlier_against_fleet(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn median_of_odd_and_even_counts() {
-        assert_eq!(median(&mut [3.0, 1.0, 2.0]), Some(2.0));
-        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), Some(2.5));
-        assert_eq!(median(&mut []), None);
-    }
 
     #[test]
     fn causes_name_the_part_and_axis() {

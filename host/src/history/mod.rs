@@ -3,7 +3,7 @@
 //!
 //! Storage is SQLite (a file per station, by default `$XDG_DATA_HOME/imucal/history.sqlite`) or
 //! a PostgreSQL server shared by several stations. Both run the same SQL text through one
-//! [`store::Backend`] trait ([`schema`] holds the table, its migration and the statements); only
+//! [`schema::Backend`] trait ([`schema`] holds the table, its migration and the statements); only
 //! the key column and the append-only triggers are written per dialect.
 //!
 //! Crates: `rusqlite` (SQLite compiled in, no system library) and the synchronous `postgres`
@@ -25,8 +25,8 @@ pub mod postgres;
 pub mod record;
 pub mod schema;
 pub mod sqlite;
+pub mod stats;
 pub mod store;
-pub mod tail;
 
 pub use changes::{device_changes, ParameterChange, RecordChanges};
 pub use fleet::{

@@ -5,8 +5,9 @@
 use postgres::types::ToSql;
 use postgres::{Client, NoTls};
 
-use super::schema::{self, ColumnKind, Dialect, SqlValue, COLUMNS, SCHEMA_VERSION, VERSION_TABLE};
-use super::store::Backend;
+use super::schema::{
+    self, Backend, ColumnKind, Dialect, SqlValue, COLUMNS, SCHEMA_VERSION, VERSION_TABLE,
+};
 
 /// Key of the advisory lock that serialises schema creation between stations.
 const MIGRATION_LOCK: i64 = 0x14D5_5CA1;

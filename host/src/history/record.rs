@@ -248,7 +248,7 @@ fn still_noise(poses: &[CapturedPose]) -> BTreeMap<String, f64> {
                 .map(|p| f64::from(variance(&p.stats)[i]))
                 .filter(|v| v.is_finite() && *v > 0.0)
                 .collect();
-            if let Some(median) = super::fleet::median(&mut v) {
+            if let Some(median) = super::stats::median(&mut v) {
                 out.insert(format!("{name}.noise.{axis}"), median.sqrt());
             }
         }

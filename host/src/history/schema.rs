@@ -50,6 +50,17 @@ pub const COLUMNS: [(&str, ColumnKind); 15] = [
     ("verdict_level", ColumnKind::OptText),
 ];
 
+/// What a database connection must do; both databases run the statements of
+/// this module, so the store's logic is shared. Errors are the database's message.
+pub trait Backend {
+    /// Create or upgrade the schema; returns the version found before.
+    fn migrate(&mut self) -> Result<i64, String>;
+    /// Insert one row in [`COLUMNS`] order; returns its key.
+    fn insert(&mut self, row: &[SqlValue]) -> Result<i64, String>;
+    /// Every row (`id` first), or those of one device, oldest first.
+    fn select(&mut self, device: Option<&str>) -> Result<Vec<Vec<SqlValue>>, String>;
+}
+
 /// Which SQL dialect a migration is written for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Dialect {

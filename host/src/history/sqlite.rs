@@ -8,8 +8,7 @@ use std::time::Duration;
 use rusqlite::types::Value;
 use rusqlite::{Connection, TransactionBehavior};
 
-use super::schema::{self, Dialect, SqlValue, SCHEMA_VERSION, VERSION_TABLE};
-use super::store::Backend;
+use super::schema::{self, Backend, Dialect, SqlValue, SCHEMA_VERSION, VERSION_TABLE};
 
 /// How long a write waits for other writers before giving up.
 const BUSY_TIMEOUT: Duration = Duration::from_secs(30);

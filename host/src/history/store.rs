@@ -6,20 +6,9 @@ use serde::Serialize;
 use super::location::DbLocation;
 use super::postgres::PostgresBackend;
 use super::record::CalibrationRecord;
-use super::schema::{self, SqlValue, SCHEMA_VERSION};
+use super::schema::{self, Backend, SCHEMA_VERSION};
 use super::sqlite::SqliteBackend;
 use super::HistoryError;
-
-/// What a database connection must do; both databases run the statements of
-/// [`super::schema`], so the store's logic is shared. Errors are the database's message.
-pub trait Backend {
-    /// Create or upgrade the schema; returns the version found before.
-    fn migrate(&mut self) -> Result<i64, String>;
-    /// Insert one row in [`schema::COLUMNS`] order; returns its key.
-    fn insert(&mut self, row: &[SqlValue]) -> Result<i64, String>;
-    /// Every row (`id` first), or those of one device, oldest first.
-    fn select(&mut self, device: Option<&str>) -> Result<Vec<Vec<SqlValue>>, String>;
-}
 
 /// Key of a stored record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]

@@ -1,8 +1,22 @@
-//! Tail probabilities and quantiles of Student's t distribution, for outlier thresholds that
-//! follow from a stated false-alarm rate. The t CDF is the regularised incomplete beta function
+//! The statistics the history needs: the median, and tail probabilities and quantiles of
+//! Student's t distribution for outlier thresholds that follow from a stated false-alarm rate. The t CDF is the regularised incomplete beta function
 //! (Abramowitz & Stegun 26.7.1), evaluated by its continued fraction (modified Lentz).
 
 use crate::analysis::noise::ln_gamma;
+
+/// Median of `values` (reordered); `None` when empty.
+pub fn median(values: &mut [f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    Some(if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    })
+}
 
 /// Continued fraction of the incomplete beta function (modified Lentz).
 fn beta_fraction(a: f64, b: f64, x: f64) -> f64 {
@@ -85,6 +99,13 @@ pub fn t_upper_quantile(upper: f64, dof: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), Some(2.5));
+        assert_eq!(median(&mut []), None);
+    }
 
     #[test]
     fn t_tail_matches_tables() {
