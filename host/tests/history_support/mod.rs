@@ -64,6 +64,7 @@ fn sensor(truth: &SensorTruth, sigma_b: f64, sigma_a: f64, rng: &mut impl Rng) -
         bias_temp: None,
         scale_temp: None,
         nonlinearity: None,
+        input_unit: None,
     }
 }
 
@@ -105,6 +106,8 @@ pub fn board_record(seed: u64) -> CalibrationRecord {
             gyro_rms: 0.0,
             mag_rms: 0.3 * part_factor(&mut rng),
         },
+        not_fitted: Default::default(),
+        provenance: None,
     };
     let device = format!("{seed:032x}");
     let mut record = CalibrationRecord::new(&device, RecordSource::Guided, params, seed as u32);
