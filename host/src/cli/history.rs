@@ -131,8 +131,9 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{} calibrations in {}",
+        "{} calibration{} in {}",
         history.len(),
+        if history.len() == 1 { "" } else { "s" },
         store.location().display()
     );
     for entry in &history {
