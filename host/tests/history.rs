@@ -219,3 +219,36 @@ fn concurrent_writers_in_separate_processes_lose_no_record() {
         }
     }
 }
+
+#[test]
+fn a_boards_history_plots_each_parameter_group_over_time() {
+    let mut first = board_record(5);
+    first.recorded_unix_ms = 0;
+    let mut second = first.clone();
+    second.recorded_unix_ms = 2 * 86_400_000;
+    second.params.mag.b[0] += 30.0;
+    let location = &databases("plot")[0];
+    let mut store = HistoryStore::open(location).expect("open");
+    store.record(&first).expect("write");
+    store.record(&second).expect("write");
+    let records = store.records(None).expect("read");
+    let series = imucal::history::plot::parameter_series(&records, "mag.b.x");
+    assert_eq!(series.len(), 2);
+    assert_eq!(series[1].0, 2.0, "days since the first calibration");
+    assert!((series[1].1 - series[0].1 - 30.0).abs() < 1e-9);
+    let figures = imucal::history::plot::parameters_over_time(&records).expect("plots");
+    let titles: Vec<&str> = figures.iter().map(|(t, _)| t.as_str()).collect();
+    assert_eq!(
+        titles,
+        [
+            "Accelerometer offset",
+            "Accelerometer gain (diagonal of A)",
+            "Gyroscope offset",
+            "Magnetometer offset",
+            "Magnetometer gain (diagonal of A)"
+        ]
+    );
+    for (title, svg) in &figures {
+        assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{title}");
+    }
+}

@@ -170,13 +170,18 @@ fn print_entry(entry: &RecordChanges, shown: usize) {
             let listed: Vec<String> = entry
                 .changes
                 .iter()
+                .filter(|c| c.change != 0.0)
                 .take(shown)
                 .map(|c| match c.change_sigma {
                     Some(s) => format!("{} {:+.4} ({:+.1}σ)", c.parameter, c.change, s),
                     None => format!("{} {:+.4}", c.parameter, c.change),
                 })
                 .collect();
-            println!("       since #{previous}: {}", listed.join(", "));
+            if listed.is_empty() {
+                println!("       since #{previous}: no parameter changed");
+            } else {
+                println!("       since #{previous}: {}", listed.join(", "));
+            }
         }
     }
 }
