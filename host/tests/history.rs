@@ -249,6 +249,9 @@ fn a_boards_history_plots_each_parameter_group_over_time() {
         ]
     );
     for (title, svg) in &figures {
-        assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{title}");
+        assert!(
+            svg.starts_with("<svg") && svg.contains("polyline"),
+            "{title}"
+        );
     }
 }
