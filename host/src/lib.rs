@@ -7,6 +7,7 @@ pub mod device;
 pub mod export;
 pub mod fit;
 pub mod geomag;
+pub mod history;
 pub mod input_checks;
 pub mod pipeline;
 pub mod recording;

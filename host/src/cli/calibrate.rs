@@ -70,6 +70,9 @@ pub struct CalibrateArgs {
     /// Session directory (default: `imucal-session-<unix time>` here).
     #[arg(long, short = 'o')]
     pub out: Option<PathBuf>,
+    /// Where to record the calibration.
+    #[command(flatten)]
+    pub history: super::history::RecordArgs,
     /// Local gravity, m/s².
     #[arg(long, default_value_t = 9.806_65)]
     pub gravity: f64,
@@ -687,6 +690,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(sim) = &simulated {
         sim.save_truth(&dir.join("truth.json"))?;
     }
+    // Recorded only once the session directory holds the calibration.
+    let mut record =
+        imucal::history::CalibrationRecord::from_session(&summary(&outcome), &outcome.poses);
+    record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    // A failed write is returned after the summary is printed, so nothing is hidden.
+    let recorded = super::history::record(&args.history, record);
     let closed = if args.analyze {
         Some(close_the_loop(
             &mut client,
@@ -739,7 +748,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             dir.join("params.json").display()
         );
     }
-    Ok(())
+    recorded
 }
 
 #[cfg(all(test, feature = "sim"))]
