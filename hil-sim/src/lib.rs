@@ -11,6 +11,8 @@ pub mod error;
 pub mod feed;
 pub mod link_faults;
 pub mod lsm9ds1_chip;
+pub mod motioncal_board;
+pub mod motioncal_serve;
 pub mod physics;
 pub mod poser;
 pub mod recording;

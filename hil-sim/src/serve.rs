@@ -340,7 +340,7 @@ impl Drop for SimHandle {
     }
 }
 
-fn is_not_ready(error: &std::io::Error) -> bool {
+pub(crate) fn is_not_ready(error: &std::io::Error) -> bool {
     matches!(
         error.kind(),
         ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
@@ -349,7 +349,7 @@ fn is_not_ready(error: &std::io::Error) -> bool {
 
 /// Keep `port`'s descriptor out of child processes: a child holding a copy of the master would
 /// keep the pty alive after the board vanishes, so its host would never see the hang-up.
-fn close_on_exec(port: &TTYPort) -> Result<(), ServeError> {
+pub(crate) fn close_on_exec(port: &TTYPort) -> Result<(), ServeError> {
     use std::os::fd::AsRawFd;
     nix::fcntl::fcntl(
         port.as_raw_fd(),
@@ -361,7 +361,7 @@ fn close_on_exec(port: &TTYPort) -> Result<(), ServeError> {
 
 /// Make writes to `port` return `WouldBlock` instead of waiting when the pty can take only part
 /// of a chunk (a ready poll does not promise room for all of it), so the loop never stalls.
-fn never_block(port: &TTYPort) -> Result<(), ServeError> {
+pub(crate) fn never_block(port: &TTYPort) -> Result<(), ServeError> {
     use nix::fcntl::{fcntl, FcntlArg, OFlag};
     use std::os::fd::AsRawFd;
     let fd = port.as_raw_fd();
@@ -607,6 +607,21 @@ pub struct ServeArgs {
     /// Speak this protocol major version at Hello (to try a host against another version).
     #[arg(long = "protocol-major")]
     pub protocol_major: Option<u16>,
+    /// What the board runs: imucal's firmware, or Adafruit's MotionCal calibration sketch
+    /// (prints `Raw:`/`Uni:` lines, stores the 68-byte packet; the link-fault options and the
+    /// guided person do not apply to it).
+    #[arg(long, value_enum, default_value = "imucal")]
+    pub protocol: BoardProtocol,
+}
+
+/// The firmware a served board runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum BoardProtocol {
+    /// imucal's firmware and framed protocol.
+    #[default]
+    Imucal,
+    /// Adafruit's MotionCal calibration sketch.
+    Motioncal,
 }
 
 impl Default for ServeArgs {
@@ -629,6 +644,7 @@ impl Default for ServeArgs {
             delay_rate: 0.05,
             vanish_after_s: None,
             protocol_major: None,
+            protocol: BoardProtocol::Imucal,
         }
     }
 }
@@ -669,34 +685,20 @@ pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
     if let Some(seconds) = args.vanish_after_s {
         crate::error::require_non_negative("--vanish-after-s", seconds)?;
     }
+    if args.protocol == BoardProtocol::Motioncal {
+        return run_motioncal(args, wall_limit);
+    }
     let handle = SimServer::start(args.options())?;
     if let Some(path) = &args.truth {
         write_truth_file(&handle.truth(), path)?;
     }
-    {
-        let mut stdout = std::io::stdout().lock();
-        writeln!(stdout, "{}", handle.port_path())
-            .and_then(|()| stdout.flush())
-            .map_err(ServeError::Io)?;
-    }
-    let (closed, stdin_closed) = mpsc::channel::<()>();
-    if !args.ignore_stdin {
-        std::thread::spawn(move || {
-            // Whatever is typed is ignored; only the end of input matters.
-            let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
-            let _ = closed.send(());
-        });
-    }
-    let started = Instant::now();
-    while handle.is_running()
-        && stdin_closed.try_recv().is_err()
-        && wall_limit.is_none_or(|limit| started.elapsed() < limit)
-    {
+    announce_port(handle.port_path())?;
+    serve_until_done(args, wall_limit, || {
         for note in handle.take_notes() {
             eprintln!("board: {note}");
         }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+        handle.is_running()
+    });
     for note in handle.take_notes() {
         eprintln!("board: {note}");
     }
@@ -709,5 +711,52 @@ pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
         stats.bytes_to_host,
         stats.bytes_from_host
     );
+    Ok(())
+}
+
+/// Prints the port path (one line, flushed).
+fn announce_port(path: &str) -> Result<(), ServeError> {
+    let mut stdout = std::io::stdout().lock();
+    writeln!(stdout, "{path}")
+        .and_then(|()| stdout.flush())
+        .map_err(ServeError::Io)
+}
+
+/// Waits until `still_running` says no, stdin ends (unless ignored) or `wall_limit` passes.
+fn serve_until_done(
+    args: &ServeArgs,
+    wall_limit: Option<Duration>,
+    mut still_running: impl FnMut() -> bool,
+) {
+    let (closed, stdin_closed) = mpsc::channel::<()>();
+    if !args.ignore_stdin {
+        std::thread::spawn(move || {
+            // Whatever is typed is ignored; only the end of input matters.
+            let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+            let _ = closed.send(());
+        });
+    }
+    let started = Instant::now();
+    while still_running()
+        && stdin_closed.try_recv().is_err()
+        && wall_limit.is_none_or(|limit| started.elapsed() < limit)
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `serve --protocol motioncal`: the MotionCal sketch board until done.
+fn run_motioncal(args: &ServeArgs, wall_limit: Option<Duration>) -> Result<(), ServeError> {
+    let handle = crate::motioncal_serve::MotionCalHandle::start(args.seed, args.speed)?;
+    if let Some(path) = &args.truth {
+        let text = serde_json::to_string_pretty(handle.truth())
+            .map_err(|e| ServeError::Io(std::io::Error::other(e)))?;
+        std::fs::write(path, text).map_err(ServeError::Io)?;
+    }
+    announce_port(handle.port_path())?;
+    serve_until_done(args, wall_limit, || handle.is_running());
+    let (stored, sim_s) = (handle.stored_count(), handle.sim_time_s());
+    handle.stop()?;
+    eprintln!("simulated {sim_s:.1} s; {stored} calibration packet(s) stored");
     Ok(())
 }
