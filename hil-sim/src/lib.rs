@@ -5,6 +5,7 @@
 //! it); see [`physics`] for the full reading model and [`effects`] for the hidden effects.
 #![forbid(unsafe_code)]
 
+pub mod bmi270_chip;
 pub mod board;
 pub mod effects;
 pub mod error;
