@@ -14,7 +14,7 @@ use imucal_hil_sim::poser::ScheduleKind;
 use imucal_hil_sim::recording::{simulate_recording, write_csv_file, write_truth_file, SimConfig};
 use imucal_hil_sim::world::TemperatureProfile;
 
-/// A simulated IMU board (LSM9DS1-like accelerometer, gyroscope, magnetometer and thermometer).
+/// A simulated IMU board (LSM9DS1 or BMI270 + BMM150; imucal's firmware or the MotionCal sketch).
 #[derive(Debug, Parser)]
 #[command(
     name = "imucal-hil-sim",

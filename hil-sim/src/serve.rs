@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use serialport::{SerialPort, TTYPort};
 use thiserror::Error;
 
-use crate::board::{BoardConfig, BoardError, PersonSchedule, SimBoard};
+use crate::board::{BoardConfig, BoardError, PersonSchedule, SensorChip, SimBoard};
 use crate::effects::EffectRequest;
 use crate::error::SimError;
 use crate::link_faults::{FaultStats, FaultyLink, LinkFaults, ParamTamper};
@@ -612,6 +612,10 @@ pub struct ServeArgs {
     /// guided person do not apply to it).
     #[arg(long, value_enum, default_value = "imucal")]
     pub protocol: BoardProtocol,
+    /// Sensor chip of a board running imucal's firmware: lsm9ds1 (Nano 33 BLE Sense) or bmi270
+    /// (BMI270 + BMM150, Nano 33 BLE Sense Rev2).
+    #[arg(long, value_enum, default_value = "lsm9ds1")]
+    pub chip: SensorChip,
 }
 
 /// The firmware a served board runs.
@@ -645,6 +649,7 @@ impl Default for ServeArgs {
             vanish_after_s: None,
             protocol_major: None,
             protocol: BoardProtocol::Imucal,
+            chip: SensorChip::Lsm9ds1,
         }
     }
 }
@@ -658,6 +663,7 @@ impl ServeArgs {
         options.schedule = self.schedule;
         options.board.max_hold_s = self.max_hold_s;
         options.board.poser.tremor = !self.no_tremor;
+        options.board.sensor = self.chip;
         options.faults = LinkFaults {
             drop_rate: self.drop_rate,
             flip_rate: self.flip_rate,
