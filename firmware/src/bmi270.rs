@@ -129,7 +129,10 @@ pub enum Error<E> {
 impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::Bus(e) => write!(f, "I²C bus error {e:?}; check the sensor bus wiring and power"),
+            Self::Bus(e) => write!(
+                f,
+                "I²C bus error {e:?}; check the sensor bus wiring and power"
+            ),
             Self::WrongChipId { found } => write!(
                 f,
                 "BMI270 CHIP_ID reads {found:#04x}, expected 0x24; is this a Rev2 board?"
@@ -177,7 +180,7 @@ impl<I2C: I2c, D: DelayNs> Bmi270Bmm150<I2C, D> {
         self.initialised = false;
         let file = self.config.config_file;
         let burst = self.config.max_burst & !1;
-        if file.is_empty() || file.len() % 2 != 0 || burst < 2 {
+        if file.is_empty() || file.len() & 1 == 1 || burst < 2 {
             return Err(Error::BadConfigFile);
         }
         let found = self.read_u8(reg::CHIP_ID)?;
@@ -194,10 +197,7 @@ impl<I2C: I2c, D: DelayNs> Bmi270Bmm150<I2C, D> {
             self.i2c
                 .transaction(
                     ADDRESS,
-                    &mut [
-                        Operation::Write(&[reg::INIT_DATA]),
-                        Operation::Write(chunk),
-                    ],
+                    &mut [Operation::Write(&[reg::INIT_DATA]), Operation::Write(chunk)],
                 )
                 .map_err(Error::Bus)?;
         }

@@ -162,7 +162,8 @@ impl Bmi270Chip {
     fn data_byte(&self, register: u8) -> u8 {
         let pwr = self.regs[usize::from(reg::PWR_CTRL)];
         let acc_fs_g = f64::from(2u8 << (self.regs[usize::from(reg::ACC_RANGE)] & 0x03));
-        let gyr_fs_dps = 2000.0 / f64::from(1u8 << (self.regs[usize::from(reg::GYR_RANGE)] & 0x07).min(4));
+        let gyr_fs_dps =
+            2000.0 / f64::from(1u8 << (self.regs[usize::from(reg::GYR_RANGE)] & 0x07).min(4));
         let word = |value: i16, high: bool| value.to_le_bytes()[usize::from(high)];
         let on = |bit: u8| self.operational() && pwr & (1 << bit) != 0;
         match register {

@@ -8,11 +8,11 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use serialport::{SerialPort, TTYPort};
+use serialport::TTYPort;
 
 use crate::motioncal_board::{MotionCalBoard, StoredCalibration};
 use crate::physics::ImuTruth;
-use crate::serve::{close_on_exec, is_not_ready, never_block, ServeError};
+use crate::serve::{is_not_ready, open_pty, ServeError};
 
 /// Longest sleep of the loop.
 const MAX_SLEEP: Duration = Duration::from_millis(1);
@@ -45,21 +45,9 @@ impl MotionCalHandle {
             return Err(ServeError::InvalidSpeed(speed));
         }
         let board = MotionCalBoard::new(seed)?;
-        let truth = board.truth().clone();
+        let truth = *board.truth();
         let schedule_s = board.schedule_duration_s();
-        let (mut master, slave) = TTYPort::pair().map_err(ServeError::Pty)?;
-        close_on_exec(&master)?;
-        close_on_exec(&slave)?;
-        never_block(&master)?;
-        master
-            .set_timeout(Duration::ZERO)
-            .map_err(ServeError::Pty)?;
-        let port_path = slave.name().ok_or_else(|| {
-            ServeError::Pty(serialport::Error::new(
-                serialport::ErrorKind::Unknown,
-                "the pseudo-terminal has no slave path",
-            ))
-        })?;
+        let (master, slave, port_path) = open_pty()?;
         let stop = Arc::new(AtomicBool::new(false));
         let observed = Arc::new(Mutex::new(Observed::default()));
         let (thread_stop, thread_observed) = (Arc::clone(&stop), Arc::clone(&observed));

@@ -168,19 +168,7 @@ impl SimServer {
         };
         let board = SimBoard::new(options.board_config())?;
         let truth = board.truth();
-        let (mut master, slave) = TTYPort::pair().map_err(ServeError::Pty)?;
-        close_on_exec(&master)?;
-        close_on_exec(&slave)?;
-        never_block(&master)?;
-        master
-            .set_timeout(Duration::ZERO)
-            .map_err(ServeError::Pty)?;
-        let port_path = slave.name().ok_or_else(|| {
-            ServeError::Pty(serialport::Error::new(
-                serialport::ErrorKind::Unknown,
-                "the pseudo-terminal has no slave path",
-            ))
-        })?;
+        let (master, slave, port_path) = open_pty()?;
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
             vanish: AtomicBool::new(false),
@@ -340,6 +328,25 @@ impl Drop for SimHandle {
     }
 }
 
+/// A pseudo-terminal for a simulated board: the master (non-blocking, kept out of child
+/// processes), the slave, and the slave's path for the host to open.
+pub(crate) fn open_pty() -> Result<(TTYPort, TTYPort, String), ServeError> {
+    let (mut master, slave) = TTYPort::pair().map_err(ServeError::Pty)?;
+    close_on_exec(&master)?;
+    close_on_exec(&slave)?;
+    never_block(&master)?;
+    master
+        .set_timeout(Duration::ZERO)
+        .map_err(ServeError::Pty)?;
+    let port_path = slave.name().ok_or_else(|| {
+        ServeError::Pty(serialport::Error::new(
+            serialport::ErrorKind::Unknown,
+            "the pseudo-terminal has no slave path",
+        ))
+    })?;
+    Ok((master, slave, port_path))
+}
+
 pub(crate) fn is_not_ready(error: &std::io::Error) -> bool {
     matches!(
         error.kind(),
@@ -349,7 +356,7 @@ pub(crate) fn is_not_ready(error: &std::io::Error) -> bool {
 
 /// Keep `port`'s descriptor out of child processes: a child holding a copy of the master would
 /// keep the pty alive after the board vanishes, so its host would never see the hang-up.
-pub(crate) fn close_on_exec(port: &TTYPort) -> Result<(), ServeError> {
+fn close_on_exec(port: &TTYPort) -> Result<(), ServeError> {
     use std::os::fd::AsRawFd;
     nix::fcntl::fcntl(
         port.as_raw_fd(),
@@ -361,7 +368,7 @@ pub(crate) fn close_on_exec(port: &TTYPort) -> Result<(), ServeError> {
 
 /// Make writes to `port` return `WouldBlock` instead of waiting when the pty can take only part
 /// of a chunk (a ready poll does not promise room for all of it), so the loop never stalls.
-pub(crate) fn never_block(port: &TTYPort) -> Result<(), ServeError> {
+fn never_block(port: &TTYPort) -> Result<(), ServeError> {
     use nix::fcntl::{fcntl, FcntlArg, OFlag};
     use std::os::fd::AsRawFd;
     let fd = port.as_raw_fd();

@@ -14,7 +14,9 @@ impl DelayNs for NoDelay {
 
 /// A stand-in configuration image (Bosch's file is not shipped): any bytes the chip expects.
 fn image() -> Vec<u8> {
-    (0..CONFIG_IMAGE_LEN).map(|i| (i * 7 + i / 256) as u8).collect()
+    (0..CONFIG_IMAGE_LEN)
+        .map(|i| (i * 7 + i / 256) as u8)
+        .collect()
 }
 
 fn leaked(bytes: Vec<u8>) -> &'static [u8] {
@@ -33,8 +35,13 @@ fn driver_loads_the_configuration_and_reads_what_the_chip_senses() {
     imu.init().expect("init succeeds");
     let (chip, _) = imu.release();
     assert_eq!(chip.internal_status(), bmi270::STATUS_INIT_OK);
-    chip.set_physical([0.5, -9.80665, 2.0], [0.1, -0.2, 1.5], [20.0, -35.5, 41.1], 30.0)
-        .unwrap();
+    chip.set_physical(
+        [0.5, -9.80665, 2.0],
+        [0.1, -0.2, 1.5],
+        [20.0, -35.5, 41.1],
+        30.0,
+    )
+    .unwrap();
     let mut imu = Bmi270Bmm150::new(&mut *chip, NoDelay, config);
     // A fresh driver must init again before reading.
     assert_eq!(imu.read(), Err(Error::NotInitialised));
@@ -45,7 +52,11 @@ fn driver_loads_the_configuration_and_reads_what_the_chip_senses() {
     let check = |counts: [i16; 3], per: f32, truth: [f64; 3]| {
         for i in 0..3 {
             let got = f64::from(counts[i]) * f64::from(per);
-            assert!((got - truth[i]).abs() <= 0.5 * f64::from(per) + 1e-9, "{got} vs {}", truth[i]);
+            assert!(
+                (got - truth[i]).abs() <= 0.5 * f64::from(per) + 1e-9,
+                "{got} vs {}",
+                truth[i]
+            );
         }
     };
     check(sample.accel, s.accel_mps2_per_count, [0.5, -9.80665, 2.0]);

@@ -92,7 +92,6 @@ fn run_calibration(seed: u64, chip: SensorChip) -> (SimHandle, DeviceClient, Ses
     (sim, client, outcome)
 }
 
-
 /// The session's fit matches the board's truth and meets the product's at-rest targets.
 fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
     let truth = sim.truth();
@@ -144,7 +143,10 @@ fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
     );
 
     // At rest: the targets of the product, and a clear improvement over the raw readings.
-    let after = outcome.after.as_ref().expect("the calibrated rest measurement");
+    let after = outcome
+        .after
+        .as_ref()
+        .expect("the calibrated rest measurement");
     assert!(
         after.accel_error_mg < 2.0,
         "|a| error {:.3} mg",
@@ -174,7 +176,10 @@ fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
 
     assert_calibrated_to_truth(&sim, &outcome);
     let fit = &outcome.fit;
-    let after = outcome.after.as_ref().expect("the calibrated rest measurement");
+    let after = outcome
+        .after
+        .as_ref()
+        .expect("the calibrated rest measurement");
 
     // The set survives a power cycle.
     sim.reboot().expect("the board reboots");
@@ -243,7 +248,10 @@ fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
 fn an_unattended_session_calibrates_the_simulated_rev2_board_with_bmi270_and_bmm150() {
     let (sim, _client, outcome) = run_calibration(2025, SensorChip::Bmi270);
     assert_calibrated_to_truth(&sim, &outcome);
-    let after = outcome.after.as_ref().expect("the calibrated rest measurement");
+    let after = outcome
+        .after
+        .as_ref()
+        .expect("the calibrated rest measurement");
     eprintln!(
         "BMI270/BMM150 session: {:.1} s simulated; after: |a| {:.3} mg, |m| {:.3} %, gyro {:.4} °/s",
         outcome.session_seconds, after.accel_error_mg, after.mag_error_pct, after.gyro_rate_dps

@@ -83,7 +83,7 @@ fn exported_motioncal_packet_is_byte_exact_to_the_documented_layout() {
         0.123, -0.0456, 0.0789, // accel zero-g, m/s²
         0.0123, -0.0071, 0.0034, // gyro zero-rate, rad/s
         12.5, -30.25, 7.125, // hard iron, µT
-        48.5, // field, µT
+        48.5,  // field, µT
         0.97, 1.031, 0.994, // soft iron diagonal
         0.0, 0.0, 0.0, // soft iron [0][1], [0][2], [1][2]
     ]);
@@ -116,11 +116,11 @@ fn triangular_magnetometer_matrix_is_sent_as_the_symmetric_square_root_of_ata() 
     let a = set.mag.a.map(|r| r.map(f64::from));
     let ata = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| a[k][i] * a[k][j]).sum()));
     let s = sqrt_by_iteration(ata);
-    for r in 0..3 {
-        for c in 0..3 {
+    for (r, row) in s.iter().enumerate() {
+        for (c, expected) in row.iter().enumerate() {
             // f32 storage: about 1e-7 relative.
             let got = f64::from(decoded.mag_softiron[r][c]);
-            assert!((got - s[r][c]).abs() < 2e-7, "[{r}][{c}] {got} vs {}", s[r][c]);
+            assert!((got - expected).abs() < 2e-7, "[{r}][{c}] {got} vs {expected}");
         }
     }
     assert_eq!(decoded.mag_hardiron, set.mag.b);
@@ -135,7 +135,12 @@ fn adafruit_json_has_the_flash_backend_keys_and_reads_back() {
     export(&params, "adafruit-json", &out);
     let text = std::fs::read_to_string(&out).unwrap();
     let doc: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
-    let keys: Vec<&str> = doc.as_object().unwrap().keys().map(String::as_str).collect();
+    let keys: Vec<&str> = doc
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(String::as_str)
+        .collect();
     for key in [
         "mag_hardiron",
         "mag_softiron",

@@ -25,12 +25,22 @@ fn fit_sent_to_the_simulated_sketch_board_is_echoed_and_stored_exactly() {
     let readings = client
         .collect_readings(count, Duration::from_secs(5))
         .expect("the board streams readings");
-    assert!(client.has_unified_lines(), "readings should come from Uni: lines");
+    assert!(
+        client.has_unified_lines(),
+        "readings should come from Uni: lines"
+    );
     assert_eq!(client.malformed_lines(), 0);
 
     let mag: Vec<Vec3> = readings.iter().map(|r| Vec3::from(r.mag)).collect();
     let field = mag.iter().map(|m| m.norm()).sum::<f64>() / mag.len() as f64;
-    let fit = fit_li(&mag, field, LiOptions { subtract_mean: true }).expect("mag fit");
+    let fit = fit_li(
+        &mag,
+        field,
+        LiOptions {
+            subtract_mean: true,
+        },
+    )
+    .expect("mag fit");
     // The schedule opens with a 4 s hold; its first 3 s give the gyro offset.
     let still = &readings[..300];
     let gyro_b = still.iter().map(|r| Vec3::from(r.gyro)).sum::<Vec3>() / still.len() as f64;
@@ -46,7 +56,11 @@ fn fit_sent_to_the_simulated_sketch_board_is_echoed_and_stored_exactly() {
         .send_calibration(&sent, Duration::from_secs(10))
         .expect("the board echoes the calibration");
     // Cal2 prints 4 decimals, Cal1 3: the echo agrees within those.
-    assert!(echo.max_difference <= 5e-4 + 1e-4, "{}", echo.max_difference);
+    assert!(
+        echo.max_difference <= 5e-4 + 1e-4,
+        "{}",
+        echo.max_difference
+    );
 
     let stored = handle.eeprom().expect("the EEPROM holds the packet");
     assert_eq!(handle.stored_count(), 1);
@@ -62,7 +76,11 @@ fn fit_sent_to_the_simulated_sketch_board_is_echoed_and_stored_exactly() {
     let truth = handle.truth().mag.b();
     for i in 0..3 {
         let fitted = f64::from(sent.mag_hardiron[i]);
-        assert!((fitted - truth[i]).abs() < 1.0, "axis {i}: {fitted} vs {}", truth[i]);
+        assert!(
+            (fitted - truth[i]).abs() < 1.0,
+            "axis {i}: {fitted} vs {}",
+            truth[i]
+        );
     }
     // Applied as the library does, the field magnitude is constant within 1 % over the tumble.
     let norms: Vec<f64> = readings
@@ -70,9 +88,8 @@ fn fit_sent_to_the_simulated_sketch_board_is_echoed_and_stored_exactly() {
         .map(|r| Vec3::from(sent.apply(r.accel, r.gyro, r.mag)[2]).norm())
         .collect();
     let mean = norms.iter().sum::<f64>() / norms.len() as f64;
-    let spread = (norms.iter().map(|n| (n - mean).powi(2)).sum::<f64>() / norms.len() as f64)
-        .sqrt()
-        / mean;
+    let spread =
+        (norms.iter().map(|n| (n - mean).powi(2)).sum::<f64>() / norms.len() as f64).sqrt() / mean;
     assert!(spread < 0.01, "calibrated field spread {spread}");
     let hard_iron_error = (0..3)
         .map(|i| (f64::from(sent.mag_hardiron[i]) - truth[i]).abs())

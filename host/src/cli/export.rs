@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use imucal::device::ParamsFile;
 use imucal::compat::{self, encode_packet, AdafruitCalibration};
+use imucal::device::ParamsFile;
 use imucal::export::{export, ExportFormat};
 use imucal_protocol::CalibrationSet;
 

@@ -32,7 +32,7 @@ pub fn symmetric_gauge(a: &[[f32; 3]; 3]) -> Result<SymmetricGauge, CompatError>
     let eigen = SymmetricEigen::new(a.transpose() * a);
     let largest = eigen.eigenvalues.max();
     // Relative to the largest, an eigenvalue below f64 round-off means A is singular.
-    if !(largest > 0.0) || eigen.eigenvalues.min() <= largest * 1e-12 {
+    if !largest.is_finite() || largest <= 0.0 || eigen.eigenvalues.min() <= largest * 1e-12 {
         return Err(CompatError::DegenerateMagnetometer);
     }
     let root = eigen.eigenvalues.map(f64::sqrt);
@@ -67,7 +67,11 @@ mod tests {
         let gauge = symmetric_gauge(&a).unwrap();
         // f32 storage of A limits the agreement to about 1e-7 relative.
         assert!((gauge.symmetric - s).abs().max() < 1e-6);
-        assert!((gauge.rotation_deg - 7.0).abs() < 1e-4, "{}", gauge.rotation_deg);
+        assert!(
+            (gauge.rotation_deg - 7.0).abs() < 1e-4,
+            "{}",
+            gauge.rotation_deg
+        );
     }
 
     #[test]
@@ -75,7 +79,10 @@ mod tests {
         let a = [[1.2, 0.1, -0.05], [0.0, 0.9, 0.07], [0.0, 0.0, 1.05]];
         let gauge = symmetric_gauge(&a).unwrap();
         let a64 = Matrix3::from_fn(|r, c| f64::from(a[r][c]));
-        for u in [Vector3::new(30.0, -10.0, 5.0), Vector3::new(-3.0, 40.0, 22.0)] {
+        for u in [
+            Vector3::new(30.0, -10.0, 5.0),
+            Vector3::new(-3.0, 40.0, 22.0),
+        ] {
             let rel = ((gauge.symmetric * u).norm() - (a64 * u).norm()).abs() / (a64 * u).norm();
             assert!(rel < 1e-12, "{rel}");
         }
@@ -84,6 +91,9 @@ mod tests {
     #[test]
     fn singular_matrix_is_refused() {
         let a = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]];
-        assert_eq!(symmetric_gauge(&a), Err(CompatError::DegenerateMagnetometer));
+        assert_eq!(
+            symmetric_gauge(&a),
+            Err(CompatError::DegenerateMagnetometer)
+        );
     }
 }

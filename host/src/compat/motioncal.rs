@@ -189,7 +189,11 @@ impl SketchReading {
         Self {
             accel: [at(0, accel), at(1, accel), at(2, accel)],
             gyro: [at(3, gyro), at(4, gyro), at(5, gyro)],
-            mag: [at(6, UT_PER_COUNT), at(7, UT_PER_COUNT), at(8, UT_PER_COUNT)],
+            mag: [
+                at(6, UT_PER_COUNT),
+                at(7, UT_PER_COUNT),
+                at(8, UT_PER_COUNT),
+            ],
         }
     }
 
@@ -246,7 +250,10 @@ fn fields<T: std::str::FromStr, const N: usize>(
     }
     let values: Vec<T> = parts
         .iter()
-        .map(|p| p.parse().map_err(|_| error(format!("`{p}` is not a number"))))
+        .map(|p| {
+            p.parse()
+                .map_err(|_| error(format!("`{p}` is not a number")))
+        })
         .collect::<Result<_, _>>()?;
     values
         .try_into()
@@ -268,29 +275,26 @@ fn finite<const N: usize>(
     }
 }
 
+/// The `N` finite numbers after `tag`.
+fn numbers<const N: usize>(
+    tag: &'static str,
+    line: &str,
+    body: &str,
+) -> Result<[f64; N], LineError> {
+    finite(tag, line, fields(tag, line, body)?)
+}
+
 /// Reads one line (without its line ending).
 pub fn parse_line(line: &str) -> Result<SketchLine, LineError> {
     let line = line.trim_matches(|c| c == '\r' || c == '\n');
     if let Some(body) = line.strip_prefix("Raw:") {
         Ok(SketchLine::Raw(fields("Raw:", line, body)?))
     } else if let Some(body) = line.strip_prefix("Uni:") {
-        Ok(SketchLine::Uni(finite(
-            "Uni:",
-            line,
-            fields("Uni:", line, body)?,
-        )?))
+        Ok(SketchLine::Uni(numbers("Uni:", line, body)?))
     } else if let Some(body) = line.strip_prefix("Cal1:") {
-        Ok(SketchLine::Cal1(finite(
-            "Cal1:",
-            line,
-            fields("Cal1:", line, body)?,
-        )?))
+        Ok(SketchLine::Cal1(numbers("Cal1:", line, body)?))
     } else if let Some(body) = line.strip_prefix("Cal2:") {
-        Ok(SketchLine::Cal2(finite(
-            "Cal2:",
-            line,
-            fields("Cal2:", line, body)?,
-        )?))
+        Ok(SketchLine::Cal2(numbers("Cal2:", line, body)?))
     } else {
         Ok(SketchLine::Text(line.to_owned()))
     }
@@ -351,7 +355,10 @@ mod tests {
     #[test]
     fn raw_line_with_a_missing_value_is_refused_with_its_text() {
         let error = parse_line("Raw:1,2,3,4,5,6,7,8").unwrap_err();
-        assert!(error.to_string().contains("8 values, expected 9"), "{error}");
+        assert!(
+            error.to_string().contains("8 values, expected 9"),
+            "{error}"
+        );
         assert!(parse_line("Uni:1,2,3,4,5,6,7,8,nan").is_err());
     }
 

@@ -35,7 +35,9 @@ pub enum MotionCalError {
     #[error(transparent)]
     Port(#[from] DeviceError),
     /// Reading or writing failed.
-    #[error("the serial link failed ({0}); check the cable and that no other program has the port")]
+    #[error(
+        "the serial link failed ({0}); check the cable and that no other program has the port"
+    )]
     Io(#[from] std::io::Error),
     /// Nothing usable arrived in time.
     #[error(
