@@ -120,7 +120,10 @@ fn triangular_magnetometer_matrix_is_sent_as_the_symmetric_square_root_of_ata() 
         for (c, expected) in row.iter().enumerate() {
             // f32 storage: about 1e-7 relative.
             let got = f64::from(decoded.mag_softiron[r][c]);
-            assert!((got - expected).abs() < 2e-7, "[{r}][{c}] {got} vs {expected}");
+            assert!(
+                (got - expected).abs() < 2e-7,
+                "[{r}][{c}] {got} vs {expected}"
+            );
         }
     }
     assert_eq!(decoded.mag_hardiron, set.mag.b);
