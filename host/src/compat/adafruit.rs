@@ -312,3 +312,95 @@ pub fn limitations(
         poses: poses.len(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pose(accel: [f64; 3], gyro: [f64; 3], mag: [f64; 3]) -> UnitSample {
+        UnitSample {
+            t_s: 0.0,
+            accel,
+            gyro,
+            mag,
+            temp_c: 25.0,
+        }
+    }
+
+    #[test]
+    fn dropped_accel_scale_and_gyro_scale_cost_what_they_change_on_the_poses() {
+        let mut set = CalibrationSet::identity();
+        // 1 % accel scale on x, 2 % gyro scale on z: on a 1 g x pose and a 0.5 rad/s z rate
+        // the library is off by 0.01 g = 10 mg and 0.01 rad/s = 0.573 °/s.
+        set.accel.a[0][0] = 1.01;
+        set.gyro.a[2][2] = 1.02;
+        set.reference.field_ut = 50.0;
+        let poses = [
+            pose([G_MPS2, 0.0, 0.0], [0.0, 0.0, 0.5], [50.0, 0.0, 0.0]),
+            pose([0.0, G_MPS2, 0.0], [0.0, 0.0, 0.0], [0.0, 50.0, 0.0]),
+        ];
+        let lim = limitations(&set, &poses).unwrap();
+        assert!(
+            (lim.accel_error_mg - 10.0).abs() < 1e-3,
+            "{}",
+            lim.accel_error_mg
+        );
+        assert!((lim.gyro_error_dps - 0.01f64.to_degrees()).abs() < 1e-6);
+        assert!(lim.mag_error_pct_of_field < 1e-9);
+        let sensors: Vec<&str> = lim.unapplied.iter().map(|t| t.sensor).collect();
+        assert_eq!(sensors, ["accel", "gyro"]);
+        assert!(lim.describe().contains("10.00 mg"), "{}", lim.describe());
+    }
+
+    #[test]
+    fn offsets_and_symmetric_soft_iron_carry_over_without_cost() {
+        let mut set = CalibrationSet::identity();
+        set.accel.b = [0.1, -0.2, 0.3];
+        set.gyro.b = [0.01, 0.02, -0.03];
+        set.mag.a = [[1.1, 0.02, 0.0], [0.02, 0.9, 0.01], [0.0, 0.01, 1.0]];
+        set.mag.b = [10.0, -20.0, 5.0];
+        set.reference.field_ut = 48.0;
+        let poses = [pose([0.3, 9.0, 1.0], [0.2, -0.1, 0.0], [40.0, -10.0, 30.0])];
+        let lim = limitations(&set, &poses).unwrap();
+        assert!(lim.unapplied.is_empty());
+        // f32 rounding of the soft iron only.
+        assert!(lim.accel_error_mg < 1e-6 && lim.gyro_error_dps < 1e-6);
+        assert!(
+            lim.mag_error_pct_of_field < 1e-4,
+            "{}",
+            lim.mag_error_pct_of_field
+        );
+        assert!(
+            lim.mag_rotation_deg < 1e-3,
+            "a symmetric A needs no rotation"
+        );
+    }
+
+    #[test]
+    fn temperature_terms_are_listed_as_unapplied() {
+        let mut set = CalibrationSet::identity();
+        set.gyro.bias_temp = Some(imucal_protocol::BiasTemperature {
+            t_ref_c: 25.0,
+            coeffs: [[1e-3, 0.0, 0.0], [0.0; 3], [0.0; 3]],
+        });
+        // 10 °C away from the reference: 1e-2 rad/s of bias the library leaves in.
+        let mut p = pose([0.0, 0.0, G_MPS2], [0.0; 3], [0.0, 0.0, 40.0]);
+        p.temp_c = 35.0;
+        let lim = limitations(&set, &[p]).unwrap();
+        assert_eq!(lim.unapplied.len(), 1);
+        assert_eq!(lim.unapplied[0].term, "offset temperature dependence");
+        assert!((lim.gyro_error_dps - 0.01f64.to_degrees()).abs() < 1e-4);
+    }
+
+    #[test]
+    fn sensor_calib_json_with_missing_keys_reads_the_library_defaults() {
+        let cal = AdafruitCalibration::from_sensor_calib_json("{\"mag_field\": 45.5}").unwrap();
+        assert_eq!(
+            cal,
+            AdafruitCalibration {
+                mag_field: 45.5,
+                ..AdafruitCalibration::identity()
+            }
+        );
+    }
+}

@@ -302,3 +302,73 @@ fn compare(tag: &str, sent: &[f64], echoed: &[f64], print: f64) -> Result<(), Mo
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A board that has printed `input`; what the host writes is kept.
+    struct Recorded {
+        input: std::io::Cursor<Vec<u8>>,
+        written: Vec<u8>,
+    }
+
+    impl Read for Recorded {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            self.input.read(buf)
+        }
+    }
+
+    impl Write for Recorded {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.written.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    fn client(text: &str) -> MotionCalClient<Recorded> {
+        let link = Recorded {
+            input: std::io::Cursor::new(text.as_bytes().to_vec()),
+            written: Vec::new(),
+        };
+        MotionCalClient::new(link, RawAccelScaling::AdafruitSketch)
+    }
+
+    #[test]
+    fn a_board_without_uni_lines_is_read_from_raw_and_noise_is_counted() {
+        let mut c =
+            client("Raw:8192,0,0,16,0,0,10,0,0\r\nRaw:1,2\r\nRaw:0,8192,0,0,0,0,0,10,0\r\n");
+        let first = c.next_reading(Duration::from_millis(50)).unwrap().unwrap();
+        assert!((first.accel[0] - 9.8).abs() < 1e-12);
+        assert!(!c.has_unified_lines());
+        assert_eq!(c.malformed_lines(), 1);
+    }
+
+    #[test]
+    fn uni_lines_are_preferred_over_raw() {
+        let mut c = client("Raw:1,1,1,1,1,1,1,1,1\r\nUni:0.10,0.20,9.81,0.0100,0,0,20.00,0,40\r\n");
+        let r = c.next_reading(Duration::from_millis(50)).unwrap().unwrap();
+        assert_eq!(r.accel, [0.1, 0.2, 9.81]);
+        assert!(c.has_unified_lines());
+    }
+
+    #[test]
+    fn an_echo_of_other_values_is_a_mismatch_naming_the_value() {
+        let cal = AdafruitCalibration::identity();
+        let mut c = client("Cal1:0.000,0.000,0.000,0.000,0.000,0.000,5.000,0.000,0.000,0.000\r\n");
+        let error = c
+            .send_calibration(&cal, Duration::from_millis(50))
+            .unwrap_err();
+        assert!(
+            matches!(&error, MotionCalError::EchoMismatch { field, .. } if field == "Cal1 value 6"),
+            "{error}"
+        );
+        assert_eq!(
+            c.into_link().written.len(),
+            super::super::motioncal::PACKET_LEN
+        );
+    }
+}
