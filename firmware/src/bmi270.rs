@@ -22,7 +22,7 @@
 //! it is not part of this crate: the board passes it in [`Config::config_file`].
 
 use embedded_hal::delay::DelayNs;
-use embedded_hal::i2c::{I2c, Operation};
+use embedded_hal::i2c::I2c;
 
 use crate::bmm150;
 use crate::imu::{Imu, RawSample, SensorScales};
@@ -86,6 +86,9 @@ pub const GYR_RANGE_1000DPS: u8 = 0x01;
 /// PWR_CTRL: accelerometer, gyroscope and thermometer on.
 pub const PWR_CTRL_ACC_GYR_TEMP: u8 = 0b1110;
 
+/// Largest configuration burst sent at once, bytes (one RAM frame on the stack).
+pub const MAX_BURST: usize = 128;
+
 /// Accelerometer counts per g at ±4 g.
 const ACC_COUNTS_PER_G: f32 = 8192.0;
 /// Gyroscope counts per °/s at ±1000 °/s.
@@ -96,7 +99,8 @@ const GYR_COUNTS_PER_DPS: f32 = 32.768;
 pub struct Config {
     /// Bosch's BMI270 configuration file (8192 bytes in the Sensor API).
     pub config_file: &'static [u8],
-    /// Largest I²C write the bus takes at once, bytes (the config is sent in such bursts; even).
+    /// Largest I²C write the bus takes at once, bytes (the config is sent in bursts of this
+    /// size, at most [`MAX_BURST`], rounded down to even).
     pub max_burst: usize,
 }
 
@@ -179,7 +183,7 @@ impl<I2C: I2c, D: DelayNs> Bmi270Bmm150<I2C, D> {
     pub fn init(&mut self) -> Result<(), Error<I2C::Error>> {
         self.initialised = false;
         let file = self.config.config_file;
-        let burst = self.config.max_burst & !1;
+        let burst = self.config.max_burst.min(MAX_BURST) & !1;
         if file.is_empty() || file.len() & 1 == 1 || burst < 2 {
             return Err(Error::BadConfigFile);
         }
@@ -194,11 +198,12 @@ impl<I2C: I2c, D: DelayNs> Bmi270Bmm150<I2C, D> {
             let word = (index * burst / 2) as u16;
             self.write(reg::INIT_ADDR_0, (word & 0x0F) as u8)?;
             self.write(reg::INIT_ADDR_1, (word >> 4) as u8)?;
+            // Copied to RAM: DMA bus masters (nRF TWIM) cannot send straight from flash.
+            let mut frame = [0u8; 1 + MAX_BURST];
+            frame[0] = reg::INIT_DATA;
+            frame[1..=chunk.len()].copy_from_slice(chunk);
             self.i2c
-                .transaction(
-                    ADDRESS,
-                    &mut [Operation::Write(&[reg::INIT_DATA]), Operation::Write(chunk)],
-                )
+                .write(ADDRESS, &frame[..=chunk.len()])
                 .map_err(Error::Bus)?;
         }
         self.write(reg::INIT_CTRL, 0x01)?;

@@ -121,8 +121,7 @@ impl BoardChip {
             Self::Bmi270(chip) => {
                 let config = bmi270::Config {
                     config_file: &SIM_BMI270_CONFIG,
-                    // nRF52840's TWIM takes up to 255 bytes per transfer.
-                    max_burst: 254,
+                    max_burst: bmi270::MAX_BURST,
                 };
                 let mut driver = Bmi270Bmm150::new(chip.clone(), SimDelay, config);
                 driver.init().map_err(BoardImuError::Bmi270)?;
