@@ -18,8 +18,9 @@
 //! hundred lines, so the driver is written here and tested against the register-level emulation
 //! in the simulator.
 //!
-//! The configuration file is Bosch's (`bmi270_config_file` of the BMI270 Sensor API, BSD-3);
-//! it is not part of this crate: the board passes it in [`Config::config_file`].
+//! The configuration file is Bosch's (`bmi270_config_file` of the BMI270 Sensor API); it is not
+//! part of this crate: the board passes it in [`Config::config_file`] (the Nano 33 BLE Sense
+//! Rev2 build takes it from the `bmi2` crate, using nothing else of that crate).
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::I2c;
