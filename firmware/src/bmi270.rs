@@ -230,7 +230,10 @@ impl<I2C: I2c, D: DelayNs> Bmi270Bmm150<I2C, D> {
             self.write(register, value)?;
         }
         let delay = &mut self.delay;
-        bmm150::init(&mut self.i2c, |ms| delay.delay_ms(ms))?;
+        bmm150::init(&mut self.i2c, |ms| delay.delay_ms(ms)).map_err(|e| match e {
+            bmm150::Error::Bus(e) => Error::Bus(e),
+            bmm150::Error::WrongId { found } => Error::WrongMagId { found },
+        })?;
         self.initialised = true;
         Ok(())
     }

@@ -66,13 +66,24 @@ pub fn decode(data: [u8; 8]) -> MagReading {
     }
 }
 
+/// Why the BMM150 could not be started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Error<E> {
+    /// The bus failed.
+    Bus(E),
+    /// CHIP_ID did not read 0x32.
+    WrongId {
+        /// Value read.
+        found: u8,
+    },
+}
+
 /// Powers the chip, checks its id and starts normal mode; `wait_ms` pauses the caller's clock
 /// (the datasheet asks for 3 ms from power-on to the first register access).
 pub fn init<I2C: I2c>(
     i2c: &mut I2C,
     mut wait_ms: impl FnMut(u32),
-) -> Result<(), super::bmi270::Error<I2C::Error>> {
-    use super::bmi270::Error;
+) -> Result<(), Error<I2C::Error>> {
     i2c.write(ADDRESS, &[reg::POWER_CTRL, 0x01])
         .map_err(Error::Bus)?;
     wait_ms(3);
@@ -80,7 +91,7 @@ pub fn init<I2C: I2c>(
     i2c.write_read(ADDRESS, &[reg::CHIP_ID], &mut id)
         .map_err(Error::Bus)?;
     if id[0] != CHIP_ID {
-        return Err(Error::WrongMagId { found: id[0] });
+        return Err(Error::WrongId { found: id[0] });
     }
     for (register, value) in [
         (reg::REPXY, REPXY_REGULAR),

@@ -12,7 +12,9 @@ use serialport::TTYPort;
 
 use crate::motioncal_board::{MotionCalBoard, StoredCalibration};
 use crate::physics::ImuTruth;
-use crate::serve::{is_not_ready, open_pty, ServeError};
+use crate::serve::{
+    announce_port, is_not_ready, open_pty, serve_until_done, wall_limit, ServeArgs, ServeError,
+};
 
 /// Longest sleep of the loop.
 const MAX_SLEEP: Duration = Duration::from_millis(1);
@@ -168,5 +170,23 @@ fn serve(
         }
         std::thread::sleep(MAX_SLEEP);
     }
+    Ok(())
+}
+
+/// `serve --protocol motioncal`: print the port path, then serve the MotionCal sketch board until
+/// stdin ends (unless ignored), `--seconds` pass, or the process is interrupted.
+pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
+    let wall_limit = wall_limit(args)?;
+    let handle = MotionCalHandle::start(args.seed, args.speed)?;
+    if let Some(path) = &args.truth {
+        let text = serde_json::to_string_pretty(handle.truth())
+            .map_err(|e| ServeError::Io(std::io::Error::other(e)))?;
+        std::fs::write(path, text).map_err(ServeError::Io)?;
+    }
+    announce_port(handle.port_path())?;
+    serve_until_done(args, wall_limit, || handle.is_running());
+    let (stored, sim_s) = (handle.stored_count(), handle.sim_time_s());
+    handle.stop()?;
+    eprintln!("simulated {sim_s:.1} s; {stored} calibration packet(s) stored");
     Ok(())
 }

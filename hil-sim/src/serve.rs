@@ -691,15 +691,9 @@ impl ServeArgs {
 /// Run the `serve` command: print the port path on stdout (one line, flushed), then serve until
 /// stdin reaches end of file, `--seconds` pass, or the process is interrupted.
 pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
-    let wall_limit = args
-        .seconds
-        .map(|s| crate::error::require_non_negative("--seconds", s).map(Duration::from_secs_f64))
-        .transpose()?;
+    let wall_limit = wall_limit(args)?;
     if let Some(seconds) = args.vanish_after_s {
         crate::error::require_non_negative("--vanish-after-s", seconds)?;
-    }
-    if args.protocol == BoardProtocol::Motioncal {
-        return run_motioncal(args, wall_limit);
     }
     let handle = SimServer::start(args.options())?;
     if let Some(path) = &args.truth {
@@ -728,7 +722,7 @@ pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
 }
 
 /// Prints the port path (one line, flushed).
-fn announce_port(path: &str) -> Result<(), ServeError> {
+pub(crate) fn announce_port(path: &str) -> Result<(), ServeError> {
     let mut stdout = std::io::stdout().lock();
     writeln!(stdout, "{path}")
         .and_then(|()| stdout.flush())
@@ -736,7 +730,7 @@ fn announce_port(path: &str) -> Result<(), ServeError> {
 }
 
 /// Waits until `still_running` says no, stdin ends (unless ignored) or `wall_limit` passes.
-fn serve_until_done(
+pub(crate) fn serve_until_done(
     args: &ServeArgs,
     wall_limit: Option<Duration>,
     mut still_running: impl FnMut() -> bool,
@@ -758,18 +752,10 @@ fn serve_until_done(
     }
 }
 
-/// `serve --protocol motioncal`: the MotionCal sketch board until done.
-fn run_motioncal(args: &ServeArgs, wall_limit: Option<Duration>) -> Result<(), ServeError> {
-    let handle = crate::motioncal_serve::MotionCalHandle::start(args.seed, args.speed)?;
-    if let Some(path) = &args.truth {
-        let text = serde_json::to_string_pretty(handle.truth())
-            .map_err(|e| ServeError::Io(std::io::Error::other(e)))?;
-        std::fs::write(path, text).map_err(ServeError::Io)?;
-    }
-    announce_port(handle.port_path())?;
-    serve_until_done(args, wall_limit, || handle.is_running());
-    let (stored, sim_s) = (handle.stored_count(), handle.sim_time_s());
-    handle.stop()?;
-    eprintln!("simulated {sim_s:.1} s; {stored} calibration packet(s) stored");
-    Ok(())
+/// `--seconds` as a duration, refused when negative or not finite.
+pub(crate) fn wall_limit(args: &ServeArgs) -> Result<Option<Duration>, ServeError> {
+    Ok(args
+        .seconds
+        .map(|s| crate::error::require_non_negative("--seconds", s).map(Duration::from_secs_f64))
+        .transpose()?)
 }
