@@ -39,6 +39,10 @@ pub struct CalibrateArgs {
     /// Simulator: switch a hidden effect on (repeatable), `[sensor.]name[=size]`.
     #[arg(long = "sim-effect", requires = "sim")]
     pub sim_effects: Vec<String>,
+    /// Simulator: sensor chip, lsm9ds1 (Nano 33 BLE Sense) or bmi270 (BMI270 + BMM150, Rev2).
+    #[arg(long, value_enum, default_value = "lsm9ds1", requires = "sim")]
+    #[cfg(feature = "sim")]
+    pub sim_chip: imucal_hil_sim::board::SensorChip,
     /// Simulator: simulated seconds per wall second.
     #[arg(long, default_value_t = 15.0, requires = "sim")]
     pub speed: f64,
@@ -548,6 +552,7 @@ impl Simulated {
         use imucal_hil_sim::serve::{SimOptions, SimServer};
         let mut options = SimOptions::new(args.sim_seed);
         options.speed = args.speed;
+        options.board.sensor = args.sim_chip;
         options.board.temperature = temperature_profile(&args.sim_temperature)?;
         if args.rounds > 1 {
             options.schedule = imucal_hil_sim::board::PersonSchedule::Rounds(args.rounds);
