@@ -1,6 +1,10 @@
 //! Leave-one-pose-out cross-validation of static-pose fits: each pose is predicted by a fit made
 //! without it, and the held-out norm residual `(|A(x−b)| − ref)/ref` is summarised as an RMS.
 //! This measures how well a calibration generalises to orientations it has not seen.
+//!
+//! The generic form refits once per pose. Methods whose fit can be updated for one removed pose
+//! (min/max: only the six face poses matter; linear least squares: a rank-one downdate) pass
+//! that update to [`held_out_rms`] and cost about one fit in all.
 
 use super::{Calibration, FitError, Pose};
 
@@ -25,18 +29,31 @@ pub fn leave_one_out_rms_indexed(
     reference: f64,
     fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
 ) -> Option<f64> {
-    if poses.len() < 2 || reference.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
-    let mut sum_sq = 0.0;
-    for (i, held_out) in poses.iter().enumerate() {
+    held_out_rms(poses, reference, |i| {
         let rest: Vec<Pose> = poses
             .iter()
             .enumerate()
             .filter(|&(j, _)| j != i)
             .map(|(_, p)| p.clone())
             .collect();
-        let cal = fit(i, &rest).ok()?;
+        fit(i, &rest)
+    })
+}
+
+/// The RMS of [`leave_one_out_rms`] given, for each pose `i`, the calibration fitted without it
+/// (`calibration_without(i)`): methods with a closed-form or rank-one update for removing one
+/// pose use this directly instead of N refits.
+pub fn held_out_rms(
+    poses: &[Pose],
+    reference: f64,
+    mut calibration_without: impl FnMut(usize) -> Result<Calibration, FitError>,
+) -> Option<f64> {
+    if poses.len() < 2 || reference.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let mut sum_sq = 0.0;
+    for (i, held_out) in poses.iter().enumerate() {
+        let cal = calibration_without(i).ok()?;
         let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
         if !r.is_finite() {
             return None;
