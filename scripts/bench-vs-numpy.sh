@@ -57,18 +57,20 @@ def li(x):
     b = -np.linalg.solve(M, v[6:9])
     return c + b * s
 times = []
+cpu0 = time.process_time()
 for _ in range(repeats):
     t0 = time.perf_counter()
     centre = li(x)
     times.append((time.perf_counter() - t0) * 1e3)
 print("numpy_li_centre", *("%.9f" % v for v in centre), file=sys.stderr)
+print("numpy_li_cpu_ms %.2f (all threads)" % ((time.process_time() - cpu0) * 1e3 / repeats), file=sys.stderr)
 print("%.2f" % sorted(times)[len(times) // 2])
 PY
 )
 
 rust_out=$(IMUCAL_LI_POINTS="$array" IMUCAL_LI_REPEATS="$repeats" \
     cargo bench --quiet -p imucal --bench li_vs_numpy 2>/dev/null)
-echo "$rust_out" | grep rust_li_centre
+echo "$rust_out" | grep -E "rust_li_centre|rust_li_cpu_ms"
 rust_ms=$(echo "$rust_out" | awk '/^rust_li_ms/ {print $2}')
 echo "points $points, median of $repeats runs each"
 echo "numpy  Li fit: $numpy_ms ms"

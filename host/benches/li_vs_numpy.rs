@@ -6,6 +6,8 @@
 //! milliseconds as `rust_li_ms <value>`. Without the variable it fits 10⁶ seeded synthetic
 //! samples instead, so `cargo bench` also runs it on its own.
 
+mod common;
+
 use std::time::Instant;
 
 use imucal::fit::li::{fit_li, LiOptions};
@@ -46,11 +48,15 @@ fn main() {
         .unwrap_or(21);
     let mut times = Vec::with_capacity(repeats);
     let mut centre = Vec3::zeros();
+    let cpu_before = common::cpu_seconds();
     for _ in 0..repeats.max(1) {
         let start = Instant::now();
         let fit = fit_li(&points, 1.0, LiOptions { subtract_mean: true }).expect("Li fits");
         times.push(start.elapsed().as_secs_f64() * 1e3);
         centre = fit.cal.b;
+    }
+    if let (Some(before), Some(after)) = (cpu_before, common::cpu_seconds()) {
+        println!("rust_li_cpu_ms {:.2}", (after - before) * 1e3 / repeats.max(1) as f64);
     }
     times.sort_by(f64::total_cmp);
     println!("points {}", points.len());

@@ -1,5 +1,8 @@
 //! Speed of reading an 11-column recording (`t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c`) of 10⁶ rows,
-//! generated here (seeded) into a temporary file. Run: `cargo bench -p imucal --bench read_speed`.
+//! generated here (seeded) into a temporary file; criterion's wall time, then the CPU time per
+//! load. Run: `cargo bench -p imucal --bench read_speed`.
+
+mod common;
 
 use std::io::Write;
 
@@ -52,6 +55,21 @@ fn bench_read(c: &mut Criterion) {
         })
     });
     group.finish();
+    // CPU time per load, independent of other work sharing the machine.
+    const LOADS: usize = 5;
+    if let Some(before) = common::cpu_seconds() {
+        for _ in 0..LOADS {
+            std::hint::black_box(Recording::load(&path, &LoadOptions::default()).map(|r| r.len()))
+                .expect("the generated recording reads");
+        }
+        if let Some(after) = common::cpu_seconds() {
+            let per_load = (after - before) / LOADS as f64;
+            println!(
+                "read/csv_11_columns_1e6_rows: {per_load:.3} CPU s per load, {:.2e} rows per CPU s",
+                ROWS as f64 / per_load
+            );
+        }
+    }
     let _ = std::fs::remove_file(&path);
 }
 

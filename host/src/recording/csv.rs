@@ -134,7 +134,7 @@ fn column_roles(header: &Header) -> Vec<Role> {
 
 /// A field as a finite number.
 fn parse_number(text: &str) -> Option<f64> {
-    text.parse::<f64>().ok().filter(|v| v.is_finite())
+    super::decimal::parse_finite(text)
 }
 
 /// Read the rows after `header_line` (the first line that is not skipped, if any) from `lines`.

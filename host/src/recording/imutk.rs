@@ -21,11 +21,7 @@ fn numbers(line: &str) -> Option<[f64; 4]> {
         } else {
             super::MAX_SENSOR_MAGNITUDE
         };
-        *slot = fields
-            .next()?
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite() && v.abs() <= limit)?;
+        *slot = super::decimal::parse_finite(fields.next()?).filter(|v| v.abs() <= limit)?;
     }
     fields.next().is_none().then_some(out)
 }

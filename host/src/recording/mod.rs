@@ -6,6 +6,7 @@
 //! is held as a separate [`MagStream`] with its own time stamps.
 
 mod csv;
+mod decimal;
 mod imutk;
 pub mod lines;
 pub mod mapping;
