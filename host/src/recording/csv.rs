@@ -177,30 +177,34 @@ fn read_table(
     // One row's sensor values, in the order of `header.sensors`.
     let mut readings = vec![0.0; 3 * header.sensors.len()];
     let mut rows = 0;
+    let input_bytes = lines.input_len();
     while let Some((line_no, line)) = lines.next_line()? {
-        if is_skipped(line) {
+        let body = content(line);
+        if body.is_empty() || body.starts_with('#') {
             continue;
         }
         let mut found = 0;
-        for (col, text) in content(line).split(',').enumerate() {
+        for (col, text) in body.split(',').enumerate() {
             found += 1;
             let Some(role) = roles.get(col) else { continue };
-            let text = text.trim();
             if let Role::Label = role {
                 if let Some(l) = labels.as_mut() {
-                    l.push(text);
+                    l.push(text.trim());
                 }
                 continue;
             }
             if let Role::Ignored = role {
                 continue;
             }
-            let value = parse_number(text).ok_or_else(|| RecordingError::BadNumber {
-                path: display(path),
-                line: line_no,
-                column: header.names[col].clone(),
-                text: text.to_string(),
-            })?;
+            // ASCII blanks are the usual padding; other Unicode spaces take the slower trim.
+            let value = parse_number(text.trim_ascii())
+                .or_else(|| parse_number(text.trim()))
+                .ok_or_else(|| RecordingError::BadNumber {
+                    path: display(path),
+                    line: line_no,
+                    column: header.names[col].clone(),
+                    text: text.trim().to_string(),
+                })?;
             match *role {
                 Role::Time => {
                     let t = time.get_or_insert_with(Vec::new);
@@ -246,6 +250,20 @@ fn read_table(
                 readings[3 * k + 1],
                 readings[3 * k + 2],
             ));
+        }
+        if rows == 0 {
+            // Rows of a file are alike in length: reserve for all of them at once rather than
+            // copying every column as it doubles.
+            if let Some(total) = input_bytes {
+                let expected = (total / (line.len() as u64 + 1)).min(1 << 32) as usize;
+                let more = expected + expected / 8;
+                for v in time.iter_mut().chain(temp.iter_mut()) {
+                    v.reserve(more);
+                }
+                for (_, v) in sensors.iter_mut() {
+                    v.reserve(more);
+                }
+            }
         }
         rows += 1;
     }

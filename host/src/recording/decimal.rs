@@ -31,23 +31,31 @@ fn fast_decimal(bytes: &[u8]) -> Option<f64> {
         [b'-', rest @ ..] => (true, rest),
         _ => (false, bytes),
     };
+    // Two tight digit loops (integer part, then fraction); the arithmetic wraps on absurdly
+    // long inputs, which the digit count then sends to the standard parser.
     let mut mantissa: u64 = 0;
-    let mut digits = 0usize;
-    let mut fraction_digits = 0usize;
-    let mut seen_point = false;
-    for &b in body {
-        match b {
-            b'0'..=b'9' => {
-                mantissa = mantissa * 10 + u64::from(b - b'0');
-                digits += 1;
-                fraction_digits += usize::from(seen_point);
-            }
-            b'.' if !seen_point => seen_point = true,
-            _ => return None,
+    let mut i = 0;
+    while let Some(d) = body.get(i).map(|b| b.wrapping_sub(b'0')).filter(|d| *d <= 9) {
+        mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d));
+        i += 1;
+    }
+    let integer_digits = i;
+    let mut fraction_digits = 0;
+    if body.get(i) == Some(&b'.') {
+        i += 1;
+        let start = i;
+        while let Some(d) = body.get(i).map(|b| b.wrapping_sub(b'0')).filter(|d| *d <= 9) {
+            mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d));
+            i += 1;
+        }
+        fraction_digits = i - start;
+        // "1." style texts: leave them to the standard parser's judgement.
+        if fraction_digits == 0 {
+            return None;
         }
     }
-    // "-", ".", "" and "1." style texts: leave them to the standard parser's judgement.
-    if digits == 0 || digits > MAX_FAST_DIGITS || (seen_point && fraction_digits == 0) {
+    let digits = integer_digits + fraction_digits;
+    if i != body.len() || digits == 0 || digits > MAX_FAST_DIGITS {
         return None;
     }
     let value = mantissa as f64 / POW10[fraction_digits];

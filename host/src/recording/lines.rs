@@ -40,20 +40,28 @@ pub struct LineReader<'a> {
     eof: bool,
     sniffed: bool,
     line_no: usize,
+    /// Size of the input in bytes when known (a regular file).
+    input_len: Option<u64>,
 }
 
 impl<'a> LineReader<'a> {
     /// Open `path` (or standard input when it is `-`) for reading once.
     pub fn open(path: &Path) -> Result<Self, RecordingError> {
-        let input: Box<dyn Read + 'a> = if path.as_os_str() == STDIN_PATH {
-            Box::new(std::io::stdin())
-        } else {
-            Box::new(File::open(path).map_err(|cause| RecordingError::Io {
-                path: display(path),
-                cause,
-            })?)
-        };
-        Ok(Self::new(input, display(path)))
+        if path.as_os_str() == STDIN_PATH {
+            return Ok(Self::new(Box::new(std::io::stdin()), display(path)));
+        }
+        let file = File::open(path).map_err(|cause| RecordingError::Io {
+            path: display(path),
+            cause,
+        })?;
+        let input_len = file
+            .metadata()
+            .ok()
+            .filter(|m| m.is_file())
+            .map(|m| m.len());
+        let mut reader = Self::new(Box::new(file), display(path));
+        reader.input_len = input_len;
+        Ok(reader)
     }
 
     /// Lines of `input`; `path` names it in errors.
@@ -68,7 +76,13 @@ impl<'a> LineReader<'a> {
             eof: false,
             sniffed: false,
             line_no: 0,
+            input_len: None,
         }
+    }
+
+    /// Size of the input in bytes, when it is a regular file (to size buffers for its rows).
+    pub fn input_len(&self) -> Option<u64> {
+        self.input_len
     }
 
     /// The name of the input, as shown in errors.
