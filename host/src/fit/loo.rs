@@ -29,7 +29,19 @@ pub fn leave_one_out_rms_indexed(
     reference: f64,
     fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
 ) -> Option<f64> {
-    held_out_rms(poses, reference, |i| {
+    rms_of_all(leave_one_out_errors(poses, reference, fit)?)
+}
+
+/// The held-out relative norm residual of every pose, in pose order, each predicted by `fit`
+/// on the other poses (`fit` receives the held-out index); `None` for a pose whose refit was
+/// refused or whose residual is not finite. `None` overall when there are fewer than two poses
+/// or the reference is not positive.
+pub fn leave_one_out_errors(
+    poses: &[Pose],
+    reference: f64,
+    fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
+) -> Option<Vec<Option<f64>>> {
+    held_out_errors(poses, reference, |i| {
         let rest: Vec<Pose> = poses
             .iter()
             .enumerate()
@@ -46,19 +58,34 @@ pub fn leave_one_out_rms_indexed(
 pub fn held_out_rms(
     poses: &[Pose],
     reference: f64,
-    mut calibration_without: impl FnMut(usize) -> Result<Calibration, FitError>,
+    calibration_without: impl FnMut(usize) -> Result<Calibration, FitError>,
 ) -> Option<f64> {
+    rms_of_all(held_out_errors(poses, reference, calibration_without)?)
+}
+
+/// As [`leave_one_out_errors`], with the calibration without pose `i` given directly.
+pub fn held_out_errors(
+    poses: &[Pose],
+    reference: f64,
+    mut calibration_without: impl FnMut(usize) -> Result<Calibration, FitError>,
+) -> Option<Vec<Option<f64>>> {
     if poses.len() < 2 || reference.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
-    let mut sum_sq = 0.0;
-    for (i, held_out) in poses.iter().enumerate() {
-        let cal = calibration_without(i).ok()?;
-        let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
-        if !r.is_finite() {
-            return None;
-        }
-        sum_sq += r * r;
-    }
-    Some((sum_sq / poses.len() as f64).sqrt())
+    let errors = poses
+        .iter()
+        .enumerate()
+        .map(|(i, held_out)| {
+            let cal = calibration_without(i).ok()?;
+            let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
+            r.is_finite().then_some(r)
+        })
+        .collect();
+    Some(errors)
+}
+
+/// RMS of the errors, or `None` when any pose could not be predicted.
+fn rms_of_all(errors: Vec<Option<f64>>) -> Option<f64> {
+    let errors = errors.into_iter().collect::<Option<Vec<f64>>>()?;
+    Some((errors.iter().map(|r| r * r).sum::<f64>() / errors.len() as f64).sqrt())
 }
