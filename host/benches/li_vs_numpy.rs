@@ -51,15 +51,28 @@ fn main() {
     let cpu_before = common::cpu_seconds();
     for _ in 0..repeats.max(1) {
         let start = Instant::now();
-        let fit = fit_li(&points, 1.0, LiOptions { subtract_mean: true }).expect("Li fits");
+        let fit = fit_li(
+            &points,
+            1.0,
+            LiOptions {
+                subtract_mean: true,
+            },
+        )
+        .expect("Li fits");
         times.push(start.elapsed().as_secs_f64() * 1e3);
         centre = fit.cal.b;
     }
     if let (Some(before), Some(after)) = (cpu_before, common::cpu_seconds()) {
-        println!("rust_li_cpu_ms {:.2}", (after - before) * 1e3 / repeats.max(1) as f64);
+        println!(
+            "rust_li_cpu_ms {:.2}",
+            (after - before) * 1e3 / repeats.max(1) as f64
+        );
     }
     times.sort_by(f64::total_cmp);
     println!("points {}", points.len());
-    println!("rust_li_centre {:.9} {:.9} {:.9}", centre.x, centre.y, centre.z);
+    println!(
+        "rust_li_centre {:.9} {:.9} {:.9}",
+        centre.x, centre.y, centre.z
+    );
     println!("rust_li_ms {:.2}", times[times.len() / 2]);
 }

@@ -46,7 +46,8 @@ fn fit_mag(input: &str, stdin: Option<&str>) -> Result<Value, String> {
         .expect("the binary runs");
     let mut pipe = child.stdin.take().expect("stdin is piped");
     if let Some(text) = stdin {
-        pipe.write_all(text.as_bytes()).expect("the child reads its input");
+        pipe.write_all(text.as_bytes())
+            .expect("the child reads its input");
     }
     drop(pipe);
     let out = child.wait_with_output().expect("the binary finishes");
@@ -87,7 +88,11 @@ fn dev_zero_is_refused_within_seconds_with_a_sentence_naming_binary_data() {
     );
     // Reading stops at the first KiB; before streaming this grew to gigabytes over seconds. The
     // bound is generous for a loaded machine: the point is that it ends.
-    assert!(start.elapsed() < Duration::from_secs(20), "{:?}", start.elapsed());
+    assert!(
+        start.elapsed() < Duration::from_secs(20),
+        "{:?}",
+        start.elapsed()
+    );
 }
 
 #[test]

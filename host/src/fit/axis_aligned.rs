@@ -85,12 +85,7 @@ fn design(points: &[Vec3]) -> Result<Design, FitError> {
         [p.y * p.y, p.z * p.z, p.x, p.y, p.z, 1.0][j]
     });
     let y = DMatrix::from_fn(q.len(), 1, |i, _| -q[i].x * q[i].x);
-    Ok(Design {
-        mean,
-        spread,
-        x,
-        y,
-    })
+    Ok(Design { mean, spread, x, y })
 }
 
 /// Leave-one-pose-out RMS by the rank-one downdate of linear least squares: without row `i`,
@@ -135,8 +130,7 @@ fn solve(points: &[Vec3], reference: f64) -> Result<(Calibration, f64), FitError
     let d = design(points)?;
     let ls = least_squares(&d.x, &d.y, "axis-aligned ellipsoid")?;
     let v = &ls.solution;
-    let cal =
-        calibration_from_coefficients(&[v[0], v[1], v[2], v[3], v[4], v[5]], &d, reference)?;
+    let cal = calibration_from_coefficients(&[v[0], v[1], v[2], v[3], v[4], v[5]], &d, reference)?;
     Ok((cal, ls.condition_number))
 }
 
@@ -207,7 +201,13 @@ mod tests {
         })
         .expect("determined");
         // Exact algebra; the normal-equation downdate and the SVD refits round differently.
-        assert!((fast - brute).abs() <= 1e-9 * brute, "{fast:e} vs {brute:e}");
-        assert!(brute > 1e-4, "the held-out error is not trivially zero: {brute:e}");
+        assert!(
+            (fast - brute).abs() <= 1e-9 * brute,
+            "{fast:e} vs {brute:e}"
+        );
+        assert!(
+            brute > 1e-4,
+            "the held-out error is not trivially zero: {brute:e}"
+        );
     }
 }

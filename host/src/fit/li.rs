@@ -145,7 +145,12 @@ pub fn constraint_matrix() -> DMatrix<f64> {
 /// condition, so near [`MAX_CONDITION`] (`λ₉/λ₁` ≈ 1e-12) `λ₉` keeps about four digits, plenty
 /// for a refusal threshold.
 fn design_condition_number(scatter: &DMatrix<f64>) -> f64 {
-    let mut eigenvalues: Vec<f64> = scatter.clone().symmetric_eigenvalues().iter().copied().collect();
+    let mut eigenvalues: Vec<f64> = scatter
+        .clone()
+        .symmetric_eigenvalues()
+        .iter()
+        .copied()
+        .collect();
     eigenvalues.sort_by(|a, b| b.total_cmp(a));
     match (eigenvalues.first(), eigenvalues.get(8)) {
         (Some(&l1), Some(&l9)) if l9 > 0.0 && l1 > 0.0 => (l1 / l9).sqrt(),
@@ -259,13 +264,27 @@ mod tests {
     /// the condition number by its SVD.
     fn fit_with_explicit_design(points: &[Vec3], reference: f64) -> (Calibration, f64) {
         let centre = points.iter().sum::<Vec3>() / points.len() as f64;
-        let scale = (points.iter().map(|p| (p - centre).norm_squared()).sum::<f64>()
+        let scale = (points
+            .iter()
+            .map(|p| (p - centre).norm_squared())
+            .sum::<f64>()
             / points.len() as f64)
             .sqrt();
         let design = DMatrix::from_fn(points.len(), 10, |i, j| {
             let q = (points[i] - centre) / scale;
             let (x, y, z) = (q.x, q.y, q.z);
-            [x * x, y * y, z * z, 2.0 * y * z, 2.0 * x * z, 2.0 * x * y, 2.0 * x, 2.0 * y, 2.0 * z, 1.0][j]
+            [
+                x * x,
+                y * y,
+                z * z,
+                2.0 * y * z,
+                2.0 * x * z,
+                2.0 * x * y,
+                2.0 * x,
+                2.0 * y,
+                2.0 * z,
+                1.0,
+            ][j]
         });
         let sv = singular_values(&design);
         let v = constrained_quadric(&(design.transpose() * &design)).expect("quadric");
@@ -289,11 +308,19 @@ mod tests {
                 let z = 1.0 - 2.0 * (t + 0.5) / 5000.0;
                 let phi = t * 2.399_963_229_728_653; // golden angle
                 let r = (1.0 - z * z).sqrt();
-                let u = Vec3::new(r * phi.cos(), r * phi.sin(), z) * (1.0 + 0.005 * (7.3 * t).sin());
+                let u =
+                    Vec3::new(r * phi.cos(), r * phi.sin(), z) * (1.0 + 0.005 * (7.3 * t).sin());
                 inverse * (u * 50.0) + b_true
             })
             .collect();
-        let fit = fit_li(&points, 50.0, LiOptions { subtract_mean: true }).expect("fit");
+        let fit = fit_li(
+            &points,
+            50.0,
+            LiOptions {
+                subtract_mean: true,
+            },
+        )
+        .expect("fit");
         let (cal, condition) = fit_with_explicit_design(&points, 50.0);
         // Both solve the same 10×10 problem; only summation order differs (well conditioned).
         let rel_a = (fit.cal.a - cal.a).amax() / cal.a.amax();
@@ -301,6 +328,10 @@ mod tests {
         assert!(rel_a < 1e-9 && rel_b < 1e-9, "A {rel_a:e}, b {rel_b:e}");
         // √(λ₁/λ₉) of S against σ₁/σ₉ of D: equal up to the rounding of forming S.
         let rel_cond = (fit.condition_number - condition).abs() / condition;
-        assert!(rel_cond < 1e-9, "condition {} vs {condition}", fit.condition_number);
+        assert!(
+            rel_cond < 1e-9,
+            "condition {} vs {condition}",
+            fit.condition_number
+        );
     }
 }

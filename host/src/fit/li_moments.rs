@@ -182,7 +182,11 @@ mod tests {
         let points: Vec<Vec3> = (0..50)
             .map(|i| {
                 let t = f64::from(i);
-                Vec3::new(3.0 * (0.3 * t).sin() + 1.0, 2.0 * (0.7 * t).cos(), 0.5 * t - 4.0)
+                Vec3::new(
+                    3.0 * (0.3 * t).sin() + 1.0,
+                    2.0 * (0.7 * t).cos(),
+                    0.5 * t - 4.0,
+                )
             })
             .collect();
         let centre = Vec3::new(0.5, -0.2, 1.0);
@@ -190,7 +194,18 @@ mod tests {
         let design = DMatrix::from_fn(points.len(), 10, |r, c| {
             let q = (points[r] - centre) / scale;
             let (x, y, z) = (q.x, q.y, q.z);
-            [x * x, y * y, z * z, 2.0 * y * z, 2.0 * x * z, 2.0 * x * y, 2.0 * x, 2.0 * y, 2.0 * z, 1.0][c]
+            [
+                x * x,
+                y * y,
+                z * z,
+                2.0 * y * z,
+                2.0 * x * z,
+                2.0 * x * y,
+                2.0 * x,
+                2.0 * y,
+                2.0 * z,
+                1.0,
+            ][c]
         });
         let explicit = design.transpose() * &design;
         let from_moments = Moments::about(&points, &centre).scatter(scale);

@@ -235,10 +235,13 @@ mod tests {
                 let u = Vec3::new(r * phi.cos(), r * phi.sin(), z);
                 let face = Vec3::from_fn(|k, _| if k == i % 3 { 1.0 } else { 0.0 })
                     * if i % 2 == 0 { 1.0 } else { -1.0 };
-                let dir = if i % 4 == 0 { face } else { (u + face).normalize() };
+                let dir = if i % 4 == 0 {
+                    face
+                } else {
+                    (u + face).normalize()
+                };
                 Pose {
-                    mean: Vec3::new(1.02 * dir.x + 0.05, 0.97 * dir.y - 0.03, 1.01 * dir.z)
-                        * 9.81
+                    mean: Vec3::new(1.02 * dir.x + 0.05, 0.97 * dir.y - 0.03, 1.01 * dir.z) * 9.81
                         + Vec3::repeat(1e-3 * (3.7 * t).sin()),
                     var: Vec3::repeat(1e-4),
                     n: 100,

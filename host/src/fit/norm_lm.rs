@@ -22,8 +22,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::chen::fit_chen;
 use super::covariance::{
-    calibration_std, normal_covariance, param_names, reduced_chi_square,
-    UPPER_TRIANGULAR_LAYOUT,
+    calibration_std, normal_covariance, param_names, reduced_chi_square, UPPER_TRIANGULAR_LAYOUT,
 };
 use super::li::{fit_li, LiOptions};
 use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
@@ -151,7 +150,11 @@ impl LeastSquaresProblem for NormProblem {
     }
 
     /// `JᵀJ` and `Jᵀr` accumulated row by row (45 + 9 multiply-adds a sample), never holding `J`.
-    fn normal_equations(&self, p: &DVector<f64>, res: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
+    fn normal_equations(
+        &self,
+        p: &DVector<f64>,
+        res: &DVector<f64>,
+    ) -> (DMatrix<f64>, DVector<f64>) {
         let r = upper_from_params(p);
         let b = Vec3::new(p[6], p[7], p[8]);
         let mut upper = [0.0; 45];

@@ -35,7 +35,11 @@ fn fast_decimal(bytes: &[u8]) -> Option<f64> {
     // long inputs, which the digit count then sends to the standard parser.
     let mut mantissa: u64 = 0;
     let mut i = 0;
-    while let Some(d) = body.get(i).map(|b| b.wrapping_sub(b'0')).filter(|d| *d <= 9) {
+    while let Some(d) = body
+        .get(i)
+        .map(|b| b.wrapping_sub(b'0'))
+        .filter(|d| *d <= 9)
+    {
         mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d));
         i += 1;
     }
@@ -44,7 +48,11 @@ fn fast_decimal(bytes: &[u8]) -> Option<f64> {
     if body.get(i) == Some(&b'.') {
         i += 1;
         let start = i;
-        while let Some(d) = body.get(i).map(|b| b.wrapping_sub(b'0')).filter(|d| *d <= 9) {
+        while let Some(d) = body
+            .get(i)
+            .map(|b| b.wrapping_sub(b'0'))
+            .filter(|d| *d <= 9)
+        {
             mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d));
             i += 1;
         }
@@ -89,7 +97,10 @@ mod tests {
             if let Some(v) = fast {
                 assert_eq!(v.to_bits(), expected.to_bits(), "{text}");
             }
-            assert_eq!(parse_finite(&text).map(f64::to_bits), Some(expected.to_bits()));
+            assert_eq!(
+                parse_finite(&text).map(f64::to_bits),
+                Some(expected.to_bits())
+            );
         }
     }
 
@@ -97,7 +108,10 @@ mod tests {
     fn other_forms_are_left_to_the_standard_parser_and_non_finite_values_refused() {
         assert_eq!(parse_finite("1e3"), Some(1000.0));
         assert_eq!(parse_finite("+2.5"), Some(2.5));
-        assert_eq!(parse_finite("12345678901234567890.5"), Some(12345678901234567890.5));
+        assert_eq!(
+            parse_finite("12345678901234567890.5"),
+            Some(12345678901234567890.5)
+        );
         assert_eq!(parse_finite("1."), Some(1.0));
         assert_eq!(parse_finite("inf"), None);
         assert_eq!(parse_finite("NaN"), None);

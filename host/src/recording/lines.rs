@@ -199,9 +199,7 @@ impl<'a> LineReader<'a> {
             ));
         }
         if let Some(at) = memchr::memchr(0, head) {
-            return Err(self.not_text(format!(
-                "it holds binary data (a zero byte at offset {at})"
-            )));
+            return Err(self.not_text(format!("it holds binary data (a zero byte at offset {at})")));
         }
         Ok(())
     }
@@ -278,6 +276,9 @@ mod tests {
     fn a_line_longer_than_the_limit_is_refused_without_reading_further() {
         let long = "1".repeat(MAX_LINE_BYTES + 10);
         let err = all_lines(reader(long.as_bytes())).unwrap_err();
-        assert!(matches!(err, RecordingError::LineTooLong { line: 1, .. }), "{err}");
+        assert!(
+            matches!(err, RecordingError::LineTooLong { line: 1, .. }),
+            "{err}"
+        );
     }
 }

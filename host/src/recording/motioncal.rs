@@ -61,7 +61,11 @@ pub fn file_looks_like_motioncal(path: &Path) -> bool {
         return false;
     };
     let mut head = Vec::with_capacity(SNIFF_BYTES);
-    if file.take(SNIFF_BYTES as u64).read_to_end(&mut head).is_err() {
+    if file
+        .take(SNIFF_BYTES as u64)
+        .read_to_end(&mut head)
+        .is_err()
+    {
         return false;
     }
     looks_like_motioncal(&String::from_utf8_lossy(&head))
