@@ -121,7 +121,8 @@ pub enum TimeUnitArg {
 /// How to read a recording (shared by every command).
 #[derive(Debug, Clone, Args)]
 pub struct InputArgs {
-    /// Recording file (CSV with a header, or IMU-TK accelerometer text file).
+    /// Recording file (CSV with a header, or IMU-TK accelerometer text file); `-` reads standard
+    /// input, and a FIFO or `<(command)` is read once as a stream.
     pub recording: PathBuf,
     /// Unit of the accelerometer columns.
     #[arg(long, value_enum, default_value = "mps2")]
