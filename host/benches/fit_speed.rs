@@ -1,9 +1,14 @@
-//! Speed of the fits: Li's ellipsoid on 10⁶ magnetometer samples, the 12-pose accelerometer LM,
-//! and the 300-sample magnetometer LM. Run: `cargo bench -p imucal --bench fit_speed`.
+//! Speed of the fits: Li's ellipsoid and the norm-model LM on 10⁶ magnetometer samples, the
+//! 12-pose accelerometer LM, the 300-sample magnetometer LM, and the leave-one-out of the
+//! sample-level min/max and the pose-level axis-aligned fits.
+//! Run: `cargo bench -p imucal --bench fit_speed`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use imucal::fit::axis_aligned::fit_axis_aligned_poses;
 use imucal::fit::li::{fit_li, LiOptions};
+use imucal::fit::minmax::fit_minmax;
 use imucal::fit::norm_lm::{fit_accel_lm_detailed, fit_mag_lm};
+use imucal::fit::Pose;
 use imucal::synthetic::{
     accel_poses, directions, mag_samples, random_calibration, rng, sphere_directions, PoseSet,
     TruthSpec,
@@ -49,7 +54,31 @@ fn bench_fits(c: &mut Criterion) {
             .map(|f| f.cal)
         })
     });
+    group.bench_function("lm_1e6_mag_samples", |b| {
+        b.iter(|| fit_mag_lm(&million, 50.0).map(|f| f.cal))
+    });
     group.finish();
+    // Magnetometer samples as one-sample poses, as `fit --method minmax` passes them.
+    let as_poses = |points: &[imucal::fit::Vec3]| -> Vec<Pose> {
+        points
+            .iter()
+            .map(|p| Pose {
+                mean: *p,
+                var: imucal::fit::Vec3::zeros(),
+                n: 1,
+                label: None,
+            })
+            .collect()
+    };
+    let samples2000 = as_poses(&million[..2000]);
+    c.bench_function("minmax_2000_mag_samples_with_loo", |b| {
+        b.iter(|| fit_minmax(&samples2000, 50.0).map(|f| f.loo_rms))
+    });
+    let dirs100 = sphere_directions(&mut r, 100);
+    let poses100 = accel_poses(&mut r, &accel_truth, &dirs100, 9.81, 0.02, 100);
+    c.bench_function("axis_aligned_100_poses_with_loo", |b| {
+        b.iter(|| fit_axis_aligned_poses(&poses100, 9.81).map(|f| f.loo_rms))
+    });
     c.bench_function("lm_accel_12_poses", |b| {
         b.iter(|| fit_accel_lm_detailed(&poses, 9.81).map(|o| o.fit.cal))
     });

@@ -232,9 +232,9 @@ fn synthetic_magnetometer_in_counts_is_fitted_to_the_given_field() {
     ]);
     assert!(ok, "{stderr}");
     let mag = &serde_json::from_str::<Value>(&stdout).expect("valid JSON")["mag"];
-    assert_eq!(mag["n_samples"], 2000, "thinned to the default bound");
+    assert_eq!(mag["n_samples"], 3000, "every sample is fitted by default");
     let b = vector(&mag["b"]);
-    // 2000 samples of σ = 1.5 counts on a ~300-count radius: σ_b ≈ 1.5·√(3/2000) ≈ 0.06 counts;
+    // 3000 samples of σ = 1.5 counts on a ~300-count radius: σ_b ≈ 1.5·√(3/3000) ≈ 0.05 counts;
     // allow 0.5 counts (8 σ) as the stated σ is checked separately.
     for k in 0..3 {
         assert!(

@@ -20,9 +20,7 @@ pub fn load(input: &InputArgs, units: Units) -> anyhow::Result<Option<Recording>
     let motioncal = match input.format {
         FormatArg::Motioncal => true,
         // A directory or unreadable file is left to the ordinary readers' messages.
-        FormatArg::Auto if path.is_file() => std::fs::read(path)
-            .ok()
-            .is_some_and(|bytes| motioncal::looks_like_motioncal(&String::from_utf8_lossy(&bytes))),
+        FormatArg::Auto if path.is_file() => motioncal::file_looks_like_motioncal(path),
         _ => false,
     };
     if !motioncal {

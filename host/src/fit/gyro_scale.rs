@@ -17,7 +17,7 @@ use super::covariance::{
     calibration_std, normal_covariance, param_names, reduced_chi_square, FULL_MATRIX_LAYOUT,
 };
 use super::gyro_bias::fit_gyro_bias;
-use super::linalg::{condition_number, rms};
+use super::linalg::{condition_from_normal_matrix, rms};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
 use crate::recording::{Recording, Sensor};
@@ -191,7 +191,7 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
         covariance,
         param_names: param_names(&FULL_MATRIX_LAYOUT),
         std,
-        condition_number: condition_number(&sol.jacobian),
+        condition_number: condition_from_normal_matrix(&sol.jtj),
         iterations: sol.iterations,
         reference: 1.0,
     })

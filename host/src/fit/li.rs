@@ -17,7 +17,11 @@
 //!
 //! Conditioning: samples are scaled to unit RMS radius about the chosen centre (the origin, or the
 //! sample mean with [`LiOptions::subtract_mean`], the preconditioning of seed 000 Table 2) before
-//! forming `D`; the centre and scale are mapped back afterwards.
+//! forming `S`; the centre and scale are mapped back afterwards.
+//!
+//! Speed: `D` (N×10) is never formed. Every entry of `S` is a sum of one monomial of degree ≤ 4
+//! in the centred coordinates, so one pass accumulates the 35 such moments
+//! ([`super::li_moments`]) and `S` is assembled from them; the rest works on 10×10 matrices.
 //!
 //! Degenerate case: noise-free samples make `S₁₁ − S₁₂S₂₂⁻¹S₂₁` singular, the wanted eigenvalue is
 //! zero rather than positive, and "the positive one" is ill defined in rounding. Every eigenpair
@@ -28,6 +32,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::li_moments::Moments;
 use super::linalg::{singular_values, sqrt_spd, RANK_TOLERANCE};
 use super::validate::{
     check_finite_points, check_reference, guard_fit, CoverageHint, EllipsoidModel,
@@ -86,47 +91,22 @@ pub(crate) fn fit_li_unchecked(
     } else {
         Vec3::zeros()
     };
-    let scale = (points
-        .iter()
-        .map(|p| (p - centre).norm_squared())
-        .sum::<f64>()
-        / points.len() as f64)
-        .sqrt();
+    let moments = Moments::about(points, &centre);
+    let scale = moments.rms_radius();
     if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return Err(FitError::Underdetermined(
             "all samples are at the origin; the sensor reads nothing".into(),
         ));
     }
-    let q: Vec<Vec3> = points.iter().map(|p| (p - centre) / scale).collect();
-
-    let design = DMatrix::from_fn(q.len(), 10, |i, j| {
-        let (x, y, z) = (q[i].x, q[i].y, q[i].z);
-        [
-            x * x,
-            y * y,
-            z * z,
-            2.0 * y * z,
-            2.0 * x * z,
-            2.0 * x * y,
-            2.0 * x,
-            2.0 * y,
-            2.0 * z,
-            1.0,
-        ][j]
-    });
-    let sv = singular_values(&design);
-    let condition_number = match sv.get(8) {
-        Some(&s9) if s9 > 0.0 => sv[0] / s9,
-        _ => f64::INFINITY,
-    };
-
+    let scatter = moments.scatter(scale);
+    let condition_number = design_condition_number(&scatter);
     if condition_number > MAX_CONDITION {
         return Err(FitError::Underdetermined(format!(
             "the samples are too far from the origin for their spread (condition number \
              {condition_number:.1e}); fit with mean subtraction"
         )));
     }
-    let v = constrained_quadric(&design)?;
+    let v = constrained_quadric(&scatter)?;
     let cal_q = calibration_from_quadric(&v, reference)?;
     // Undo the normalisation: q = (x − centre)/scale.
     let cal = Calibration {
@@ -160,9 +140,26 @@ pub fn constraint_matrix() -> DMatrix<f64> {
     c
 }
 
-/// The 10 quadric coefficients minimising `vᵀDᵀDv` under the ellipsoid constraint.
-fn constrained_quadric(design: &DMatrix<f64>) -> Result<DVector<f64>, FitError> {
-    let s = design.transpose() * design;
+/// `σ₁/σ₉` of the design matrix `D` from its scatter matrix `S = DᵀD` (`σᵢ = √λᵢ(S)`): the
+/// ratio of the largest to the second-smallest singular value. Forming `S` squares the
+/// condition, so near [`MAX_CONDITION`] (`λ₉/λ₁` ≈ 1e-12) `λ₉` keeps about four digits, plenty
+/// for a refusal threshold.
+fn design_condition_number(scatter: &DMatrix<f64>) -> f64 {
+    let mut eigenvalues: Vec<f64> = scatter
+        .clone()
+        .symmetric_eigenvalues()
+        .iter()
+        .copied()
+        .collect();
+    eigenvalues.sort_by(|a, b| b.total_cmp(a));
+    match (eigenvalues.first(), eigenvalues.get(8)) {
+        (Some(&l1), Some(&l9)) if l9 > 0.0 && l1 > 0.0 => (l1 / l9).sqrt(),
+        _ => f64::INFINITY,
+    }
+}
+
+/// The 10 quadric coefficients minimising `vᵀSv` (`S = DᵀD`) under the ellipsoid constraint.
+fn constrained_quadric(s: &DMatrix<f64>) -> Result<DVector<f64>, FitError> {
     let s11 = s.view((0, 0), (6, 6)).into_owned();
     let s12 = s.view((0, 6), (6, 4)).into_owned();
     let s22 = s.view((6, 6), (4, 4)).into_owned();
@@ -257,4 +254,84 @@ fn no_ellipsoid(why: &str) -> FitError {
     FitError::Underdetermined(format!(
         "no ellipsoid fits the samples ({why}); cover more orientations and check for outliers"
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The fit as first written: the explicit N×10 design matrix, `S = DᵀD` by matrix product and
+    /// the condition number by its SVD.
+    fn fit_with_explicit_design(points: &[Vec3], reference: f64) -> (Calibration, f64) {
+        let centre = points.iter().sum::<Vec3>() / points.len() as f64;
+        let scale = (points
+            .iter()
+            .map(|p| (p - centre).norm_squared())
+            .sum::<f64>()
+            / points.len() as f64)
+            .sqrt();
+        let design = DMatrix::from_fn(points.len(), 10, |i, j| {
+            let q = (points[i] - centre) / scale;
+            let (x, y, z) = (q.x, q.y, q.z);
+            [
+                x * x,
+                y * y,
+                z * z,
+                2.0 * y * z,
+                2.0 * x * z,
+                2.0 * x * y,
+                2.0 * x,
+                2.0 * y,
+                2.0 * z,
+                1.0,
+            ][j]
+        });
+        let sv = singular_values(&design);
+        let v = constrained_quadric(&(design.transpose() * &design)).expect("quadric");
+        let cal = calibration_from_quadric(&v, reference).expect("ellipsoid");
+        let cal = Calibration {
+            a: cal.a / scale,
+            b: centre + cal.b * scale,
+        };
+        (cal, sv[0] / sv[8])
+    }
+
+    #[test]
+    fn moment_accumulation_matches_the_explicit_design_matrix_fit() {
+        // A tilted, offset ellipsoid with deterministic pseudo-noise of 0.5 % of its radius.
+        let a_true = Mat3::new(1.1, 0.05, -0.02, 0.0, 0.93, 0.04, 0.0, 0.0, 1.02);
+        let b_true = Vec3::new(25.0, -12.0, 40.0);
+        let inverse = a_true.try_inverse().expect("invertible");
+        let points: Vec<Vec3> = (0..5000)
+            .map(|i| {
+                let t = f64::from(i);
+                let z = 1.0 - 2.0 * (t + 0.5) / 5000.0;
+                let phi = t * 2.399_963_229_728_653; // golden angle
+                let r = (1.0 - z * z).sqrt();
+                let u =
+                    Vec3::new(r * phi.cos(), r * phi.sin(), z) * (1.0 + 0.005 * (7.3 * t).sin());
+                inverse * (u * 50.0) + b_true
+            })
+            .collect();
+        let fit = fit_li(
+            &points,
+            50.0,
+            LiOptions {
+                subtract_mean: true,
+            },
+        )
+        .expect("fit");
+        let (cal, condition) = fit_with_explicit_design(&points, 50.0);
+        // Both solve the same 10×10 problem; only summation order differs (well conditioned).
+        let rel_a = (fit.cal.a - cal.a).amax() / cal.a.amax();
+        let rel_b = (fit.cal.b - cal.b).amax() / cal.b.amax();
+        assert!(rel_a < 1e-9 && rel_b < 1e-9, "A {rel_a:e}, b {rel_b:e}");
+        // √(λ₁/λ₉) of S against σ₁/σ₉ of D: equal up to the rounding of forming S.
+        let rel_cond = (fit.condition_number - condition).abs() / condition;
+        assert!(
+            rel_cond < 1e-9,
+            "condition {} vs {condition}",
+            fit.condition_number
+        );
+    }
 }

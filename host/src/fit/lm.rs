@@ -14,6 +14,13 @@ pub trait LeastSquaresProblem {
     fn residuals(&self, p: &DVector<f64>) -> DVector<f64>;
     /// Jacobian `∂r/∂p` at `p` (rows = residuals, columns = parameters).
     fn jacobian(&self, p: &DVector<f64>) -> DMatrix<f64>;
+    /// The Gauss–Newton normal matrix `JᵀJ` and gradient half `Jᵀr` at `p`, where `r` is the
+    /// residual at `p`. The default forms `J`; problems with many residuals accumulate both
+    /// residual by residual instead, so memory does not grow with the number of residuals.
+    fn normal_equations(&self, p: &DVector<f64>, r: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
+        let j = self.jacobian(p);
+        (j.transpose() * &j, j.transpose() * r)
+    }
 }
 
 /// Stopping rules and the starting damping.
@@ -47,8 +54,6 @@ pub struct LmSolution {
     pub params: DVector<f64>,
     /// Residuals at the minimum.
     pub residuals: DVector<f64>,
-    /// Jacobian at the minimum.
-    pub jacobian: DMatrix<f64>,
     /// `JᵀJ` at the minimum (the Gauss–Newton normal matrix).
     pub jtj: DMatrix<f64>,
     /// Cost `Σ rᵢ²` at the minimum.
@@ -100,18 +105,16 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
         });
     }
     let n = p.len();
-    let mut jac = problem.jacobian(&p);
+    let (mut jtj, mut grad) = problem.normal_equations(&p, &r);
     let mut lambda = opts.initial_lambda;
     let mut nu = 2.0;
     let mut iterations = 0;
     let mut need_jacobian = false;
     while iterations < opts.max_iterations {
         if need_jacobian {
-            jac = problem.jacobian(&p);
+            (jtj, grad) = problem.normal_equations(&p, &r);
             need_jacobian = false;
         }
-        let jtj = jac.transpose() * &jac;
-        let grad = jac.transpose() * &r;
         if !jtj.iter().all(|v| v.is_finite()) || !grad.iter().all(|v| v.is_finite()) {
             return Err(LmFailure {
                 iterations,
@@ -196,12 +199,10 @@ fn finish<P: LeastSquaresProblem + ?Sized>(
     cost: f64,
     iterations: usize,
 ) -> LmSolution {
-    let jacobian = problem.jacobian(&params);
-    let jtj = jacobian.transpose() * &jacobian;
+    let (jtj, _) = problem.normal_equations(&params, &residuals);
     LmSolution {
         params,
         residuals,
-        jacobian,
         jtj,
         cost,
         iterations,

@@ -1,6 +1,10 @@
 //! Leave-one-pose-out cross-validation of static-pose fits: each pose is predicted by a fit made
 //! without it, and the held-out norm residual `(|A(x−b)| − ref)/ref` is summarised as an RMS.
 //! This measures how well a calibration generalises to orientations it has not seen.
+//!
+//! The generic form refits once per pose. Methods whose fit can be updated for one removed pose
+//! (min/max: only the six face poses matter; linear least squares: a rank-one downdate) pass
+//! that update to [`held_out_rms`] and cost about one fit in all.
 
 use super::{Calibration, FitError, Pose};
 
@@ -25,10 +29,7 @@ pub fn leave_one_out_rms_indexed(
     reference: f64,
     fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
 ) -> Option<f64> {
-    let errors = leave_one_out_errors(poses, reference, fit)?
-        .into_iter()
-        .collect::<Option<Vec<f64>>>()?;
-    Some((errors.iter().map(|r| r * r).sum::<f64>() / errors.len() as f64).sqrt())
+    rms_of_all(leave_one_out_errors(poses, reference, fit)?)
 }
 
 /// The held-out relative norm residual of every pose, in pose order, each predicted by `fit`
@@ -40,6 +41,34 @@ pub fn leave_one_out_errors(
     reference: f64,
     fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
 ) -> Option<Vec<Option<f64>>> {
+    held_out_errors(poses, reference, |i| {
+        let rest: Vec<Pose> = poses
+            .iter()
+            .enumerate()
+            .filter(|&(j, _)| j != i)
+            .map(|(_, p)| p.clone())
+            .collect();
+        fit(i, &rest)
+    })
+}
+
+/// The RMS of [`leave_one_out_rms`] given, for each pose `i`, the calibration fitted without it
+/// (`calibration_without(i)`): methods with a closed-form or rank-one update for removing one
+/// pose use this directly instead of N refits.
+pub fn held_out_rms(
+    poses: &[Pose],
+    reference: f64,
+    calibration_without: impl FnMut(usize) -> Result<Calibration, FitError>,
+) -> Option<f64> {
+    rms_of_all(held_out_errors(poses, reference, calibration_without)?)
+}
+
+/// As [`leave_one_out_errors`], with the calibration without pose `i` given directly.
+pub fn held_out_errors(
+    poses: &[Pose],
+    reference: f64,
+    mut calibration_without: impl FnMut(usize) -> Result<Calibration, FitError>,
+) -> Option<Vec<Option<f64>>> {
     if poses.len() < 2 || reference.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
@@ -47,16 +76,16 @@ pub fn leave_one_out_errors(
         .iter()
         .enumerate()
         .map(|(i, held_out)| {
-            let rest: Vec<Pose> = poses
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != i)
-                .map(|(_, p)| p.clone())
-                .collect();
-            let cal = fit(i, &rest).ok()?;
+            let cal = calibration_without(i).ok()?;
             let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
             r.is_finite().then_some(r)
         })
         .collect();
     Some(errors)
+}
+
+/// RMS of the errors, or `None` when any pose could not be predicted.
+fn rms_of_all(errors: Vec<Option<f64>>) -> Option<f64> {
+    let errors = errors.into_iter().collect::<Option<Vec<f64>>>()?;
+    Some((errors.iter().map(|r| r * r).sum::<f64>() / errors.len() as f64).sqrt())
 }

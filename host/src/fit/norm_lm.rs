@@ -22,11 +22,10 @@ use nalgebra::{DMatrix, DVector};
 
 use super::chen::fit_chen;
 use super::covariance::{
-    calibration_std, condition_number, normal_covariance, param_names, reduced_chi_square,
-    UPPER_TRIANGULAR_LAYOUT,
+    calibration_std, normal_covariance, param_names, reduced_chi_square, UPPER_TRIANGULAR_LAYOUT,
 };
 use super::li::{fit_li, LiOptions};
-use super::linalg::upper_triangular_gauge;
+use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
 use super::loo::leave_one_out_rms;
 use super::six_position::fit_six_position;
@@ -143,33 +142,79 @@ impl LeastSquaresProblem for NormProblem {
             .zip(&self.tangential)
             .enumerate()
         {
-            let u = x - b;
-            let v = r * u;
-            let n = v.norm();
-            if n == 0.0 {
-                continue; // the norm is not differentiable at the centre; contributes nothing
-            }
-            // d(n − k/n)/dn = 1 + k/n².
-            let w = w * (1.0 + k / (n * n));
-            let vh = v / n;
-            let cols = [
-                vh[0] * u[0],
-                vh[0] * u[1],
-                vh[0] * u[2],
-                vh[1] * u[1],
-                vh[1] * u[2],
-                vh[2] * u[2],
-            ];
-            for (k, c) in cols.iter().enumerate() {
-                j[(i, k)] = w * c;
-            }
-            let db = -(r.transpose() * vh);
-            for k in 0..3 {
-                j[(i, 6 + k)] = w * db[k];
+            for (c, v) in jacobian_row(&r, &b, x, *w, *k).iter().enumerate() {
+                j[(i, c)] = *v;
             }
         }
         j
     }
+
+    /// `JᵀJ` and `Jᵀr` accumulated row by row (45 + 9 multiply-adds a sample), never holding `J`.
+    fn normal_equations(
+        &self,
+        p: &DVector<f64>,
+        res: &DVector<f64>,
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        let r = upper_from_params(p);
+        let b = Vec3::new(p[6], p[7], p[8]);
+        let mut upper = [0.0; 45];
+        let mut grad = [0.0; 9];
+        for (((x, w), k), ri) in self
+            .points
+            .iter()
+            .zip(&self.weights)
+            .zip(&self.tangential)
+            .zip(res.iter())
+        {
+            let row = jacobian_row(&r, &b, x, *w, *k);
+            let mut at = 0;
+            for i in 0..9 {
+                grad[i] += row[i] * ri;
+                for j in i..9 {
+                    upper[at] += row[i] * row[j];
+                    at += 1;
+                }
+            }
+        }
+        let mut jtj = DMatrix::zeros(9, 9);
+        let mut at = 0;
+        for i in 0..9 {
+            for j in i..9 {
+                jtj[(i, j)] = upper[at];
+                jtj[(j, i)] = upper[at];
+                at += 1;
+            }
+        }
+        (jtj, DVector::from_row_slice(&grad))
+    }
+}
+
+/// One row of the Jacobian: the derivative of `w·(n − k/n − 1)`, `n = |R(x − b)|`, with respect
+/// to `R11 R12 R13 R22 R23 R33 b1 b2 b3`. Zero at the centre, where the norm is not
+/// differentiable.
+#[inline(always)]
+fn jacobian_row(r: &Mat3, b: &Vec3, x: &Vec3, w: f64, k: f64) -> [f64; 9] {
+    let u = x - b;
+    let v = r * u;
+    let n = v.norm();
+    if n == 0.0 {
+        return [0.0; 9];
+    }
+    // d(n − k/n)/dn = 1 + k/n².
+    let w = w * (1.0 + k / (n * n));
+    let vh = v / n;
+    let db = -(r.transpose() * vh);
+    [
+        w * vh[0] * u[0],
+        w * vh[0] * u[1],
+        w * vh[0] * u[2],
+        w * vh[1] * u[1],
+        w * vh[1] * u[2],
+        w * vh[2] * u[2],
+        w * db[0],
+        w * db[1],
+        w * db[2],
+    ]
 }
 
 fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> {
@@ -375,7 +420,7 @@ pub fn refine_lm_detailed(
         covariance,
         param_names: param_names(&UPPER_TRIANGULAR_LAYOUT),
         std,
-        condition_number: condition_number(&sol.jacobian),
+        condition_number: condition_from_normal_matrix(&sol.jtj),
         iterations,
         reference,
     };

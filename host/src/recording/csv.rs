@@ -1,10 +1,13 @@
 //! Reader for the CSV recording format (`ARCHITECTURE.md`, "Recording format"): a header line
 //! of named columns in any order (`t_s`, `ax ay az`, `gx gy gz`, `mx my mz`, `temp_c`, and an
 //! optional `pose` or `segment` label), then one row per sample. Lines starting with `#` are
-//! comments.
+//! comments. The file is read once, line by line (see [`super::lines`]): memory holds the
+//! numbers kept, not the text.
 
+use std::collections::HashMap;
 use std::path::Path;
 
+use super::lines::LineReader;
 use super::{
     display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError, Sensor,
     MAX_SENSOR_MAGNITUDE,
@@ -79,26 +82,82 @@ fn parse_header(path: &Path, line: &str) -> Result<Header, RecordingError> {
     })
 }
 
-/// Rows of a CSV file as columns of numbers (label column kept as text).
+/// Rows of a CSV file as columns of numbers (labels interned as they are read).
 struct Table {
     header: Header,
     time: Option<Vec<f64>>,
     temp: Option<Vec<f64>>,
-    labels: Option<Vec<String>>,
+    labels: Option<Labels>,
     sensors: Vec<(Sensor, Vec<Vec3>)>,
     rows: usize,
 }
 
-fn read_table(path: &Path) -> Result<Table, RecordingError> {
-    let text = super::read_text(path)?;
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim_start_matches('\u{feff}').trim()))
-        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-    let (_, header_line) = lines.next().ok_or_else(|| RecordingError::Empty {
-        path: display(path),
-    })?;
+/// Text of a line as the CSV reader sees it: without a byte-order mark or surrounding blanks.
+fn content(line: &str) -> &str {
+    line.trim_start_matches('\u{feff}').trim()
+}
+
+/// True for lines the CSV format skips: blank lines and `#` comments.
+pub(super) fn is_skipped(line: &str) -> bool {
+    let line = content(line);
+    line.is_empty() || line.starts_with('#')
+}
+
+/// What a column of the header holds.
+#[derive(Debug, Clone, Copy)]
+enum Role {
+    Time,
+    Temp,
+    Label,
+    /// A sensor value: index `3·sensor + axis` into one row's readings.
+    Reading(usize),
+    Ignored,
+}
+
+fn column_roles(header: &Header) -> Vec<Role> {
+    let mut roles = vec![Role::Ignored; header.names.len()];
+    let mut set = |col: Option<usize>, role: Role| {
+        if let Some(slot) = col.and_then(|c| roles.get_mut(c)) {
+            *slot = role;
+        }
+    };
+    set(header.time, Role::Time);
+    set(header.temp, Role::Temp);
+    set(header.label.map(|(c, _)| c), Role::Label);
+    for (k, (_, cols)) in header.sensors.iter().enumerate() {
+        for (axis, col) in cols.iter().enumerate() {
+            set(Some(*col), Role::Reading(3 * k + axis));
+        }
+    }
+    roles
+}
+
+/// A field as a finite number.
+fn parse_number(text: &str) -> Option<f64> {
+    super::decimal::parse_finite(text)
+}
+
+/// Read the rows after `header_line` (the first line that is not skipped, if any) from `lines`.
+fn read_table(
+    path: &Path,
+    lines: &mut LineReader<'_>,
+    header_line: Option<(usize, String)>,
+) -> Result<Table, RecordingError> {
+    let header_line = match header_line {
+        Some((_, line)) => line,
+        None => loop {
+            match lines.next_line()? {
+                Some((_, l)) if is_skipped(l) => {}
+                Some((_, l)) => break l.to_string(),
+                None => {
+                    return Err(RecordingError::Empty {
+                        path: display(path),
+                    })
+                }
+            }
+        },
+    };
+    let header_line = content(&header_line);
     let header = parse_header(path, header_line)?;
     if header.sensors.is_empty() {
         return Err(RecordingError::NoSensor {
@@ -108,76 +167,103 @@ fn read_table(path: &Path) -> Result<Table, RecordingError> {
     }
     let mut time = header.time.map(|_| Vec::new());
     let mut temp = header.temp.map(|_| Vec::new());
-    let mut labels = header.label.map(|_| Vec::new());
+    let mut labels = header.label.map(|(_, kind)| LabelInterner::new(kind));
     let mut sensors: Vec<(Sensor, Vec<Vec3>)> = header
         .sensors
         .iter()
         .map(|(s, _)| (*s, Vec::new()))
         .collect();
-    let mut fields: Vec<&str> = Vec::with_capacity(header.names.len());
+    let roles = column_roles(&header);
+    // One row's sensor values, in the order of `header.sensors`.
+    let mut readings = vec![0.0; 3 * header.sensors.len()];
     let mut rows = 0;
-    for (line_no, line) in lines {
-        fields.clear();
-        fields.extend(line.split(',').map(str::trim));
-        if fields.len() != header.names.len() {
+    let input_bytes = lines.input_len();
+    while let Some((line_no, line)) = lines.next_line()? {
+        let body = content(line);
+        if body.is_empty() || body.starts_with('#') {
+            continue;
+        }
+        let mut found = 0;
+        for (col, text) in body.split(',').enumerate() {
+            found += 1;
+            let Some(role) = roles.get(col) else { continue };
+            if let Role::Label = role {
+                if let Some(l) = labels.as_mut() {
+                    l.push(text.trim());
+                }
+                continue;
+            }
+            if let Role::Ignored = role {
+                continue;
+            }
+            // ASCII blanks are the usual padding; other Unicode spaces take the slower trim.
+            let value = parse_number(text.trim_ascii())
+                .or_else(|| parse_number(text.trim()))
+                .ok_or_else(|| RecordingError::BadNumber {
+                    path: display(path),
+                    line: line_no,
+                    column: header.names[col].clone(),
+                    text: text.trim().to_string(),
+                })?;
+            match *role {
+                Role::Time => {
+                    let t = time.get_or_insert_with(Vec::new);
+                    if let Some(&previous) = t.last() {
+                        if value < previous {
+                            return Err(RecordingError::TimeBackwards {
+                                path: display(path),
+                                line: line_no,
+                                time: value,
+                                previous,
+                            });
+                        }
+                    }
+                    t.push(value);
+                }
+                Role::Temp => temp.get_or_insert_with(Vec::new).push(value),
+                Role::Reading(slot) => {
+                    if value.abs() > MAX_SENSOR_MAGNITUDE {
+                        return Err(RecordingError::OutOfRange {
+                            path: display(path),
+                            line: line_no,
+                            column: header.names[col].clone(),
+                            value,
+                            limit: MAX_SENSOR_MAGNITUDE,
+                        });
+                    }
+                    readings[slot] = value;
+                }
+                Role::Label | Role::Ignored => {}
+            }
+        }
+        if found != header.names.len() {
             return Err(RecordingError::FieldCount {
                 path: display(path),
                 line: line_no,
                 expected: header.names.len(),
-                found: fields.len(),
+                found,
             });
         }
-        let number = |col: usize| -> Result<f64, RecordingError> {
-            let text = fields.get(col).copied().unwrap_or("");
-            match text.parse::<f64>() {
-                Ok(v) if v.is_finite() => Ok(v),
-                _ => Err(RecordingError::BadNumber {
-                    path: display(path),
-                    line: line_no,
-                    column: header.names.get(col).cloned().unwrap_or_default(),
-                    text: text.to_string(),
-                }),
-            }
-        };
-        if let (Some(col), Some(t)) = (header.time, time.as_mut()) {
-            let value = number(col)?;
-            if let Some(&previous) = t.last() {
-                if value < previous {
-                    return Err(RecordingError::TimeBackwards {
-                        path: display(path),
-                        line: line_no,
-                        time: value,
-                        previous,
-                    });
+        for (k, (_, out)) in sensors.iter_mut().enumerate() {
+            out.push(Vec3::new(
+                readings[3 * k],
+                readings[3 * k + 1],
+                readings[3 * k + 2],
+            ));
+        }
+        if rows == 0 {
+            // Rows of a file are alike in length: reserve for all of them at once rather than
+            // copying every column as it doubles.
+            if let Some(total) = input_bytes {
+                let expected = (total / (line.len() as u64 + 1)).min(1 << 32) as usize;
+                let more = expected + expected / 8;
+                for v in time.iter_mut().chain(temp.iter_mut()) {
+                    v.reserve(more);
+                }
+                for (_, v) in sensors.iter_mut() {
+                    v.reserve(more);
                 }
             }
-            t.push(value);
-        }
-        if let (Some(col), Some(v)) = (header.temp, temp.as_mut()) {
-            v.push(number(col)?);
-        }
-        if let (Some((col, _)), Some(v)) = (header.label, labels.as_mut()) {
-            v.push(fields.get(col).copied().unwrap_or("").to_string());
-        }
-        let reading = |col: usize| -> Result<f64, RecordingError> {
-            let value = number(col)?;
-            if value.abs() > MAX_SENSOR_MAGNITUDE {
-                return Err(RecordingError::OutOfRange {
-                    path: display(path),
-                    line: line_no,
-                    column: header.names.get(col).cloned().unwrap_or_default(),
-                    value,
-                    limit: MAX_SENSOR_MAGNITUDE,
-                });
-            }
-            Ok(value)
-        };
-        for ((_, cols), (_, out)) in header.sensors.iter().zip(sensors.iter_mut()) {
-            out.push(Vec3::new(
-                reading(cols[0])?,
-                reading(cols[1])?,
-                reading(cols[2])?,
-            ));
         }
         rows += 1;
     }
@@ -190,7 +276,7 @@ fn read_table(path: &Path) -> Result<Table, RecordingError> {
         header,
         time,
         temp,
-        labels,
+        labels: labels.map(LabelInterner::finish),
         sensors,
         rows,
     })
@@ -205,33 +291,55 @@ fn row_times(time: Option<Vec<f64>>, rows: usize, rate_hz: Option<f64>) -> (Vec<
     }
 }
 
-fn build_labels(kind: LabelKind, texts: Vec<String>) -> Labels {
-    let mut names: Vec<String> = Vec::new();
-    let per_row = texts
-        .into_iter()
-        .map(|text| {
-            if text.is_empty() || text == "-" {
-                return None;
-            }
-            Some(match names.iter().position(|n| *n == text) {
-                Some(i) => i,
-                None => {
-                    names.push(text);
-                    names.len() - 1
-                }
-            })
-        })
-        .collect();
-    Labels {
-        kind,
-        names,
-        per_row,
+/// Builds [`Labels`] row by row, storing each distinct text once.
+struct LabelInterner {
+    kind: LabelKind,
+    names: Vec<String>,
+    index: HashMap<String, usize>,
+    per_row: Vec<Option<usize>>,
+}
+
+impl LabelInterner {
+    fn new(kind: LabelKind) -> Self {
+        Self {
+            kind,
+            names: Vec::new(),
+            index: HashMap::new(),
+            per_row: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, text: &str) {
+        let label = if text.is_empty() || text == "-" {
+            None
+        } else if let Some(&i) = self.index.get(text) {
+            Some(i)
+        } else {
+            self.names.push(text.to_string());
+            self.index.insert(text.to_string(), self.names.len() - 1);
+            Some(self.names.len() - 1)
+        };
+        self.per_row.push(label);
+    }
+
+    fn finish(self) -> Labels {
+        Labels {
+            kind: self.kind,
+            names: self.names,
+            per_row: self.per_row,
+        }
     }
 }
 
-/// Read a CSV recording.
-pub(super) fn load(path: &Path, options: &LoadOptions) -> Result<Recording, RecordingError> {
-    let table = read_table(path)?;
+/// Read a CSV recording from `lines`, whose first line that is not skipped may already have been
+/// taken out (`header_line`).
+pub(super) fn load(
+    path: &Path,
+    lines: &mut LineReader<'_>,
+    header_line: Option<(usize, String)>,
+    options: &LoadOptions,
+) -> Result<Recording, RecordingError> {
+    let table = read_table(path, lines, header_line)?;
     let (time, time_is_index) = row_times(table.time, table.rows, options.rate_hz);
     let mut recording = Recording {
         source: path.to_path_buf(),
@@ -240,11 +348,7 @@ pub(super) fn load(path: &Path, options: &LoadOptions) -> Result<Recording, Reco
         gyro: None,
         temp_c: table.temp,
         mag: None,
-        labels: table
-            .header
-            .label
-            .zip(table.labels)
-            .map(|((_, kind), texts)| build_labels(kind, texts)),
+        labels: table.labels,
         ignored_columns: table.header.ignored,
         units: options.units,
         time,
@@ -270,7 +374,7 @@ pub(super) fn load_mag_stream(
     path: &Path,
     options: &LoadOptions,
 ) -> Result<MagStream, RecordingError> {
-    let table = read_table(path)?;
+    let table = read_table(path, &mut LineReader::open(path)?, None)?;
     let samples = table
         .sensors
         .into_iter()

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use super::lines::LineReader;
 use super::{display, LoadOptions, Recording, RecordingError};
 use crate::fit::Vec3;
 
@@ -20,45 +21,44 @@ fn numbers(line: &str) -> Option<[f64; 4]> {
         } else {
             super::MAX_SENSOR_MAGNITUDE
         };
-        *slot = fields
-            .next()?
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite() && v.abs() <= limit)?;
+        *slot = super::decimal::parse_finite(fields.next()?).filter(|v| v.abs() <= limit)?;
     }
     fields.next().is_none().then_some(out)
 }
 
-fn is_comment(line: &str) -> bool {
+/// True for lines IMU-TK skips: blank lines and `%` or `#` comments.
+pub(super) fn is_comment(line: &str) -> bool {
+    let line = line.trim();
     line.is_empty() || line.starts_with('%') || line.starts_with('#')
 }
 
-/// True when the first data line of `path` is four numbers (no header of names).
-pub(super) fn looks_like_imutk(path: &Path) -> Result<bool, RecordingError> {
-    let text = super::read_text(path)?;
-    for line in text.lines() {
-        let line = line.trim();
-        if is_comment(line) {
-            continue;
-        }
-        return Ok(numbers(line).is_some());
-    }
-    Ok(false)
+/// True when `line` is a data line of this format (four numbers, no names).
+pub(super) fn is_triad_line(line: &str) -> bool {
+    numbers(line.trim()).is_some()
 }
 
 /// Read one IMU-TK triad file: time stamps (scaled to seconds) and samples.
 pub fn read_triad(path: &Path, time_scale: f64) -> Result<(Vec<f64>, Vec<Vec3>), RecordingError> {
-    let text = super::read_text(path)?;
+    read_triad_lines(path, &mut LineReader::open(path)?, None, time_scale)
+}
+
+/// [`read_triad`] on `lines`, whose first data line may already have been taken out (`first`).
+fn read_triad_lines(
+    path: &Path,
+    lines: &mut LineReader<'_>,
+    first: Option<(usize, String)>,
+    time_scale: f64,
+) -> Result<(Vec<f64>, Vec<Vec3>), RecordingError> {
     let mut time = Vec::new();
     let mut samples = Vec::new();
-    for (i, line) in text.lines().enumerate() {
+    let mut push = |line_no: usize, line: &str| -> Result<(), RecordingError> {
         let line = line.trim();
         if is_comment(line) {
-            continue;
+            return Ok(());
         }
         let [t, x, y, z] = numbers(line).ok_or_else(|| RecordingError::ImutkLine {
             path: display(path),
-            line: i + 1,
+            line: line_no,
             text: line.chars().take(80).collect(),
         })?;
         let t = t * time_scale;
@@ -66,7 +66,7 @@ pub fn read_triad(path: &Path, time_scale: f64) -> Result<(Vec<f64>, Vec<Vec3>),
             if t < previous {
                 return Err(RecordingError::TimeBackwards {
                     path: display(path),
-                    line: i + 1,
+                    line: line_no,
                     time: t,
                     previous,
                 });
@@ -74,6 +74,13 @@ pub fn read_triad(path: &Path, time_scale: f64) -> Result<(Vec<f64>, Vec<Vec3>),
         }
         time.push(t);
         samples.push(Vec3::new(x, y, z));
+        Ok(())
+    };
+    if let Some((line_no, line)) = &first {
+        push(*line_no, line)?;
+    }
+    while let Some((line_no, line)) = lines.next_line()? {
+        push(line_no, line)?;
     }
     if time.is_empty() {
         return Err(RecordingError::NoRows {
@@ -83,10 +90,16 @@ pub fn read_triad(path: &Path, time_scale: f64) -> Result<(Vec<f64>, Vec<Vec3>),
     Ok((time, samples))
 }
 
-/// Read an IMU-TK accelerometer file and, if given, its gyroscope file.
-pub(super) fn load(path: &Path, options: &LoadOptions) -> Result<Recording, RecordingError> {
+/// Read an IMU-TK accelerometer file from `lines` (its first data line possibly already taken
+/// out as `first`) and, if given, its gyroscope file.
+pub(super) fn load(
+    path: &Path,
+    lines: &mut LineReader<'_>,
+    first: Option<(usize, String)>,
+    options: &LoadOptions,
+) -> Result<Recording, RecordingError> {
     let scale = options.imutk_time_scale.unwrap_or(1.0);
-    let (time, accel) = read_triad(path, scale)?;
+    let (time, accel) = read_triad_lines(path, lines, first, scale)?;
     let gyro = match &options.gyro_file {
         None => None,
         Some(gyro_path) => {

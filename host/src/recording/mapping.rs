@@ -25,6 +25,9 @@ pub enum ImportError {
         /// Operating-system error.
         cause: std::io::Error,
     },
+    /// The input is not line-oriented UTF-8 text, or could not be read (see [`super::lines`]).
+    #[error(transparent)]
+    Text(#[from] super::RecordingError),
     /// A MotionCal log without any `Raw:` line.
     #[error("`{path}` holds no `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` line; it is not a MotionCal serial log (save the serial monitor output while the calibration sketch runs)")]
     NoRawLines {

@@ -6,7 +6,9 @@
 //! is held as a separate [`MagStream`] with its own time stamps.
 
 mod csv;
+mod decimal;
 mod imutk;
+pub mod lines;
 pub mod mapping;
 pub mod motioncal;
 pub mod units;
@@ -35,6 +37,16 @@ pub enum RecordingError {
         path: String,
         /// What was found instead of text.
         detail: String,
+    },
+    /// A line is longer than any recording's line can be (a file without line breaks).
+    #[error("`{path}` line {line} is longer than {limit} bytes; a recording has one short line per sample, so this is not a recording (or its line breaks were lost)")]
+    LineTooLong {
+        /// File concerned.
+        path: String,
+        /// 1-based line number.
+        line: usize,
+        /// Longest line accepted, in bytes.
+        limit: usize,
     },
     /// A sensor value is finite but too large to be any sensor's reading.
     #[error("`{path}` line {line}, column `{column}`: {value:e} is larger than any sensor reading (limit {limit:e} in magnitude); correct or delete that row")]
@@ -258,24 +270,25 @@ impl Recording {
                 return Err(RecordingError::BadRate(rate));
             }
         }
+        let mut lines = lines::LineReader::open(path)?;
+        let first = first_data_line(&mut lines, options.format)?;
         let format = match options.format {
-            Format::Auto => {
-                if imutk::looks_like_imutk(path)? {
-                    Format::Imutk
-                } else {
-                    Format::Csv
-                }
-            }
+            Format::Auto => match &first {
+                Some((_, line)) if imutk::is_triad_line(line) => Format::Imutk,
+                _ => Format::Csv,
+            },
             other => other,
         };
         let mut recording = match format {
-            Format::Imutk => imutk::load(path, options)?,
-            _ => csv::load(path, options)?,
+            Format::Imutk => imutk::load(path, &mut lines, first, options)?,
+            _ => csv::load(path, &mut lines, first, options)?,
         };
         if recording.mag.is_none() {
             let mag_path = match &options.mag_file {
                 Some(p) => Some(p.clone()),
-                None if !options.no_mag_sibling => sibling_mag_file(path).filter(|p| p.is_file()),
+                None if !options.no_mag_sibling && path.as_os_str() != lines::STDIN_PATH => {
+                    sibling_mag_file(path).filter(|p| p.is_file())
+                }
                 None => None,
             };
             if let Some(mag_path) = mag_path {
@@ -366,33 +379,23 @@ pub fn sibling_mag_file(path: &Path) -> Option<PathBuf> {
 /// that pose statistics are built from.
 pub const MAX_SENSOR_MAGNITUDE: f64 = 1e10;
 
-/// The whole file as UTF-8 text, or an error that says what the file holds instead.
-pub(crate) fn read_text(path: &Path) -> Result<String, RecordingError> {
-    let bytes = std::fs::read(path).map_err(|cause| RecordingError::Io {
-        path: display(path),
-        cause,
-    })?;
-    let not_text = |detail: String| RecordingError::NotText {
-        path: display(path),
-        detail,
-    };
-    if bytes.starts_with(&[0xFF, 0xFE]) || bytes.starts_with(&[0xFE, 0xFF]) {
-        return Err(not_text(
-            "it is UTF-16 text (it starts with a UTF-16 byte-order mark)".to_string(),
-        ));
+/// The first line that is neither blank nor a comment of `format` (for `Auto`, of either
+/// format), which decides the format; `None` when the input ends first.
+fn first_data_line(
+    lines: &mut lines::LineReader<'_>,
+    format: Format,
+) -> Result<Option<(usize, String)>, RecordingError> {
+    while let Some((line_no, line)) = lines.next_line()? {
+        let skipped = match format {
+            Format::Csv => csv::is_skipped(line),
+            Format::Imutk => imutk::is_comment(line),
+            Format::Auto => csv::is_skipped(line) || imutk::is_comment(line),
+        };
+        if !skipped {
+            return Ok(Some((line_no, line.to_string())));
+        }
     }
-    if let Some(offset) = bytes.iter().position(|b| *b == 0) {
-        return Err(not_text(format!(
-            "it holds binary data (a zero byte at offset {offset})"
-        )));
-    }
-    String::from_utf8(bytes).map_err(|e| {
-        let offset = e.utf8_error().valid_up_to();
-        let byte = e.as_bytes().get(offset).copied().unwrap_or_default();
-        not_text(format!(
-            "it holds bytes that are not UTF-8 text (byte 0x{byte:02X} at offset {offset})"
-        ))
-    })
+    Ok(None)
 }
 
 fn display(path: &Path) -> String {

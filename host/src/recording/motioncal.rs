@@ -7,8 +7,10 @@
 //! Other lines of such a log (`Uni:`, `Ori:`, `Cal1:`, `Cal2:`, text) are skipped. The log has
 //! no time stamps: rows are timed by `--rate`, or counted when no rate is given.
 
+use std::io::Read;
 use std::path::Path;
 
+use super::lines::LineReader;
 use super::mapping::ImportError;
 use super::{AccelUnit, GyroUnit, MagStream, MagUnit, Recording, Units};
 use crate::fit::Vec3;
@@ -51,8 +53,39 @@ fn parse_raw(payload: &str) -> Result<[f64; 9], (usize, String)> {
     Ok(values)
 }
 
+/// True when the first [`SNIFF_BYTES`] of the file at `path` hold a `Raw:` line; `false` when it
+/// cannot be read (the ordinary readers then say why). Reads only that much, so a large
+/// recording is not read twice and a device or pipe is not drained.
+pub fn file_looks_like_motioncal(path: &Path) -> bool {
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut head = Vec::with_capacity(SNIFF_BYTES);
+    if file
+        .take(SNIFF_BYTES as u64)
+        .read_to_end(&mut head)
+        .is_err()
+    {
+        return false;
+    }
+    looks_like_motioncal(&String::from_utf8_lossy(&head))
+}
+
+/// Bytes of a file inspected by [`file_looks_like_motioncal`]: 200 lines of a log.
+pub const SNIFF_BYTES: usize = 16 * 1024;
+
 /// Reads a MotionCal log from text; `path` names it in errors and in the recording.
 pub fn parse(text: &str, path: &Path, rate_hz: Option<f64>) -> Result<Recording, ImportError> {
+    let mut lines = LineReader::new(Box::new(text.as_bytes()), path.display().to_string());
+    parse_lines(&mut lines, path, rate_hz)
+}
+
+/// Reads a MotionCal log line by line from `lines`.
+fn parse_lines(
+    lines: &mut LineReader<'_>,
+    path: &Path,
+    rate_hz: Option<f64>,
+) -> Result<Recording, ImportError> {
     if let Some(rate) = rate_hz {
         if !(rate.is_finite() && rate > 0.0) {
             return Err(ImportError::BadRate(rate));
@@ -62,13 +95,13 @@ pub fn parse(text: &str, path: &Path, rate_hz: Option<f64>) -> Result<Recording,
     let mut accel = Vec::new();
     let mut gyro = Vec::new();
     let mut mag = Vec::new();
-    for (index, line) in text.lines().enumerate() {
+    while let Some((line_no, line)) = lines.next_line()? {
         let Some(payload) = line.trim().strip_prefix(RAW_PREFIX) else {
             continue;
         };
         let v = parse_raw(payload).map_err(|(found, field)| ImportError::RawLine {
             path: shown.clone(),
-            line: index + 1,
+            line: line_no,
             found,
             field,
         })?;
@@ -104,11 +137,7 @@ pub fn parse(text: &str, path: &Path, rate_hz: Option<f64>) -> Result<Recording,
     })
 }
 
-/// Reads a MotionCal log file.
+/// Reads a MotionCal log file (or standard input for `-`), once, line by line.
 pub fn load(path: &Path, rate_hz: Option<f64>) -> Result<Recording, ImportError> {
-    let text = std::fs::read_to_string(path).map_err(|cause| ImportError::Io {
-        path: path.display().to_string(),
-        cause,
-    })?;
-    parse(&text, path, rate_hz)
+    parse_lines(&mut LineReader::open(path)?, path, rate_hz)
 }
