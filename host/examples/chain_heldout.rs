@@ -174,18 +174,21 @@ fn table(dir: &Path, title: &str, offsets: &[usize]) {
     println!("\nlargest chain/best ratio: {worst:.2} (target ≤ 1.5)");
 }
 
+/// The shared collection when present, else the repository's copies.
+fn default_dir() -> PathBuf {
+    let shared = PathBuf::from("/work/shared/data/real");
+    let repo = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/real");
+    if shared.is_dir() {
+        shared
+    } else {
+        repo
+    }
+}
+
 fn main() {
     let dir = std::env::args()
         .nth(1)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            let shared = PathBuf::from("/work/shared/data/real");
-            if shared.is_dir() {
-                shared
-            } else {
-                PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/real")
-            }
-        });
+        .map_or_else(default_dir, PathBuf::from);
     table(
         &dir,
         "Every 4th hold (the 4th, 8th, …) held out, held-out RMS of |a|/g − 1:",

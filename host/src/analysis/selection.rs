@@ -11,7 +11,7 @@ use super::extended_fit::{
 };
 use super::noise::ChiSquareTest;
 use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, SensorAnalysis};
-use crate::fit::{Calibration, Pose, Vec3};
+use crate::fit::{Calibration, Vec3};
 use crate::recording::Sensor;
 
 /// Above this |ρ| between pose temperature and pose time, temperature and time effects are
@@ -33,17 +33,6 @@ fn pearson(a: &[f64], b: &[f64]) -> Option<f64> {
     }
     let r = sab / (saa * sbb).sqrt();
     r.is_finite().then_some(r)
-}
-
-pub(super) fn to_poses(obs: &[Observation]) -> Vec<Pose> {
-    obs.iter()
-        .map(|o| Pose {
-            mean: o.mean,
-            var: o.sigma_mean.component_mul(&o.sigma_mean) * o.n as f64,
-            n: o.n,
-            label: o.label,
-        })
-        .collect()
 }
 
 fn coefficients(

@@ -2,10 +2,10 @@
 //! poses, started at the default chain's model; the gyroscope's bias with the specific force for
 //! g-sensitivity; the magnetometer from still poses or short windows of the stream.
 
-use super::dataset::{self};
+use super::dataset::{self, to_poses};
 use super::extended_fit::BaseKind;
 use super::result::{AnalysisError, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
-use super::selection::{analyse_observations, to_poses, SensorSetup};
+use super::selection::{analyse_observations, SensorSetup};
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::li::{fit_li, LiOptions};
 use crate::fit::norm_lm::{fit_mag_lm, sphere_start};

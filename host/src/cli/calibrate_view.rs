@@ -315,26 +315,38 @@ pub(super) fn before_after_table(outcome: &SessionOutcome) -> String {
         "{:<16}{:>14}{:>14}{:>12}\n",
         "at rest", "before", "after", "target"
     ));
-    text.push_str(&format!(
-        "{:<16}{:>14}{:>14}{:>12}\n",
-        "|a| error",
-        show(Some(before.accel_error_mg), "mg", 2),
-        show(after.map(|a| a.accel_error_mg), "mg", 3),
-        "< 2 mg"
-    ));
-    text.push_str(&format!(
-        "{:<16}{:>14}{:>14}{:>12}\n",
-        "|m| error",
-        show(Some(before.mag_error_pct), "%", 2),
-        show(after.map(|a| a.mag_error_pct), "%", 3),
-        "< 0.5 %"
-    ));
-    text.push_str(&format!(
-        "{:<16}{:>14}{:>14}{:>12}\n",
-        "gyro rate",
-        show(Some(before.gyro_rate_dps), "°/s", 3),
-        show(after.map(|a| a.gyro_rate_dps), "°/s", 4),
-        ""
-    ));
+    let rows = [
+        (
+            "|a| error",
+            Some(before.accel_error_mg),
+            after.map(|a| a.accel_error_mg),
+            "mg",
+            2,
+            "< 2 mg",
+        ),
+        (
+            "|m| error",
+            Some(before.mag_error_pct),
+            after.map(|a| a.mag_error_pct),
+            "%",
+            2,
+            "< 0.5 %",
+        ),
+        (
+            "gyro rate",
+            Some(before.gyro_rate_dps),
+            after.map(|a| a.gyro_rate_dps),
+            "°/s",
+            3,
+            "",
+        ),
+    ];
+    for (name, was, now, unit, precision, target) in rows {
+        text.push_str(&format!(
+            "{name:<16}{:>14}{:>14}{target:>12}\n",
+            show(was, unit, precision),
+            show(now, unit, precision + 1),
+        ));
+    }
     text
 }
