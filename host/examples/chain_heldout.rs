@@ -100,12 +100,14 @@ fn holds(dir: &Path, name: &str, accel: AccelUnit, gyro: GyroUnit) -> Result<Vec
 
 /// Train/test splits: holds `i` with `i % HOLD_OUT_EVERY == offset` held out.
 fn split(poses: &[Pose], offset: usize) -> (Vec<Pose>, Vec<Pose>) {
-    let (test, train): (Vec<(usize, &Pose)>, Vec<(usize, &Pose)>) = poses
-        .iter()
-        .enumerate()
-        .partition(|(i, _)| i % HOLD_OUT_EVERY == offset);
-    let strip = |v: Vec<(usize, &Pose)>| v.into_iter().map(|(_, p)| p.clone()).collect();
-    (strip(train), strip(test))
+    let held_out = |i: &usize| i % HOLD_OUT_EVERY == offset;
+    let pick = |keep: bool| -> Vec<Pose> {
+        (0..poses.len())
+            .filter(|i| held_out(i) != keep)
+            .map(|i| poses[i].clone())
+            .collect()
+    };
+    (pick(true), pick(false))
 }
 
 /// One table row: every method's pooled held-out RMS, the chain's, and the ratio to the best.

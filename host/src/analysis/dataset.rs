@@ -230,6 +230,18 @@ pub fn window_observations(
     out
 }
 
+/// Observations as fit poses (the variance of one sample recovered from the mean's).
+pub fn to_poses(obs: &[Observation]) -> Vec<Pose> {
+    obs.iter()
+        .map(|o| Pose {
+            mean: o.mean,
+            var: o.sigma_mean.component_mul(&o.sigma_mean) * o.n as f64,
+            n: o.n,
+            label: o.label,
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -328,16 +340,4 @@ mod tests {
         ])
         .is_none());
     }
-}
-
-/// Observations as fit poses (the variance of one sample recovered from the mean's).
-pub fn to_poses(obs: &[Observation]) -> Vec<Pose> {
-    obs.iter()
-        .map(|o| Pose {
-            mean: o.mean,
-            var: o.sigma_mean.component_mul(&o.sigma_mean) * o.n as f64,
-            n: o.n,
-            label: o.label,
-        })
-        .collect()
 }

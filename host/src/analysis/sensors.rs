@@ -128,7 +128,11 @@ pub fn analyse_sensor(
             };
             analyse_observations(setup, obs).map(|mut a| {
                 if !options.gyro_scale_known {
+                    // Without a scale the residual and every coefficient are in counts.
                     a.residual_unit = "counts";
+                    for c in a.effects.iter_mut().flat_map(|e| e.coefficients.iter_mut()) {
+                        c.unit = c.unit.replace("rad/s", "counts");
+                    }
                 }
                 a
             })

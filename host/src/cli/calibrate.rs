@@ -29,8 +29,6 @@ fn duration_arg(name: &str, seconds: f64) -> anyhow::Result<Duration> {
     Ok(Duration::from_secs_f64(seconds))
 }
 
-/// The terminal interface of a session.
-
 fn unix_now() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -38,6 +36,7 @@ fn unix_now() -> u64 {
 }
 
 /// The die temperature profile of `--sim-temperature`.
+/// Run `imucal calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
         args.gravity.is_finite() && args.gravity > 0.0,

@@ -107,8 +107,6 @@ impl Simulated {
     }
 }
 
-/// Run `imucal calibrate`.
-
 #[cfg(all(test, feature = "sim"))]
 mod tests {
     use super::temperature_profile;

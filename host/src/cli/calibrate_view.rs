@@ -9,6 +9,7 @@ use imucal::session::{SessionEvent, SessionFit, SessionObserver, SessionOutcome,
 use imucal_protocol::StreamKind;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+/// The terminal interface of a session.
 pub(super) struct Terminal {
     plain: bool,
     yes: bool,
