@@ -35,7 +35,7 @@
 use crate::fit::axis_aligned::{fit_axis_aligned, fit_axis_aligned_poses};
 use crate::fit::loo::leave_one_out_errors;
 use crate::fit::minmax::{fit_minmax, minmax_calibration};
-use crate::fit::norm_lm::{fit_accel_lm, fit_accel_lm_detailed};
+use crate::fit::norm_lm::fit_accel_lm_detailed;
 use crate::fit::six_position::{fit_six_position, nearest_axes, six_position_calibration};
 use crate::fit::{Calibration, Fit, FitError, Method, Pose, Vec3};
 
@@ -109,8 +109,18 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
     for method in CANDIDATES {
         match fit_full(method, poses, reference) {
             Err(e) => outcomes.push((method, Some(CandidateOutcome::Refused(e.to_string())))),
-            Ok(fit) => {
-                folds.push((method, held_out_errors(method, poses, reference)));
+            Ok(mut fit) => {
+                let errors = held_out_errors(method, poses, reference);
+                if method == Method::Lm {
+                    // The same held-out residuals `fit_accel_lm` would compute for itself.
+                    fit.loo_rms = errors
+                        .iter()
+                        .copied()
+                        .collect::<Option<Vec<f64>>>()
+                        .filter(|e| !e.is_empty())
+                        .map(|e| (e.iter().map(|r| r * r).sum::<f64>() / e.len() as f64).sqrt());
+                }
+                folds.push((method, errors));
                 fits.push((method, fit));
                 outcomes.push((method, None));
             }
@@ -158,7 +168,8 @@ fn fit_full(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, FitEr
     match method {
         Method::MinMax => fit_minmax(poses, reference),
         Method::AxisAligned => fit_axis_aligned_poses(poses, reference),
-        Method::Lm => fit_accel_lm(poses, reference),
+        // Its leave-one-out RMS comes from the chain's own held-out refits.
+        Method::Lm => fit_accel_lm_detailed(poses, reference).map(|o| o.fit),
         _ => fit_six_position(poses, None, reference),
     }
 }
