@@ -122,6 +122,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(sim) = &simulated {
         sim.save_truth(&dir.join("truth.json"))?;
     }
+    // Recorded only once the session directory holds the calibration.
+    let mut record =
+        imucal::history::CalibrationRecord::from_session(&summary(&outcome), &outcome.poses);
+    record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    // A failed write is returned after the summary is printed, so nothing is hidden.
+    let recorded = super::history::record(&args.history, record);
     let closed = if args.analyze {
         Some(close_the_loop(
             &mut client,
@@ -174,5 +180,5 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             dir.join("params.json").display()
         );
     }
-    Ok(())
+    recorded
 }

@@ -51,6 +51,7 @@ impl Simulated {
         use imucal_hil_sim::serve::{SimOptions, SimServer};
         let mut options = SimOptions::new(args.sim_seed);
         options.speed = args.speed;
+        options.board.sensor = args.sim_chip;
         options.board.temperature = temperature_profile(&args.sim_temperature)?;
         if args.rounds > 1 {
             options.schedule = imucal_hil_sim::board::PersonSchedule::Rounds(args.rounds);

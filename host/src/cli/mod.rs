@@ -9,6 +9,8 @@ mod calibrate_view;
 pub mod device;
 pub mod export;
 pub mod fit;
+pub mod fleet;
+pub mod history;
 pub mod import;
 pub mod report;
 pub mod still;
