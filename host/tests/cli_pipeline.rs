@@ -272,3 +272,24 @@ fn absurd_reference_values_are_refused_by_every_command_with_a_sentence() {
         );
     }
 }
+
+#[test]
+fn analyze_labels_a_gyroscope_without_a_scale_in_counts_not_rad_per_s() {
+    let recording = real("imutk_xsens_multipos.csv");
+    let out = imucal(&[
+        "analyze",
+        &recording,
+        "--accel-unit",
+        "counts",
+        "--gyro-unit",
+        "counts",
+    ]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let gyro = stdout
+        .split("gyro — ")
+        .nth(1)
+        .expect("the gyroscope is analysed");
+    assert!(gyro.contains("counts"), "{gyro}");
+    assert!(!gyro.contains("rad/s"), "{gyro}");
+}

@@ -14,7 +14,7 @@
 //! `E[Δx²]/(2(1 − ρ))`, also from the differences. Both choices make the floor the noise of the
 //! sensor, not of the person holding it.
 
-use crate::fit::Vec3;
+use crate::fit::{Pose, Vec3};
 use crate::recording::{LabelKind, Recording, Sensor};
 use crate::still::StillReport;
 
@@ -228,6 +228,18 @@ pub fn window_observations(
         });
     }
     out
+}
+
+/// Observations as fit poses (the variance of one sample recovered from the mean's).
+pub fn to_poses(obs: &[Observation]) -> Vec<Pose> {
+    obs.iter()
+        .map(|o| Pose {
+            mean: o.mean,
+            var: o.sigma_mean.component_mul(&o.sigma_mean) * o.n as f64,
+            n: o.n,
+            label: o.label,
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -37,7 +37,7 @@ pub enum Command {
     #[command(
         after_help = "Examples:\n  imucal calibrate --sim --yes\n  imucal calibrate --port /dev/ttyACM0 --field-ut 48.5"
     )]
-    Calibrate(super::calibrate::CalibrateArgs),
+    Calibrate(CalibrateArgs),
     /// Write an HTML report (plots, parameters, verdict) of a session directory or a recording.
     #[command(after_help = REPORT_EXAMPLES)]
     Report(ReportArgs),
@@ -293,4 +293,82 @@ pub struct StillArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Arguments of `imucal calibrate`.
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Serial port of the board (default: the only likely board from `imucal ports`).
+    #[arg(long, short = 'p', conflicts_with = "sim")]
+    pub port: Option<String>,
+    /// Calibrate the simulated board, started in-process on a pseudo-terminal.
+    #[arg(long)]
+    pub sim: bool,
+    /// Simulator: seed of the board's errors, noise and the simulated person.
+    #[arg(long, default_value_t = 1, requires = "sim")]
+    pub sim_seed: u64,
+    /// Simulator: switch a hidden effect on (repeatable), `[sensor.]name[=size]`.
+    #[arg(long = "sim-effect", requires = "sim")]
+    pub sim_effects: Vec<String>,
+    /// Simulator: sensor chip, lsm9ds1 (Nano 33 BLE Sense) or bmi270 (BMI270 + BMM150, Rev2).
+    #[arg(long, value_enum, default_value = "lsm9ds1", requires = "sim")]
+    #[cfg(feature = "sim")]
+    pub sim_chip: imucal_hil_sim::board::SensorChip,
+    /// Simulator: simulated seconds per wall second.
+    #[arg(long, default_value_t = 15.0, requires = "sim")]
+    pub speed: f64,
+    /// Simulator: die temperature, `constant` (the person's ambient) or `sweep[:LOW:HIGH:PERIOD]`
+    /// (°C, °C, s; `sweep` alone is 10–40 °C every 90 s).
+    #[arg(long, default_value = "constant", requires = "sim")]
+    pub sim_temperature: String,
+    /// Capture the twelve positions this many times over (the simulated person repeats them).
+    /// Spreading the poses over time and temperature lets `--analyze` see temperature effects;
+    /// the accelerometer's analysis needs at least two rounds.
+    #[arg(long, default_value_t = 1)]
+    pub rounds: u8,
+    /// After the base fit, analyse the residual of the session's poses; the effects the firmware
+    /// can apply (bias temperature polynomial, scale temperature coefficient, non-linearity, gyro
+    /// g-sensitivity) that the analysis accepts are added to the set, written, verified and
+    /// checked at rest again; the written set is saved as params.json (the base set as
+    /// params-base.json) and the analysis as analysis.json.
+    ///
+    /// Example: imucal calibrate --sim --sim-temperature sweep
+    /// --sim-effect accel.bias_temperature=2 --rounds 3 --analyze --yes
+    #[arg(long, verbatim_doc_comment)]
+    pub analyze: bool,
+    /// Unattended: write without asking, and print plain progress lines.
+    #[arg(long, short = 'y')]
+    pub yes: bool,
+    /// Print the machine-readable summary (JSON) on stdout instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Session directory (default: `imucal-session-<unix time>` here).
+    #[arg(long, short = 'o')]
+    pub out: Option<PathBuf>,
+    /// Where to record the calibration.
+    #[command(flatten)]
+    pub history: super::history::RecordArgs,
+    /// Local gravity, m/s².
+    #[arg(long, default_value_t = 9.806_65)]
+    pub gravity: f64,
+    /// Local field magnitude, µT (e.g. from a geomagnetic model). Without it the magnetometer
+    /// keeps its mean sensitivity (with `--sim`: the simulated site's field).
+    #[arg(long)]
+    pub field_ut: Option<f64>,
+    /// Where the board is (latitude, longitude in degrees, optional altitude in m): the World
+    /// Magnetic Model's field there today is the magnetometer reference unless --field-ut is given.
+    #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
+    pub location: Option<imucal::geomag::Location>,
+    /// Still time averaged per position, s.
+    #[arg(long, default_value_t = 1.5)]
+    pub hold: f64,
+    /// Longest wait for the next position, s.
+    #[arg(long, default_value_t = 180.0)]
+    pub pose_timeout: f64,
+    /// Longest magnetometer phase, s.
+    #[arg(long, default_value_t = 180.0)]
+    pub mag_timeout: f64,
+    /// Longest wait for the board to lie still at the end, s.
+    #[arg(long, default_value_t = 120.0)]
+    pub rest_timeout: f64,
 }

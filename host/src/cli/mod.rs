@@ -3,6 +3,9 @@
 pub mod analyze;
 pub mod args;
 pub mod calibrate;
+mod calibrate_extend;
+mod calibrate_sim;
+mod calibrate_view;
 pub mod device;
 pub mod export;
 pub mod fit;

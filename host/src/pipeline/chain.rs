@@ -1,7 +1,8 @@
 //! The one default accelerometer chain, used by `fit`, `calibrate` and `analyze` alike.
 //!
-//! Candidates, simplest first: the axis-aligned ellipsoid (6 unknowns: scales and offsets), the
-//! norm model solved by Levenberg–Marquardt (9: upper-triangular `A` and `b`) and the
+//! Candidates, simplest first: the six-face min/max (6 unknowns: per-axis scale and offset from
+//! the face readings, seed 004), the axis-aligned ellipsoid (6 unknowns: the same parameters by
+//! least squares over every pose), the norm model solved by Levenberg–Marquardt (9: upper-triangular `A` and `b`) and the
 //! six-position least squares of seed 000 eq. 11–15 (12: full `A` and `b`, poses labelled by
 //! their nearest face). Each is first fitted on every pose with its own refusals (coverage,
 //! faces, closed ellipsoid).
@@ -18,8 +19,8 @@
 //! **One-standard-error rule** (Hastie, Tibshirani & Friedman, *Elements of Statistical
 //! Learning*, §7.10): the LOPO mean square error is itself an estimate, with standard error
 //! `sd(eᵢ²)/√n`. Among the models whose LOPO MSE is within one standard error of the best, the
-//! one with the fewest unknowns is chosen: the data cannot tell them apart, and the simpler one
-//! has the smaller variance on poses not seen. The rule has no tuned threshold: its margin is
+//! one with the fewest unknowns is chosen (between equally many, the lower error): the data
+//! cannot tell them apart, and the simpler one has the smaller variance on poses not seen. The rule has no tuned threshold: its margin is
 //! the sampling error of the data at hand.
 //!
 //! **Models are compared on the same held-out poses.** A refit can be refused when a pose is
@@ -33,7 +34,8 @@
 
 use crate::fit::axis_aligned::{fit_axis_aligned, fit_axis_aligned_poses};
 use crate::fit::loo::leave_one_out_errors;
-use crate::fit::norm_lm::{fit_accel_lm, fit_accel_lm_detailed};
+use crate::fit::minmax::{fit_minmax, minmax_calibration};
+use crate::fit::norm_lm::fit_accel_lm_detailed;
 use crate::fit::six_position::{fit_six_position, nearest_axes, six_position_calibration};
 use crate::fit::{Calibration, Fit, FitError, Method, Pose, Vec3};
 
@@ -42,12 +44,17 @@ use crate::fit::{Calibration, Fit, FitError, Method, Pose, Vec3};
 pub const MIN_COMMON_FOLDS: usize = 3;
 
 /// The candidate models, simplest (fewest unknowns) first.
-pub const CANDIDATES: [Method; 3] = [Method::AxisAligned, Method::Lm, Method::SixPosition];
+pub const CANDIDATES: [Method; 4] = [
+    Method::MinMax,
+    Method::AxisAligned,
+    Method::Lm,
+    Method::SixPosition,
+];
 
 /// Number of unknowns of a candidate model.
 pub fn unknowns(method: Method) -> usize {
     match method {
-        Method::AxisAligned => 6,
+        Method::MinMax | Method::AxisAligned => 6,
         Method::Lm => 9,
         _ => 12,
     }
@@ -102,8 +109,18 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
     for method in CANDIDATES {
         match fit_full(method, poses, reference) {
             Err(e) => outcomes.push((method, Some(CandidateOutcome::Refused(e.to_string())))),
-            Ok(fit) => {
-                folds.push((method, held_out_errors(method, poses, reference)));
+            Ok(mut fit) => {
+                let errors = held_out_errors(method, poses, reference);
+                if method == Method::Lm {
+                    // The same held-out residuals `fit_accel_lm` would compute for itself.
+                    fit.loo_rms = errors
+                        .iter()
+                        .copied()
+                        .collect::<Option<Vec<f64>>>()
+                        .filter(|e| !e.is_empty())
+                        .map(|e| (e.iter().map(|r| r * r).sum::<f64>() / e.len() as f64).sqrt());
+                }
+                folds.push((method, errors));
                 fits.push((method, fit));
                 outcomes.push((method, None));
             }
@@ -149,8 +166,10 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
 /// The full fit of one candidate, with its refusals.
 fn fit_full(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
     match method {
+        Method::MinMax => fit_minmax(poses, reference),
         Method::AxisAligned => fit_axis_aligned_poses(poses, reference),
-        Method::Lm => fit_accel_lm(poses, reference),
+        // Its leave-one-out RMS comes from the chain's own held-out refits.
+        Method::Lm => fit_accel_lm_detailed(poses, reference).map(|o| o.fit),
         _ => fit_six_position(poses, None, reference),
     }
 }
@@ -164,6 +183,7 @@ fn refit(
     reference: f64,
 ) -> Result<Calibration, FitError> {
     match method {
+        Method::MinMax => minmax_calibration(rest, reference),
         Method::AxisAligned => {
             let means: Vec<Vec3> = rest.iter().map(|p| p.mean).collect();
             fit_axis_aligned(&means, reference).map(|f| f.cal)
@@ -266,10 +286,10 @@ fn choose(candidates: &[Candidate]) -> Option<Method> {
         })
         .collect();
     let (_, best_mse, best_se) = scored.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))?;
-    // CANDIDATES is ordered simplest first, and so is `scored`.
     scored
         .iter()
-        .find(|(_, mse, _)| *mse <= best_mse + best_se)
+        .filter(|(_, mse, _)| *mse <= best_mse + best_se)
+        .min_by(|a, b| unknowns(a.0).cmp(&unknowns(b.0)).then(a.1.total_cmp(&b.1)))
         .map(|(m, _, _)| *m)
 }
 
@@ -316,7 +336,9 @@ fn explain(chosen: Method, candidates: &[Candidate]) -> String {
         .map(|c| {
             let why = match &c.outcome {
                 CandidateOutcome::Scored { lopo_rms, .. } => {
-                    if unknowns(c.method) > unknowns(chosen) {
+                    if unknowns(c.method) == unknowns(chosen) {
+                        format!("held-out error {lopo_rms:.3e}, higher for as many unknowns")
+                    } else if unknowns(c.method) > unknowns(chosen) {
                         format!(
                             "held-out error {lopo_rms:.3e}, no better within the standard error \
                              for {} more unknowns",

@@ -17,7 +17,7 @@
 use imucal_protocol::CalibrationSet;
 
 use super::solve::{accel_of, gyro_of, CapturedPose};
-use crate::analysis::dataset::Observation;
+use crate::analysis::dataset::{to_poses, Observation};
 use crate::analysis::effects::EffectKind;
 use crate::analysis::extended_fit::BaseKind;
 use crate::analysis::{
@@ -26,7 +26,7 @@ use crate::analysis::{
 };
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::norm_lm::fit_accel_lm;
-use crate::fit::{Pose, Vec3};
+use crate::fit::Vec3;
 use crate::recording::Sensor;
 use imucal_protocol::PoseStats;
 
@@ -66,17 +66,6 @@ fn usable(pose: &CapturedPose) -> bool {
             .chain(std::iter::once(&s.temp_mean_c))
             .all(|v| v.is_finite())
         && pose.t_s.is_finite()
-}
-
-fn to_poses(obs: &[Observation]) -> Vec<Pose> {
-    obs.iter()
-        .map(|o| Pose {
-            mean: o.mean,
-            var: o.sigma_mean.component_mul(&o.sigma_mean) * o.n as f64,
-            n: o.n,
-            label: o.label,
-        })
-        .collect()
 }
 
 /// Analyse the accelerometer and gyroscope of a session's poses (nominal units: m/s², rad/s)

@@ -1,9 +1,9 @@
 //! Fitting the data of a guided session with the library's default methods, and how good the
 //! result is expected to be.
 //!
-//! - Accelerometer: Levenberg–Marquardt on the norm model `|A(vᵢ − b)| = g` over the captured
-//!   poses, weighted by each pose's noise (seed 003's twelve-position iteration, solved in the
-//!   upper-triangular gauge; [`crate::fit::norm_lm::fit_accel_lm`]).
+//! - Accelerometer: the default chain of [`crate::pipeline::chain`] (the model chosen by
+//!   held-out error, usually Levenberg–Marquardt on the norm model `|A(vᵢ − b)| = g` weighted by
+//!   each pose's noise, as `imucal fit` does).
 //! - Gyroscope: bias = noise-weighted mean of the pose means (seed 000 eq. 9;
 //!   [`crate::fit::gyro_bias::fit_gyro_bias`]); its σ is inflated by the Birge ratio of the pose
 //!   means, since slow hand sway leaves a correlated rate in each hold that `var/n` misses. Scale
@@ -29,8 +29,9 @@ use super::coverage::region_directions;
 use super::targets::Target;
 use crate::fit::alignment::{fit_alignment, Alignment};
 use crate::fit::gyro_bias::fit_gyro_bias;
-use crate::fit::norm_lm::{fit_accel_lm, fit_mag_lm};
+use crate::fit::norm_lm::fit_mag_lm;
 use crate::fit::{Calibration, Fit, FitError, Mat3, Pose, Vec3};
+use crate::pipeline::chain::{default_accel_chain, ChainChoice};
 
 /// Standard gravity, m/s² (the unit of "mg").
 pub const STANDARD_GRAVITY: f64 = 9.806_65;
@@ -111,8 +112,10 @@ pub struct Budgets {
 pub struct SessionFit {
     /// The parameter set to write.
     pub set: CalibrationSet,
-    /// Accelerometer fit (m/s²).
+    /// Accelerometer fit (m/s²), by the default chain.
     pub accel: Fit,
+    /// Which accelerometer model the default chain chose, and why.
+    pub accel_choice: ChainChoice,
     /// Gyroscope bias fit (rad/s).
     pub gyro: Fit,
     /// Magnetometer fit in its own gauge, before the alignment (µT).
@@ -157,38 +160,46 @@ pub fn mag_of(stats: &PoseStats) -> ([f32; 3], [f32; 3]) {
     (stats.mag_mean, stats.mag_var)
 }
 
-/// Gradient of `|A(x − b)|` with respect to the upper-triangular parameters
-/// `A11 A12 A13 A22 A23 A33 b1 b2 b3`, at the raw reading that maps to `reference·û`.
-fn norm_gradient(cal: &Calibration, direction: &Vec3, reference: f64) -> Option<DVector<f64>> {
-    let u = cal.a.try_inverse()? * (direction * reference);
-    let d = direction;
-    let back = cal.a.transpose() * d;
-    Some(DVector::from_vec(vec![
-        d[0] * u[0],
-        d[0] * u[1],
-        d[0] * u[2],
-        d[1] * u[1],
-        d[1] * u[2],
-        d[2] * u[2],
-        -back[0],
-        -back[1],
-        -back[2],
-    ]))
+/// Gradient of `|A(x − b)|` with respect to the fit's parameters (named `Aij`, `bj` in
+/// `param_names`; entries not fitted are fixed), at the raw reading that maps to `reference·û`:
+/// `∂/∂Aᵢⱼ = ûᵢ·uⱼ` and `∂/∂b = −Aᵀû` with `u = x − b`.
+fn norm_gradient(fit: &Fit, direction: &Vec3) -> Option<DVector<f64>> {
+    let cal = &fit.cal;
+    let u = cal.a.try_inverse()? * (direction * fit.reference);
+    let back = cal.a.transpose() * direction;
+    let entry = |name: &str| -> Option<f64> {
+        let digits: Vec<usize> = name
+            .chars()
+            .skip(1)
+            .map(|c| c.to_digit(10).map(|d| d as usize))
+            .collect::<Option<Vec<_>>>()?;
+        match (name.chars().next()?, digits.as_slice()) {
+            ('A', [r, c]) => Some(direction[r.checked_sub(1)?] * u[c.checked_sub(1)?]),
+            ('b', [j]) => Some(-back[j.checked_sub(1)?]),
+            _ => None,
+        }
+    };
+    let values = fit
+        .param_names
+        .iter()
+        .map(|n| entry(n))
+        .collect::<Option<Vec<f64>>>()?;
+    Some(DVector::from_vec(values))
 }
 
 /// One-sigma error of `|A(x − b)|` along the output direction `direction` (unit), in output
-/// units; `None` without a 9×9 covariance.
+/// units; `None` without a covariance over named `A`/`b` entries.
 pub fn norm_sigma_at(fit: &Fit, direction: &Vec3) -> Option<f64> {
     let cov: &DMatrix<f64> = fit.covariance.as_ref()?;
-    if cov.shape() != (9, 9) {
+    let g = norm_gradient(fit, direction)?;
+    if cov.shape() != (g.len(), g.len()) {
         return None;
     }
-    let g = norm_gradient(&fit.cal, direction, fit.reference)?;
     Some((g.transpose() * cov * &g)[(0, 0)].max(0.0).sqrt())
 }
 
 /// Largest one-sigma error of `|A(x − b)|` over the 26 cube directions, in output units;
-/// `None` without a 9×9 covariance.
+/// `None` without a covariance.
 pub fn max_norm_sigma(fit: &Fit) -> Option<f64> {
     region_directions()
         .iter()
@@ -283,7 +294,8 @@ pub fn fit_session(
 ) -> Result<SessionFit, FitError> {
     let accel_poses: Vec<Pose> = poses.iter().map(|p| pose_of(&p.stats, accel_of)).collect();
     let gyro_poses: Vec<Pose> = poses.iter().map(|p| pose_of(&p.stats, gyro_of)).collect();
-    let accel = fit_accel_lm(&accel_poses, gravity_mps2)?;
+    let accel_choice = default_accel_chain(&accel_poses, gravity_mps2)?;
+    let accel = accel_choice.fit.clone();
     let gyro = fit_gyro_bias(&gyro_poses, 1.0)?;
     let (mag, field, field_source) = fit_mag(mag_points, field_ut)?;
 
@@ -344,6 +356,7 @@ pub fn fit_session(
     Ok(SessionFit {
         set,
         accel,
+        accel_choice,
         gyro,
         mag,
         alignment,

@@ -1,0 +1,251 @@
+//! What the residual analysis finds: per sensor the base and final fits' residuals against the
+//! noise floor, every candidate effect's verdict and coefficients, and the extended terms in
+//! the firmware's form.
+
+use imucal_protocol::{BiasTemperature, Nonlinearity, SensorCalibration};
+
+use super::dataset::Observation;
+use super::effects::EffectKind;
+use super::extended_fit::{physical_factor, ExtendedFit, Problem};
+use super::noise::ChiSquareTest;
+use crate::fit::{Calibration, FitError};
+use crate::recording::Sensor;
+
+/// Why a sensor could not be analysed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AnalysisError {
+    /// The recording does not have the sensor.
+    #[error("the recording has no {0} data; analyse another sensor")]
+    NoSensor(&'static str),
+    /// Too few observations for the base model and a held-out test.
+    #[error("only {found} usable {what} for the {sensor}; record at least {needed} to analyse its residual")]
+    TooFewObservations {
+        /// Sensor name.
+        sensor: &'static str,
+        /// What was counted.
+        what: &'static str,
+        /// Number found.
+        found: usize,
+        /// Number needed.
+        needed: usize,
+    },
+    /// The input checks refused the sensor (the sentence names cause and fix).
+    #[error("{0}")]
+    Refused(String),
+    /// The base fit failed.
+    #[error("the base {sensor} fit failed: {source}")]
+    BaseFit {
+        /// Sensor name.
+        sensor: &'static str,
+        /// Why.
+        source: FitError,
+    },
+    /// The solver failed on all observations.
+    #[error(
+        "the {0} model could not be refitted on its observations; check the recording for outliers"
+    )]
+    Refit(&'static str),
+}
+
+/// Settings of the analysis (the input options of `imucal fit`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AnalysisOptions {
+    /// Local gravity, m/s².
+    pub gravity: f64,
+    /// Local field magnitude (µT), or `None` to normalise to 1.
+    pub field_ut: Option<f64>,
+    /// Gyroscope data unit to rad/s.
+    pub gyro_scale: f64,
+    /// Whether `gyro_scale` is known; without it the gyroscope is analysed in counts.
+    pub gyro_scale_known: bool,
+    /// Magnetometer window length (samples) when it has too few still poses.
+    pub mag_window: usize,
+    /// Largest number of magnetometer windows.
+    pub max_mag_windows: usize,
+}
+
+impl Default for AnalysisOptions {
+    fn default() -> Self {
+        Self {
+            gravity: crate::recording::STANDARD_GRAVITY,
+            field_ut: None,
+            gyro_scale: 1.0,
+            gyro_scale_known: true,
+            mag_window: 20,
+            max_mag_windows: 300,
+        }
+    }
+}
+
+/// One coefficient in physical units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coefficient {
+    /// Name, e.g. `c1_x`.
+    pub name: String,
+    /// Value.
+    pub value: f64,
+    /// One-sigma uncertainty (inflated by `√(χ²/dof)` when the final residual is above the floor).
+    pub std: f64,
+    /// Unit.
+    pub unit: String,
+}
+
+/// Verdict on one candidate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EffectStatus {
+    /// Improves held-out error by more than chance and enough to matter; in the final model.
+    Accepted,
+    /// Tested and not supported.
+    Rejected,
+    /// Would pass, but temperature and time are too correlated to tell it from its rival.
+    Confounded,
+    /// The data do not carry what it depends on (no temperature, no accelerometer, …).
+    NotTestable,
+}
+
+/// The outcome for one candidate effect.
+#[derive(Debug, Clone)]
+pub struct EffectResult {
+    /// Which effect (with the chosen degree for `bias_temperature`).
+    pub kind: EffectKind,
+    /// Verdict.
+    pub status: EffectStatus,
+    /// Relative fall of the mean held-out loss (last round it was tested in).
+    pub score: f64,
+    /// Signed-rank p-value (last round).
+    pub p_value: f64,
+    /// Fall of the held-out loss per component, noise variances (last round).
+    pub gain: f64,
+    /// Coefficients (of the final model when accepted, of the tested extension otherwise).
+    pub coefficients: Vec<Coefficient>,
+    /// A sentence explaining the verdict.
+    pub note: String,
+}
+
+/// Everything found for one sensor.
+#[derive(Debug, Clone)]
+pub struct SensorAnalysis {
+    /// Which sensor.
+    pub sensor: Sensor,
+    /// Name of the base model (the `fit` default method).
+    pub base_model: String,
+    /// Unit of the residuals and the noise floor: `relative` (to the reference magnitude) for
+    /// the accelerometer and magnetometer, `rad/s` or `counts` for the gyroscope.
+    pub residual_unit: &'static str,
+    /// Observations used.
+    pub observations: Vec<Observation>,
+    /// RMS residual expected from noise alone (units of `rms_*`).
+    pub noise_floor: f64,
+    /// Chi-square test of the base model.
+    pub test_before: ChiSquareTest,
+    /// Chi-square test of the final model.
+    pub test_after: ChiSquareTest,
+    /// RMS of the base model on the fit observations (relative for accel/mag, rad/s for gyro).
+    pub rms_before: f64,
+    /// RMS of the final model on the fit observations.
+    pub rms_after: f64,
+    /// Held-out RMS of the base model.
+    pub heldout_rms_before: f64,
+    /// Held-out RMS of the final model.
+    pub heldout_rms_after: f64,
+    /// Every candidate tested.
+    pub effects: Vec<EffectResult>,
+    /// The final residual is above the floor and no candidate explains it.
+    pub unexplained: bool,
+    /// The recorded variable the final residual correlates with best, and the correlation.
+    pub best_correlate: Option<(String, f64)>,
+    /// Pearson correlation of pose temperature and time, when temperature is recorded.
+    pub temp_time_correlation: Option<f64>,
+    /// Base calibration of the final model.
+    pub calibration: Calibration,
+    /// Reference temperature `T₀` of the temperature terms, °C.
+    pub t_ref_c: f64,
+    /// Per-observation residual of the base and final models (signed, physical units).
+    pub residuals_before: Vec<f64>,
+    /// See `residuals_before`.
+    pub residuals_after: Vec<f64>,
+    /// Final extended terms (scaled problem and parameters), for [`SensorAnalysis::to_calibration_terms`].
+    pub(super) final_fit: ExtendedFit,
+    pub(super) problem: Problem,
+}
+
+/// Extended calibration terms of one sensor in the firmware's form.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationTerms {
+    /// `A`, `b` and the extended terms the firmware applies.
+    pub sensor: SensorCalibration,
+    /// Gyro g-sensitivity `K` (rad/s per m/s²), when accepted.
+    pub gyro_g_sensitivity: Option<[[f32; 3]; 3]>,
+}
+
+impl SensorAnalysis {
+    /// Accepted effects.
+    pub fn accepted(&self) -> impl Iterator<Item = &EffectResult> {
+        self.effects
+            .iter()
+            .filter(|e| e.status == EffectStatus::Accepted)
+    }
+
+    /// Whether the base residual is consistent with the noise.
+    pub fn consistent_with_noise(&self) -> bool {
+        self.test_before.consistent()
+    }
+
+    /// The final model in the protocol's `CalibrationSet` form: `A`, `b`, and each accepted
+    /// effect that has a firmware term (`bias_drift` has none and is left out).
+    pub fn to_calibration_terms(&self) -> CalibrationTerms {
+        let mut out = SensorCalibration::identity();
+        let a = self.calibration.a;
+        out.a = [0, 1, 2].map(|r| [0, 1, 2].map(|c| a[(r, c)] as f32));
+        out.b = [0, 1, 2].map(|k| self.calibration.b[k] as f32);
+        let mut g_sens = None;
+        let p = &self.final_fit.params;
+        let mut offset = self.problem.base_params();
+        for e in &self.final_fit.effects {
+            let value = |j: usize| {
+                p[offset + j] * physical_factor(&self.problem, &self.final_fit.effects, offset + j)
+            };
+            match *e {
+                EffectKind::BiasTemperature(d) => {
+                    let mut coeffs = [[0f32; 3]; 3];
+                    for (k, row) in coeffs
+                        .iter_mut()
+                        .enumerate()
+                        .take(usize::from(d.clamp(1, 3)))
+                    {
+                        *row = [0, 1, 2].map(|axis| value(3 * k + axis) as f32);
+                    }
+                    out.bias_temp = Some(BiasTemperature {
+                        t_ref_c: self.t_ref_c as f32,
+                        coeffs,
+                    });
+                }
+                EffectKind::ScaleTemperature => {
+                    out.scale_temp = Some([0, 1, 2].map(|k| value(k) as f32))
+                }
+                EffectKind::ScaleNonlinearity => {
+                    out.nonlinearity = Some(Nonlinearity {
+                        quadratic: [0, 1, 2].map(|k| value(k) as f32),
+                        cubic: [0, 1, 2].map(|k| value(3 + k) as f32),
+                    })
+                }
+                EffectKind::GSensitivity => {
+                    g_sens = Some([0, 1, 2].map(|r| [0, 1, 2].map(|c| value(3 * r + c) as f32)));
+                }
+                EffectKind::BiasDrift | EffectKind::BinnedBias(_) => {}
+            }
+            offset += e.param_count();
+        }
+        CalibrationTerms {
+            sensor: out,
+            gyro_g_sensitivity: g_sens,
+        }
+    }
+}
+
+/// The analysis of every sensor of a recording.
+#[derive(Debug, Clone)]
+pub struct RecordingAnalysis {
+    /// Per sensor: the analysis, or why it could not be done.
+    pub sensors: Vec<(Sensor, Result<SensorAnalysis, AnalysisError>)>,
+}

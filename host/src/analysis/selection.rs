@@ -1,0 +1,415 @@
+//! Forward selection of effects for one sensor's observations (see the module comment of
+//! [`super`]): the base fit, every candidate tested by held-out error, the accepted ones refitted
+//! jointly, temperature and time told apart only when they decorrelate.
+
+use super::crossval::{extend_start, held_out, Comparison, HeldOut};
+use super::dataset::Observation;
+use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
+use super::extended_fit::{
+    base_calibration, fit_rows, physical_factor, physical_residual, start_params, BaseKind,
+    ExtendedFit, Problem,
+};
+use super::noise::ChiSquareTest;
+use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, SensorAnalysis};
+use crate::fit::{Calibration, Vec3};
+use crate::recording::Sensor;
+
+/// Above this |ρ| between pose temperature and pose time, temperature and time effects are
+/// reported as confounded instead of choosing one.
+pub const CONFOUNDING_LIMIT: f64 = 0.95;
+
+fn pearson(a: &[f64], b: &[f64]) -> Option<f64> {
+    let n = a.len().min(b.len());
+    if n < 3 {
+        return None;
+    }
+    let ma = a[..n].iter().sum::<f64>() / n as f64;
+    let mb = b[..n].iter().sum::<f64>() / n as f64;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for i in 0..n {
+        sab += (a[i] - ma) * (b[i] - mb);
+        saa += (a[i] - ma).powi(2);
+        sbb += (b[i] - mb).powi(2);
+    }
+    let r = sab / (saa * sbb).sqrt();
+    r.is_finite().then_some(r)
+}
+
+fn coefficients(
+    problem: &Problem,
+    fit: &ExtendedFit,
+    effect_index: usize,
+    unit: &str,
+    inflation: f64,
+) -> Vec<Coefficient> {
+    let mut offset = problem.base_params();
+    for e in &fit.effects[..effect_index] {
+        offset += e.param_count();
+    }
+    let e = fit.effects[effect_index];
+    e.param_labels(unit)
+        .into_iter()
+        .enumerate()
+        .map(|(j, (name, unit))| {
+            let idx = offset + j;
+            let f = physical_factor(problem, &fit.effects, idx);
+            let std = fit
+                .covariance
+                .as_ref()
+                .map_or(f64::NAN, |c| c[(idx, idx)].max(0.0).sqrt())
+                * f.abs()
+                * inflation;
+            Coefficient {
+                name,
+                value: fit.params[idx] * f,
+                std,
+                unit,
+            }
+        })
+        .collect()
+}
+
+/// Fit `effects` on every observation and evaluate held out.
+fn evaluate(
+    problem: &Problem,
+    effects: &[EffectKind],
+    start: &nalgebra::DVector<f64>,
+) -> Option<(ExtendedFit, HeldOut)> {
+    let rows: Vec<usize> = (0..problem.points.len()).collect();
+    let fit = fit_rows(problem, effects, &rows, start)?;
+    let ho = held_out(problem, effects, &fit)?;
+    Some((fit, ho))
+}
+
+/// What [`analyse_observations`] needs besides the observations.
+#[derive(Debug, Clone)]
+pub struct SensorSetup<'a> {
+    /// Which sensor.
+    pub sensor: Sensor,
+    /// Name of the base model.
+    pub base_model: &'a str,
+    /// Base model kind.
+    pub base: BaseKind,
+    /// The base fit (start and noise propagation).
+    pub start: Calibration,
+    /// Calibrated specific force per observation, m/s² (gyroscope).
+    pub force: Option<Vec<Vec3>>,
+    /// Gravity, m/s².
+    pub gravity: f64,
+    /// Data unit, for coefficient labels.
+    pub unit: &'a str,
+}
+
+/// Analyse one sensor's observations (see the module comment).
+pub fn analyse_observations(
+    setup: SensorSetup<'_>,
+    observations: Vec<Observation>,
+) -> Result<SensorAnalysis, AnalysisError> {
+    let SensorSetup {
+        sensor,
+        base_model,
+        base,
+        start,
+        force,
+        gravity,
+        unit,
+    } = setup;
+    let start = &start;
+    let problem = Problem::new(&observations, base, start, force, gravity);
+    let components = problem.components();
+    let n = observations.len();
+    let base_start = start_params(&problem, start, &[]);
+    let (base_fit, base_ho) =
+        evaluate(&problem, &[], &base_start).ok_or(AnalysisError::Refit(sensor.name()))?;
+    let temps: Option<Vec<f64>> = observations.iter().map(|o| o.temp_c).collect();
+    let times: Vec<f64> = observations.iter().map(|o| o.time_s).collect();
+    let temp_time_correlation = temps.as_ref().and_then(|t| pearson(t, &times));
+    let confounded = temp_time_correlation.is_some_and(|r| r.abs() > CONFOUNDING_LIMIT);
+
+    let families: &[EffectKind] = match base {
+        BaseKind::Norm { .. } => &NORM_FAMILIES,
+        BaseKind::Rest { .. } => &GYRO_FAMILIES,
+    };
+    let mut results: Vec<EffectResult> = Vec::new();
+    let mut remaining: Vec<EffectKind> = Vec::new();
+    for &f in families {
+        if problem.supports(f) {
+            remaining.push(f);
+        } else {
+            let why = match f {
+                EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature => {
+                    "no temperature, or a constant one, was recorded"
+                }
+                EffectKind::GSensitivity => "no accelerometer was recorded with the gyroscope",
+                _ => "the data do not vary in the variable it depends on",
+            };
+            results.push(EffectResult {
+                kind: f,
+                status: EffectStatus::NotTestable,
+                score: 0.0,
+                p_value: 1.0,
+                gain: 0.0,
+                coefficients: Vec::new(),
+                note: format!("not testable: {why}"),
+            });
+        }
+    }
+    let mut current: (ExtendedFit, HeldOut) = (base_fit.clone(), base_ho.clone());
+    let mut last: Vec<(EffectKind, Comparison, ExtendedFit)> = Vec::new();
+    let mut confounded_found = false;
+    let mut wrong_form: Vec<(&'static str, String)> = Vec::new();
+    while !remaining.is_empty() {
+        let m = remaining.len();
+        let mut round: Vec<(EffectKind, Comparison, ExtendedFit, HeldOut)> = Vec::new();
+        for &cand in &remaining {
+            let mut best: Option<(EffectKind, Comparison, ExtendedFit, HeldOut)> = None;
+            let degrees: Vec<EffectKind> = match cand {
+                EffectKind::BiasTemperature(_) => {
+                    (1..=3).map(EffectKind::BiasTemperature).collect()
+                }
+                other => vec![other],
+            };
+            for kind in degrees {
+                let mut effects = current.0.effects.clone();
+                effects.push(kind);
+                let start = extend_start(&current.0.params, kind.param_count());
+                let Some((fit, ho)) = evaluate(&problem, &effects, &start) else {
+                    break;
+                };
+                let cmp = Comparison::new(&current.1, &ho, components);
+                // A higher degree replaces a lower one only if it beats it by the same rule.
+                let keep = match &best {
+                    None => true,
+                    Some((_, _, _, prev_ho)) => Comparison::new(prev_ho, &ho, components).passes(m),
+                };
+                if keep {
+                    best = Some((kind, cmp, fit, ho));
+                } else {
+                    break;
+                }
+            }
+            if let Some(b) = best {
+                round.push(b);
+            }
+        }
+        let winner = round
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, c, _, _))| c.passes(m))
+            .min_by(|a, b| {
+                a.1 .1
+                    .p_value
+                    .total_cmp(&b.1 .1.p_value)
+                    .then(b.1 .1.score.total_cmp(&a.1 .1.score))
+            })
+            .map(|(i, _)| i);
+        last.retain(|(k, _, _)| !round.iter().any(|(rk, _, _, _)| rk.name() == k.name()));
+        for (k, c, f, _) in &round {
+            last.push((*k, c.clone(), f.clone()));
+        }
+        let Some(w) = winner else { break };
+        let (kind, _, fit, ho) = round.swap_remove(w);
+        let time_or_temp = matches!(
+            kind,
+            EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
+        );
+        if confounded && time_or_temp {
+            confounded_found = true;
+            remaining.retain(|r| {
+                !matches!(
+                    r,
+                    EffectKind::BiasDrift
+                        | EffectKind::BiasTemperature(_)
+                        | EffectKind::ScaleTemperature
+                )
+            });
+            continue;
+        }
+        remaining.retain(|r| r.name() != kind.name());
+        if time_or_temp {
+            // Form check: a bias free in shape over the same variable must not predict better.
+            let binned = EffectKind::BinnedBias(kind.needs_temperature());
+            let mut effects = current.0.effects.clone();
+            effects.push(binned);
+            let start = extend_start(&current.0.params, binned.param_count());
+            if let Some((_, binned_ho)) = evaluate(&problem, &effects, &start) {
+                let cmp = Comparison::new(&ho, &binned_ho, components);
+                if cmp.passes(1) {
+                    wrong_form.push((
+                        kind.name(),
+                        format!(
+                            "explains part of the residual, but a bias free in shape over {} predicts held-out poses better \
+                             (signed-rank p = {:.1e}): the dependence has another form (a step, hysteresis), so it is not accepted",
+                            kind.variable(),
+                            cmp.p_value
+                        ),
+                    ));
+                    continue;
+                }
+            }
+        }
+        current = (fit, ho);
+    }
+
+    let final_fit = current.0.clone();
+    let final_ho = current.1.clone();
+    let p_count = final_fit.params.len();
+    let test_before = ChiSquareTest::new(base_fit.cost, n * components, base_start.len());
+    let test_after = ChiSquareTest::new(final_fit.cost, n * components, p_count);
+    let inflation = test_after.reduced().max(1.0).sqrt();
+    let residual_of =
+        |fit: &ExtendedFit, i: usize| physical_residual(&problem, i, &fit.effects, &fit.params);
+    let residuals_before: Vec<f64> = (0..n).map(|i| residual_of(&base_fit, i).0).collect();
+    let residuals_after: Vec<f64> = (0..n).map(|i| residual_of(&final_fit, i).0).collect();
+    let rms = |v: &[f64]| (v.iter().map(|r| r * r).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    let noise_floor = match base {
+        BaseKind::Norm { .. } => (problem
+            .weights
+            .iter()
+            .map(|w| if w[0] > 0.0 { 1.0 / (w[0] * w[0]) } else { 0.0 })
+            .sum::<f64>()
+            / n as f64)
+            .sqrt(),
+        BaseKind::Rest { scale } => {
+            (observations
+                .iter()
+                .map(|o| o.sigma_mean.norm_squared())
+                .sum::<f64>()
+                / n as f64)
+                .sqrt()
+                * scale
+        }
+    };
+
+    // Verdicts.
+    for (idx, kind) in final_fit.effects.iter().enumerate() {
+        let (score, p_value, gain) = last
+            .iter()
+            .find(|(k, _, _)| k.name() == kind.name())
+            .map_or((0.0, 0.0, 0.0), |(_, c, _)| {
+                (c.score, c.p_value, c.gain_per_component)
+            });
+        results.push(EffectResult {
+            kind: *kind,
+            status: EffectStatus::Accepted,
+            score,
+            p_value,
+            gain,
+            coefficients: coefficients(&problem, &final_fit, idx, unit, inflation),
+            note: format!(
+                "improves held-out error by {:.0} % (signed-rank p = {p_value:.1e})",
+                100.0 * score
+            ),
+        });
+    }
+    for (kind, cmp, fit) in &last {
+        if final_fit.effects.iter().any(|k| k.name() == kind.name()) {
+            continue;
+        }
+        let time_or_temp = matches!(
+            kind,
+            EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
+        );
+        let status = if confounded_found && time_or_temp && cmp.passes(1) {
+            EffectStatus::Confounded
+        } else {
+            EffectStatus::Rejected
+        };
+        let note = match status {
+            EffectStatus::Confounded => format!(
+                "would improve held-out error, but temperature and time are correlated (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); \
+                 record with temperature varying independently of time to tell them apart",
+                temp_time_correlation.unwrap_or(f64::NAN)
+            ),
+            _ => match wrong_form.iter().find(|(name, _)| *name == kind.name()) {
+                Some((_, why)) => why.clone(),
+                None => format!(
+                    "held-out gain {:.2} noise variances per component, signed-rank p = {:.2e}: not enough",
+                    cmp.gain_per_component, cmp.p_value
+                ),
+            },
+        };
+        let index = fit.effects.len() - 1;
+        results.push(EffectResult {
+            kind: *kind,
+            status,
+            score: cmp.score,
+            p_value: cmp.p_value,
+            gain: cmp.gain_per_component,
+            coefficients: coefficients(&problem, fit, index, unit, 1.0),
+            note,
+        });
+    }
+
+    // The recorded variable the final residual follows best.
+    let mut variables: Vec<(String, Vec<f64>)> = vec![("time".into(), times.clone())];
+    if let Some(t) = &temps {
+        variables.push(("temperature".into(), t.clone()));
+    }
+    let cal = base_calibration(&problem, &final_fit.params);
+    // At rest the gyroscope's reading is its residual, so its magnitude is no explanatory variable.
+    if matches!(base, BaseKind::Norm { .. }) {
+        variables.push((
+            "reading magnitude".into(),
+            observations
+                .iter()
+                .map(|o| (o.mean - cal.b).norm())
+                .collect(),
+        ));
+    }
+    if let Some(f) = &problem.force {
+        for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+            variables.push((
+                format!("specific force {axis}"),
+                f.iter().map(|v| v[k]).collect(),
+            ));
+        }
+    }
+    let signed: Vec<Vec3> = (0..n).map(|i| residual_of(&final_fit, i).1).collect();
+    let mut best_correlate: Option<(String, f64)> = None;
+    for (name, values) in &variables {
+        for k in 0..components {
+            let comp: Vec<f64> = signed.iter().map(|v| v[k]).collect();
+            if let Some(r) = pearson(&comp, values) {
+                if best_correlate
+                    .as_ref()
+                    .is_none_or(|(_, b)| r.abs() > b.abs())
+                {
+                    let label = if components == 3 {
+                        format!("{name} (axis {})", ["x", "y", "z"][k])
+                    } else {
+                        name.clone()
+                    };
+                    best_correlate = Some((label, r));
+                }
+            }
+        }
+    }
+    let unexplained = !test_after.consistent();
+    Ok(SensorAnalysis {
+        sensor,
+        base_model: base_model.to_string(),
+        residual_unit: match base {
+            BaseKind::Norm { .. } => "relative",
+            BaseKind::Rest { .. } => "rad/s",
+        },
+        noise_floor,
+        test_before,
+        test_after,
+        rms_before: rms(&residuals_before),
+        rms_after: rms(&residuals_after),
+        heldout_rms_before: base_ho.rms(),
+        heldout_rms_after: final_ho.rms(),
+        effects: results,
+        unexplained,
+        best_correlate,
+        temp_time_correlation,
+        calibration: cal,
+        t_ref_c: problem.temp_ref.0,
+        residuals_before,
+        residuals_after,
+        observations,
+        final_fit,
+        problem,
+    })
+}

@@ -1,0 +1,182 @@
+//! Observations and base model of each sensor of a recording: the accelerometer from its still
+//! poses, started at the default chain's model; the gyroscope's bias with the specific force for
+//! g-sensitivity; the magnetometer from still poses or short windows of the stream.
+
+use super::dataset::{self, to_poses};
+use super::extended_fit::BaseKind;
+use super::result::{AnalysisError, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
+use super::selection::{analyse_observations, SensorSetup};
+use crate::fit::gyro_bias::fit_gyro_bias;
+use crate::fit::li::{fit_li, LiOptions};
+use crate::fit::norm_lm::{fit_mag_lm, sphere_start};
+use crate::fit::{Calibration, Vec3};
+use crate::pipeline::chain::default_accel_chain;
+use crate::recording::{Recording, Sensor};
+use crate::still::StillReport;
+
+/// Analyse every sensor of a recording. The accelerometer is analysed first: its final
+/// calibration gives the specific force for the gyroscope's g-sensitivity.
+pub fn analyse_recording(
+    recording: &Recording,
+    still: &StillReport,
+    options: &AnalysisOptions,
+) -> RecordingAnalysis {
+    let mut sensors = Vec::new();
+    let mut accel_cal: Option<Calibration> = None;
+    for sensor in recording.sensors() {
+        let result = analyse_sensor(recording, still, options, sensor, accel_cal.as_ref());
+        if let (Sensor::Accel, Ok(a)) = (sensor, &result) {
+            accel_cal = Some(a.calibration);
+        }
+        sensors.push((sensor, result));
+    }
+    RecordingAnalysis { sensors }
+}
+
+/// Analyse one sensor; `accel_cal` (the accelerometer's calibration) enables g-sensitivity.
+pub fn analyse_sensor(
+    recording: &Recording,
+    still: &StillReport,
+    options: &AnalysisOptions,
+    sensor: Sensor,
+    accel_cal: Option<&Calibration>,
+) -> Result<SensorAnalysis, AnalysisError> {
+    if !recording.has(sensor) {
+        return Err(AnalysisError::NoSensor(sensor.name()));
+    }
+    let unit = recording.units.symbol(sensor);
+    let too_few = |what, found, needed| AnalysisError::TooFewObservations {
+        sensor: sensor.name(),
+        what,
+        found,
+        needed,
+    };
+    match sensor {
+        Sensor::Accel => {
+            let obs = dataset::pose_observations(recording, still, Sensor::Accel);
+            if obs.len() < 10 {
+                return Err(too_few("still poses", obs.len(), 10));
+            }
+            // The default chain's model starts the extended fit; when every model of the chain
+            // refuses, the generic solver here restarts from the sphere.
+            let start = match default_accel_chain(&to_poses(&obs), options.gravity) {
+                Ok(choice) => choice.fit.cal,
+                Err(source) => {
+                    let means: Vec<Vec3> = obs.iter().map(|o| o.mean).collect();
+                    let sphere = sphere_start(&means, options.gravity);
+                    let setup = SensorSetup {
+                        sensor,
+                        base_model: "lm",
+                        base: BaseKind::Norm {
+                            reference: options.gravity,
+                        },
+                        start: sphere,
+                        force: None,
+                        gravity: options.gravity,
+                        unit,
+                    };
+                    return analyse_observations(setup, obs).map_err(|_| AnalysisError::BaseFit {
+                        sensor: "accel",
+                        source,
+                    });
+                }
+            };
+            let setup = SensorSetup {
+                sensor,
+                base_model: "lm",
+                base: BaseKind::Norm {
+                    reference: options.gravity,
+                },
+                start,
+                force: None,
+                gravity: options.gravity,
+                unit,
+            };
+            analyse_observations(setup, obs)
+        }
+        Sensor::Gyro => {
+            let obs = dataset::pose_observations(recording, still, Sensor::Gyro);
+            if obs.len() < 3 {
+                return Err(too_few("still poses", obs.len(), 3));
+            }
+            let start = fit_gyro_bias(&to_poses(&obs), options.gyro_scale).map_err(|source| {
+                AnalysisError::BaseFit {
+                    sensor: "gyro",
+                    source,
+                }
+            })?;
+            // Specific force from the accelerometer's calibration, else from its nominal unit.
+            let accel_si = recording.units.to_si(Sensor::Accel);
+            let force = obs
+                .iter()
+                .map(|o| match (accel_cal, accel_si) {
+                    (Some(cal), _) => o.accel_mean.map(|a| cal.apply(&a)),
+                    (None, Some(k)) => o.accel_mean.map(|a| a * k),
+                    (None, None) => None,
+                })
+                .collect::<Option<Vec<Vec3>>>();
+            let setup = SensorSetup {
+                sensor,
+                base_model: "gyro-bias",
+                base: BaseKind::Rest {
+                    scale: options.gyro_scale,
+                },
+                start: start.cal,
+                force,
+                gravity: options.gravity,
+                unit,
+            };
+            analyse_observations(setup, obs).map(|mut a| {
+                if !options.gyro_scale_known {
+                    // Without a scale the residual and every coefficient are in counts.
+                    a.residual_unit = "counts";
+                    for c in a.effects.iter_mut().flat_map(|e| e.coefficients.iter_mut()) {
+                        c.unit = c.unit.replace("rad/s", "counts");
+                    }
+                }
+                a
+            })
+        }
+        Sensor::Mag => {
+            // Still poses only when they cover enough orientations for the ellipsoid (nine
+            // distinct gravity directions); otherwise short windows of the whole stream.
+            let mut obs = dataset::pose_observations(recording, still, Sensor::Mag);
+            let covered = still.from_pose_column || still.directions.len() >= 9;
+            if obs.len() < 12 || !covered {
+                obs = dataset::window_observations(
+                    recording,
+                    options.mag_window,
+                    options.max_mag_windows,
+                );
+            }
+            if obs.len() < 12 {
+                return Err(too_few("magnetometer windows", obs.len(), 12));
+            }
+            let reference = options.field_ut.unwrap_or(1.0);
+            let means: Vec<Vec3> = obs.iter().map(|o| o.mean).collect();
+            // The `fit` default, else Li's ellipsoid, else the sphere, refined by the solver here.
+            let start = match fit_mag_lm(&means, reference) {
+                Ok(fit) => fit.cal,
+                Err(_) => fit_li(
+                    &means,
+                    reference,
+                    LiOptions {
+                        subtract_mean: true,
+                    },
+                )
+                .map(|f| f.cal)
+                .unwrap_or_else(|_| sphere_start(&means, reference)),
+            };
+            let setup = SensorSetup {
+                sensor,
+                base_model: "lm",
+                base: BaseKind::Norm { reference },
+                start,
+                force: None,
+                gravity: options.gravity,
+                unit,
+            };
+            analyse_observations(setup, obs)
+        }
+    }
+}

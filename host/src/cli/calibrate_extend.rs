@@ -1,0 +1,73 @@
+//! `imucal calibrate --analyze`: the residual analysis of the session's poses, and the extended
+//! set (the effects it accepts as the firmware's terms) written and checked at rest.
+
+use anyhow::Context;
+use imucal::analysis::report;
+use imucal::device::DeviceClient;
+use imucal::device::ParamsFile;
+use imucal::session::{
+    analyse_poses, extend_set, rest_errors, stream_for, RestErrors, SessionOptions, SessionOutcome,
+};
+use imucal_protocol::StreamKind;
+
+/// `--analyze`: the residual analysis of the poses, and the extended set written and checked at
+/// rest when it adds anything. Returns the at-rest errors with the extended set, if written.
+pub(super) fn close_the_loop(
+    client: &mut DeviceClient,
+    options: &SessionOptions,
+    outcome: &SessionOutcome,
+    dir: &std::path::Path,
+    json: bool,
+) -> anyhow::Result<Option<RestErrors>> {
+    let analysis = analyse_poses(&outcome.poses, options.gravity_mps2);
+    std::fs::write(
+        dir.join("analysis.json"),
+        serde_json::to_string_pretty(&report::to_json(&analysis))?,
+    )
+    .with_context(|| format!("could not write {}", dir.join("analysis.json").display()))?;
+    if !json {
+        eprintln!(
+            "\nResidual analysis of the {} poses:\n{}",
+            outcome.poses.len(),
+            report::to_text(&analysis)
+        );
+    }
+    let extended = extend_set(&outcome.fit.set, &analysis);
+    for effect in &extended.left_out {
+        eprintln!("Note: {effect} was accepted but the firmware has no term for it; not written");
+    }
+    if !extended.extended() {
+        eprintln!("The analysis accepted no effect the firmware applies; the base set stays.");
+        return Ok(None);
+    }
+    eprintln!("Extended terms added: {}", extended.added.join(", "));
+    let base_path = dir.join("params-base.json");
+    std::fs::write(&base_path, ParamsFile::from(&outcome.fit.set).to_json())
+        .with_context(|| format!("could not write {}", base_path.display()))?;
+    let params_path = dir.join("params.json");
+    std::fs::write(&params_path, ParamsFile::from(&extended.set).to_json())
+        .with_context(|| format!("could not write {}", params_path.display()))?;
+    if !outcome.written {
+        eprintln!(
+            "The base set was not written, so neither is the extended one; `imucal flash {}` \
+             writes it",
+            params_path.display()
+        );
+        return Ok(None);
+    }
+    let status = client.write_params_verified(&extended.set)?;
+    eprintln!(
+        "Extended set written, committed, read back and compared: CRC {:#010x} (store \
+         sequence {})",
+        status.active_crc, status.active_seq
+    );
+    let samples = stream_for(
+        client,
+        StreamKind::Calibrated,
+        options.rest_measure_s,
+        options.read_timeout,
+    )?;
+    let errors = rest_errors(&samples, outcome.fit.gravity_mps2, outcome.fit.field_ut)
+        .context("no calibrated samples arrived for the check at rest")?;
+    Ok(Some(errors))
+}

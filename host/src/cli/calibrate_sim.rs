@@ -1,0 +1,150 @@
+//! `imucal calibrate --sim`: the simulated board started in-process behind a pseudo-terminal,
+//! with its temperature profile; a stub without the `sim` feature.
+
+use anyhow::Context;
+
+use super::args::CalibrateArgs;
+
+#[cfg(feature = "sim")]
+pub(super) fn temperature_profile(
+    text: &str,
+) -> anyhow::Result<Option<imucal_hil_sim::world::TemperatureProfile>> {
+    use imucal_hil_sim::world::TemperatureProfile;
+    if text == "constant" {
+        return Ok(None);
+    }
+    let values: Option<Vec<f64>> = match text.strip_prefix("sweep") {
+        Some("") => Some(vec![10.0, 40.0, 90.0]),
+        Some(rest) => rest
+            .strip_prefix(':')
+            .and_then(|r| r.split(':').map(|n| n.parse().ok()).collect()),
+        None => None,
+    };
+    match values.as_deref() {
+        Some(&[low_c, high_c, period_s])
+            if [low_c, high_c, period_s].iter().all(|v| v.is_finite())
+                && low_c < high_c
+                && period_s > 0.0 =>
+        {
+            Ok(Some(TemperatureProfile::Sweep {
+                low_c,
+                high_c,
+                period_s,
+            }))
+        }
+        _ => anyhow::bail!(
+            "--sim-temperature {text} is not understood; give `constant`, `sweep`, or \
+             `sweep:LOW:HIGH:PERIOD` with LOW < HIGH in °C and PERIOD > 0 in s, e.g. sweep:10:40:90"
+        ),
+    }
+}
+
+/// The simulated board of `--sim`.
+#[cfg(feature = "sim")]
+pub(super) struct Simulated {
+    handle: imucal_hil_sim::serve::SimHandle,
+}
+
+#[cfg(feature = "sim")]
+impl Simulated {
+    pub(super) fn start(args: &CalibrateArgs) -> anyhow::Result<Self> {
+        use imucal_hil_sim::serve::{SimOptions, SimServer};
+        let mut options = SimOptions::new(args.sim_seed);
+        options.speed = args.speed;
+        options.board.sensor = args.sim_chip;
+        options.board.temperature = temperature_profile(&args.sim_temperature)?;
+        if args.rounds > 1 {
+            options.schedule = imucal_hil_sim::board::PersonSchedule::Rounds(args.rounds);
+        }
+        options.effects = args
+            .sim_effects
+            .iter()
+            .map(|text| text.parse())
+            .collect::<Result<_, _>>()
+            .context("a --sim-effect is not understood")?;
+        let handle = SimServer::start(options).context("the simulated board could not start")?;
+        Ok(Self { handle })
+    }
+
+    pub(super) fn port(&self) -> String {
+        self.handle.port_path().to_string()
+    }
+
+    /// The simulated site's field, µT: it stands for a value looked up for the location.
+    pub(super) fn field_ut(&self) -> f64 {
+        let field = self.handle.truth().world.field_world_ut;
+        field.iter().map(|v| v * v).sum::<f64>().sqrt()
+    }
+
+    pub(super) fn save_truth(&self, path: &std::path::Path) -> anyhow::Result<()> {
+        imucal_hil_sim::recording::write_truth_file(&self.handle.truth(), path)
+            .context("the simulator's truth could not be saved")
+    }
+}
+
+/// Without the simulator there is no simulated board (`start` explains).
+#[cfg(not(feature = "sim"))]
+pub(super) enum Simulated {}
+
+#[cfg(not(feature = "sim"))]
+impl Simulated {
+    pub(super) fn start(_args: &CalibrateArgs) -> anyhow::Result<Self> {
+        anyhow::bail!(
+            "this imucal was built without the simulator; rebuild with the default features \
+             (cargo build -p imucal) to use --sim, or give --port"
+        )
+    }
+
+    pub(super) fn port(&self) -> String {
+        match *self {}
+    }
+
+    pub(super) fn field_ut(&self) -> f64 {
+        match *self {}
+    }
+
+    pub(super) fn save_truth(&self, _path: &std::path::Path) -> anyhow::Result<()> {
+        match *self {}
+    }
+}
+
+#[cfg(all(test, feature = "sim"))]
+mod tests {
+    use super::temperature_profile;
+    use imucal_hil_sim::world::TemperatureProfile;
+
+    #[test]
+    fn sweep_profiles_are_read_with_defaults_or_given_numbers() {
+        let sweep = |low_c, high_c, period_s| {
+            Some(TemperatureProfile::Sweep {
+                low_c,
+                high_c,
+                period_s,
+            })
+        };
+        assert_eq!(temperature_profile("constant").ok(), Some(None));
+        assert_eq!(
+            temperature_profile("sweep").ok(),
+            Some(sweep(10.0, 40.0, 90.0))
+        );
+        assert_eq!(
+            temperature_profile("sweep:-5:55.5:120").ok(),
+            Some(sweep(-5.0, 55.5, 120.0))
+        );
+    }
+
+    #[test]
+    fn malformed_or_inverted_sweeps_are_refused_with_an_example() {
+        for bad in [
+            "sweepx:1:2:3",
+            "sweep:40:10:90",
+            "sweep:10:40:0",
+            "sweep:10:40",
+            "sweep:10:NaN:90",
+            "hot",
+        ] {
+            let error = temperature_profile(bad).expect_err(bad).to_string();
+            assert!(error.contains("sweep:10:40:90"), "{bad}: {error}");
+        }
+    }
+}
