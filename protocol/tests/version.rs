@@ -115,12 +115,17 @@ fn every_error_code_has_a_distinct_actionable_description() {
             computed: 2,
         },
         ErrorCode::NothingStaged,
-        ErrorCode::InvalidParams(InvalidParamsReason::NonFinite),
-        ErrorCode::InvalidParams(InvalidParamsReason::IllConditioned),
-        ErrorCode::InvalidParams(InvalidParamsReason::OffsetOutOfRange),
-        ErrorCode::InvalidParams(InvalidParamsReason::GainOutOfRange),
-        ErrorCode::InvalidParams(InvalidParamsReason::ExtendedTermOutOfRange),
-        ErrorCode::InvalidParams(InvalidParamsReason::UnsupportedFormat),
+        ErrorCode::InvalidParams(InvalidParamsReason::NonFinite(ParamField::Reference)),
+        ErrorCode::InvalidParams(InvalidParamsReason::IllConditioned(SensorKind::Accel)),
+        ErrorCode::InvalidParams(InvalidParamsReason::OffsetOutOfRange(SensorKind::Gyro)),
+        ErrorCode::InvalidParams(InvalidParamsReason::GainOutOfRange(SensorKind::Mag)),
+        ErrorCode::InvalidParams(InvalidParamsReason::ReferenceTemperatureOutOfRange(
+            SensorKind::Mag,
+        )),
+        ErrorCode::InvalidParams(InvalidParamsReason::ExtendedTermOutOfRange(
+            ParamField::GyroGSensitivity,
+        )),
+        ErrorCode::InvalidParams(InvalidParamsReason::UnsupportedFormat { found: 1 }),
         ErrorCode::FlashError,
     ];
     let descriptions: std::collections::HashSet<_> = codes.iter().map(|c| c.describe()).collect();
