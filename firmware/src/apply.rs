@@ -22,13 +22,15 @@
 //! for a given set. Validated parameters and `i16` counts keep every intermediate far from
 //! `f32` overflow, so no input produces NaN or infinity.
 //!
-//! When a sensor has a scale temperature coefficient but no bias temperature polynomial, the
-//! reference temperature is 0 °C (`ΔT = T`).
+//! Validation is the protocol's [`imucal_protocol::validate()`], and ΔT follows its one rule
+//! ([`imucal_protocol::delta_t_c`]: `T − T_ref` of the sensor, clamped to the validated span), so
+//! the result matches the reference [`imucal_protocol::model::apply`] to f32 rounding.
 
-use imucal_protocol::{CalibratedSample, CalibrationSet, InvalidParamsReason, SensorCalibration};
+use imucal_protocol::{
+    delta_t_c, validate, CalibratedSample, CalibrationSet, InvalidParamsReason, SensorCalibration,
+};
 
 use crate::imu::{RawSample, SensorScales};
-use crate::validate::{validate, MAX_DELTA_T_C};
 
 type Vec3 = [f32; 3];
 type Mat3 = [[f32; 3]; 3];
@@ -156,9 +158,8 @@ struct SensorCorrection {
 impl SensorCorrection {
     fn new(sensor: &SensorCalibration, per_count: f32) -> Self {
         let a = sensor.a;
-        let (t_ref_c, coeffs) = sensor
-            .bias_temp
-            .map_or((0.0, [[0.0; 3]; 3]), |t| (t.t_ref_c, t.coeffs));
+        let t_ref_c = sensor.t_ref_c;
+        let coeffs = sensor.bias_temp.map_or([[0.0; 3]; 3], |t| t.coeffs);
         // Degrees whose coefficients are all zero cost nothing at run time.
         let bias_degree = coeffs
             .iter()
@@ -220,9 +221,9 @@ impl SensorCorrection {
     #[inline(always)]
     fn apply(&self, counts: [i16; 3], temp_c: f32) -> Vec3 {
         let c = counts.map(f32::from);
-        // Validation bounds the extended terms over |ΔT| ≤ MAX_DELTA_T_C; clamping keeps a reading
-        // on the thermometer's rail inside that checked span.
-        let dt = (temp_c - self.t_ref_c).clamp(-MAX_DELTA_T_C, MAX_DELTA_T_C);
+        // Validation bounds the extended terms over the clamped span; a reading on the
+        // thermometer's rail stays inside it.
+        let dt = delta_t_c(temp_c, self.t_ref_c);
         let offset = self.offset_at(dt);
         let mut y = match self.nonlinearity {
             None => {
@@ -387,7 +388,7 @@ fn mat_vec(m: &Mat3, v: &Vec3) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use imucal_protocol::{BiasTemperature, Nonlinearity};
+    use imucal_protocol::{model, BiasTemperature, NominalSample, Nonlinearity, SensorKind};
 
     fn scales() -> SensorScales {
         SensorScales {
@@ -412,8 +413,8 @@ mod tests {
             [-0.004, 0.006, 1.01],
         ];
         set.accel.b = [0.12, -0.3, 0.05];
+        set.accel.t_ref_c = 25.0;
         set.accel.bias_temp = Some(BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[2e-3, -1e-3, 5e-4], [1e-5, 0.0, -2e-5], [1e-7, 3e-7, 0.0]],
         });
         set.accel.scale_temp = Some([1e-4, -2e-4, 5e-5]);
@@ -423,8 +424,8 @@ mod tests {
         });
         set.gyro.a = [[1.01, -0.02, 0.0], [0.015, 0.99, 0.004], [0.0, 0.01, 1.03]];
         set.gyro.b = [0.01, -0.02, 0.005];
+        set.gyro.t_ref_c = 30.0;
         set.gyro.bias_temp = Some(BiasTemperature {
-            t_ref_c: 30.0,
             coeffs: [[1e-4, -2e-4, 3e-5], [0.0; 3], [0.0; 3]],
         });
         set.gyro_g_sensitivity = Some([[1e-4, 2e-5, 0.0], [0.0, -2e-4, 1e-5], [3e-5, 0.0, 5e-5]]);
@@ -438,60 +439,23 @@ mod tests {
         set
     }
 
-    /// The model of `CalibrationSet`, term by term in f64: the reference for the folded f32 path.
-    fn reference_sensor(
-        sensor: &SensorCalibration,
-        counts: [i16; 3],
-        per_count: f32,
-        temp_c: f64,
-    ) -> [f64; 3] {
-        let (t_ref, coeffs) = sensor
-            .bias_temp
-            .map_or((0.0, [[0.0; 3]; 3]), |t| (f64::from(t.t_ref_c), t.coeffs));
-        let dt = temp_c - t_ref;
-        let mut u = [0.0f64; 3];
-        for axis in 0..3 {
-            let x = f64::from(counts[axis]) * f64::from(per_count);
-            let bias = f64::from(sensor.b[axis])
-                + f64::from(coeffs[0][axis]) * dt
-                + f64::from(coeffs[1][axis]) * dt * dt
-                + f64::from(coeffs[2][axis]) * dt * dt * dt;
-            let ui = x - bias;
-            u[axis] = match sensor.nonlinearity {
-                Some(n) => {
-                    ui + f64::from(n.quadratic[axis]) * ui * ui
-                        + f64::from(n.cubic[axis]) * ui * ui * ui
-                }
-                None => ui,
-            };
-        }
-        let mut y = [0.0f64; 3];
-        for row in 0..3 {
-            y[row] = (0..3)
-                .map(|col| f64::from(sensor.a[row][col]) * u[col])
-                .sum();
-            if let Some(s) = sensor.scale_temp {
-                y[row] *= 1.0 + f64::from(s[row]) * dt;
-            }
-        }
-        y
-    }
-
+    /// The protocol's f64 reference model on the same sample in nominal units.
     fn reference(set: &CalibrationSet, raw: &RawSample) -> [[f64; 3]; 3] {
         let s = scales();
-        let temp_c =
-            f64::from(s.temp_offset_c) + f64::from(s.temp_c_per_count) * f64::from(raw.temp);
-        let accel = reference_sensor(&set.accel, raw.accel, s.accel_mps2_per_count, temp_c);
-        let mut gyro = reference_sensor(&set.gyro, raw.gyro, s.gyro_rads_per_count, temp_c);
-        if let Some(k) = set.gyro_g_sensitivity {
-            for row in 0..3 {
-                gyro[row] -= (0..3)
-                    .map(|col| f64::from(k[row][col]) * accel[col])
-                    .sum::<f64>();
-            }
-        }
-        let mag = reference_sensor(&set.mag, raw.mag, s.mag_ut_per_count, temp_c);
-        [accel, gyro, mag]
+        let nominal = |counts: [i16; 3], per_count: f32| {
+            counts.map(|c| f64::from(c) * f64::from(per_count))
+        };
+        let out = model::apply(
+            set,
+            &NominalSample {
+                accel: nominal(raw.accel, s.accel_mps2_per_count),
+                gyro: nominal(raw.gyro, s.gyro_rads_per_count),
+                mag: nominal(raw.mag, s.mag_ut_per_count),
+                temp_c: f64::from(s.temp_offset_c)
+                    + f64::from(s.temp_c_per_count) * f64::from(raw.temp),
+            },
+        );
+        [out.accel, out.gyro, out.mag]
     }
 
     /// Deterministic spread of samples over the whole count range and −40…85 °C.
@@ -591,6 +555,63 @@ mod tests {
     }
 
     #[test]
+    fn scale_temperature_alone_scales_about_the_sensors_own_reference() {
+        // s = 1e-4/°C about T_ref = 25 °C, no bias polynomial: y = (1 + s·(T − 25))·σ·c, so no
+        // scale change at all at 25 °C (format 1 took T_ref = 0 here and scaled by 1.0025).
+        let s = scales();
+        let mut set = CalibrationSet::identity();
+        set.accel.t_ref_c = 25.0;
+        set.accel.scale_temp = Some([1e-4; 3]);
+        let correction = Correction::new(&set, &s).unwrap();
+        let counts = [16_384i16, -8_192, 4_000];
+        // 10…40 °C in 1 °C steps: 16 counts per °C around 25 °C at 0 counts.
+        for temp_c in 10..=40 {
+            let raw = RawSample {
+                accel: counts,
+                temp: ((temp_c - 25) * 16) as i16,
+                ..RawSample::default()
+            };
+            let out = correction.apply(&raw).accel;
+            let gain = 1.0 + 1e-4 * f64::from(temp_c - 25);
+            for axis in 0..3 {
+                let expected =
+                    gain * f64::from(counts[axis]) * f64::from(s.accel_mps2_per_count);
+                // f32 rounding of a ≈10 m/s² product: a few 1e-7 relative.
+                let error = (f64::from(out[axis]) - expected).abs();
+                assert!(error <= 1e-6 * expected.abs(), "{temp_c} °C axis {axis}: {error:e}");
+                if temp_c == 25 {
+                    let nominal = f32::from(counts[axis]) * s.accel_mps2_per_count;
+                    assert_eq!(out[axis], nominal, "no scale change at T_ref");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn temperatures_beyond_the_validated_span_get_its_edge_correction() {
+        let s = scales();
+        let set = extended_set();
+        let correction = Correction::new(&set, &s).unwrap();
+        // Thermometer rails: i16::MAX counts is 2073 °C, i16::MIN is −2023 °C.
+        for rail in [i16::MIN, i16::MAX] {
+            let raw = RawSample {
+                accel: [12_000, -3_000, 9_000],
+                gyro: [400, -200, 100],
+                mag: [1_000, 2_000, -3_000],
+                temp: rail,
+            };
+            let ours = correction.apply(&raw);
+            let truth = reference(&set, &raw);
+            for (values, truth) in [ours.accel, ours.gyro, ours.mag].iter().zip(truth) {
+                for axis in 0..3 {
+                    let error = (f64::from(values[axis]) - truth[axis]).abs();
+                    assert!(error <= 1e-5 * truth[axis].abs().max(1.0), "{error:e}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn identity_gives_nominal_units() {
         let correction = Correction::identity(&scales());
         let raw = RawSample {
@@ -616,9 +637,8 @@ mod tests {
             &mut zero_terms.gyro,
             &mut zero_terms.mag,
         ] {
-            sensor.bias_temp = sensor.bias_temp.map(|t| BiasTemperature {
+            sensor.bias_temp = sensor.bias_temp.map(|_| BiasTemperature {
                 coeffs: [[0.0; 3]; 3],
-                ..t
             });
             sensor.scale_temp = sensor.scale_temp.map(|_| [0.0; 3]);
             sensor.nonlinearity = sensor.nonlinearity.map(|_| Nonlinearity {
@@ -662,7 +682,9 @@ mod tests {
         set.gyro.b[1] = f32::NAN;
         assert_eq!(
             Correction::new(&set, &scales()),
-            Err(InvalidParamsReason::NonFinite)
+            Err(InvalidParamsReason::NonFinite(
+                imucal_protocol::ParamField::Offset(SensorKind::Gyro)
+            ))
         );
     }
 

@@ -4,14 +4,25 @@
 //! number (u32), payload length (u32), CRC-32/ISO-HDLC over the first 16 header bytes and the
 //! payload (u32) — then the payload, padded with `0xFF` to the program size. All little-endian.
 //!
-//! A write goes to the inactive slot: erase, program (header last), read back and compare. Only a
-//! verified slot has a valid CRC with a higher sequence number, so a power cut at any step leaves
-//! either the previous set or the new one active, never a corrupt one. On boot the valid slot with
-//! the newer sequence number wins; sequence numbers compare by serial-number arithmetic
+//! A write goes to the inactive slot: erase, program every chunk after the first, then the first
+//! chunk (header and the start of the payload), read back and compare. The header is programmed
+//! at the *start* of that final operation, so a cut inside it can leave a complete header over a
+//! payload that is not; what makes the store safe is the CRC over header fields and payload,
+//! not the order. The order only means that before the final operation the slot has no magic.
+//! Only a slot whose CRC checks counts, so a power cut at any step leaves either the previous set
+//! or the new one, never a corrupt one. Sequence numbers compare by serial-number arithmetic
 //! (RFC 1982), so wrapping past `u32::MAX` keeps the order.
 //!
-//! The payload (the postcard-encoded parameter set) is opaque here; checking its content is the
-//! caller's job before [`ParamStore::write`].
+//! On boot [`ParamStore::load_newest`] offers the valid slots newest first to the caller, who
+//! decodes and validates the payload: a newest set that no longer passes (after an update
+//! tightened the limits, or a marginal bit that reads back differently the second time) falls
+//! back to the older valid slot instead of to nothing. Every read re-checks the CRC.
+//!
+//! Why not the `sequential-storage` crate: it keeps a key-value map or queue in a log of items,
+//! needs `MultiwriteNorFlash` (programming a word twice, which ECC-protected internal flash
+//! forbids) and async flash traits, and would change the on-flash format for a single ≤ 1 KiB
+//! record that two A/B slots hold with one erase per write. Its test method is what we adopt:
+//! random tears and marginal bits over many seeded iterations (`tests/store_random_tears.rs`).
 
 use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
 
@@ -169,6 +180,36 @@ impl<F: NorFlash> ParamStore<F> {
         }
     }
 
+    /// Offer the valid slots' payloads to `accept`, newest first, and make the first accepted
+    /// one active; returns what `accept` made of it and its sequence number. A slot whose CRC
+    /// fails on this read, or whose payload `accept` refuses, is passed over, so a newest set
+    /// that no longer validates falls back to the older one. `None` when no slot is accepted.
+    pub fn load_newest<T>(
+        &mut self,
+        buffer: &mut [u8],
+        mut accept: impl FnMut(&[u8]) -> Option<T>,
+    ) -> Option<(T, u32)> {
+        let [first, second] = [0, 1].map(|index| self.check_slot(index, None).ok().flatten());
+        let newest_first = match (first, second) {
+            (Some(a), Some(b)) if is_newer(a.sequence, b.sequence) => [Some(a), Some(b)],
+            (a, b) => [b, a],
+        };
+        for slot in newest_first.into_iter().flatten() {
+            let Some(target) = buffer.get_mut(..slot.len) else {
+                continue;
+            };
+            if self.check_slot(slot.index, Some(target)) != Ok(Some(slot)) {
+                continue;
+            }
+            if let Some(value) = buffer.get(..slot.len).and_then(&mut accept) {
+                self.active = Some(slot);
+                return Some((value, slot.sequence));
+            }
+        }
+        self.active = None;
+        None
+    }
+
     /// Store `payload` as the new active set; on any error the previous set stays active.
     ///
     /// Returns the new sequence number.
@@ -180,7 +221,13 @@ impl<F: NorFlash> ParamStore<F> {
                 max,
             });
         }
-        let (index, sequence) = match self.active {
+        // With no active set, a slot the caller refused may still hold the newest sequence:
+        // write after it, into the other slot, so that the order stays right.
+        let newest = match self.active {
+            Some(slot) => Some(slot),
+            None => self.scan(),
+        };
+        let (index, sequence) = match newest {
             Some(slot) => (1 - slot.index, slot.sequence.wrapping_add(1)),
             None => (0, 1),
         };
@@ -190,8 +237,8 @@ impl<F: NorFlash> ParamStore<F> {
             .erase(start, start + self.slot_size)
             .map_err(flash_error)?;
 
-        // Program every chunk after the first, then the first (with the header): until the last
-        // program step the slot has no magic, and the CRC covers everything anyway.
+        // Program every chunk after the first, then the first (header at its start): until the
+        // final operation the slot has no magic; within it, the CRC rejects a partial image.
         let image_len = round_up(HEADER_LEN + payload.len(), F::WRITE_SIZE);
         let chunks = image_len.div_ceil(CHUNK);
         let mut buffer = [0u8; CHUNK];
@@ -292,9 +339,11 @@ impl<F: NorFlash> ParamStore<F> {
         let mut done = 0;
         while done < len {
             let offset = HEADER_LEN + done;
-            let take = (len - done).min(CHUNK - F::READ_SIZE);
-            // Read an aligned window that covers [offset, offset + take).
-            let aligned = offset - offset % F::READ_SIZE;
+            // Read an aligned window that covers [offset, offset + take) and fits the buffer.
+            // `offset % READ_SIZE < READ_SIZE ≤ CHUNK`, so every pass takes at least one byte.
+            let misalignment = offset % F::READ_SIZE;
+            let take = (len - done).min(CHUNK - misalignment);
+            let aligned = offset - misalignment;
             let window = round_up(offset + take - aligned, F::READ_SIZE);
             let Some(bytes) = buffer.get_mut(..window) else {
                 return Err(StoreError::Geometry);
@@ -374,6 +423,37 @@ mod tests {
     use super::*;
     use crate::ram_flash::RamFlash;
 
+    /// A flash that only reads whole 256-byte pages.
+    struct ReadPages<F>(F);
+
+    impl<F: embedded_storage::nor_flash::ErrorType> embedded_storage::nor_flash::ErrorType
+        for ReadPages<F>
+    {
+        type Error = F::Error;
+    }
+
+    impl<F: NorFlash> embedded_storage::nor_flash::ReadNorFlash for ReadPages<F> {
+        const READ_SIZE: usize = 256;
+        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            assert!(offset % 256 == 0 && bytes.len() % 256 == 0, "unaligned read");
+            self.0.read(offset, bytes)
+        }
+        fn capacity(&self) -> usize {
+            self.0.capacity()
+        }
+    }
+
+    impl<F: NorFlash> NorFlash for ReadPages<F> {
+        const WRITE_SIZE: usize = F::WRITE_SIZE;
+        const ERASE_SIZE: usize = F::ERASE_SIZE;
+        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+            self.0.erase(from, to)
+        }
+        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+            self.0.write(offset, bytes)
+        }
+    }
+
     /// Deterministic payload bytes that differ between versions.
     fn payload(version: u8, len: usize) -> std::vec::Vec<u8> {
         (0..len)
@@ -429,6 +509,41 @@ mod tests {
         let mut store = ParamStore::new(flash, 0, 1024).unwrap();
         assert_eq!(store.active_sequence(), Some(1));
         assert_eq!(active(&mut store), Some(payload(1, 100)));
+    }
+
+    #[test]
+    fn a_flash_that_reads_whole_256_byte_pages_still_checks_its_slots() {
+        // READ_SIZE = CHUNK: each read window must still take at least one payload byte.
+        let mut store = ParamStore::new(ReadPages(RamFlash::<8192, 2048, 4>::new()), 0, 2048)
+            .unwrap();
+        assert_eq!(store.write(&payload(1, 700)), Ok(1));
+        let mut store = ParamStore::new(store.into_flash(), 0, 2048).unwrap();
+        assert_eq!(store.active_sequence(), Some(1));
+        assert_eq!(active(&mut store), Some(payload(1, 700)));
+    }
+
+    #[test]
+    fn a_newest_set_the_caller_refuses_falls_back_to_the_older_one() {
+        let mut store = ParamStore::new(RamFlash::<4096, 1024, 4>::new(), 0, 1024).unwrap();
+        store.write(&payload(1, 100)).unwrap();
+        store.write(&payload(2, 100)).unwrap();
+        let mut store = ParamStore::new(store.into_flash(), 0, 1024).unwrap();
+        let mut buffer = [0u8; 1024];
+        // Refuse version 2 (as firmware with tighter limits would): version 1 becomes active.
+        let loaded = store.load_newest(&mut buffer, |bytes| (bytes[0] == 1).then(|| bytes.to_vec()));
+        assert_eq!(loaded, Some((payload(1, 100), 1)));
+        assert_eq!(store.active_sequence(), Some(1));
+        // The next write replaces the refused slot (taking its sequence number, 2): it is then
+        // the newest set on the flash.
+        assert_eq!(store.write(&payload(3, 50)), Ok(2));
+        let mut store = ParamStore::new(store.into_flash(), 0, 1024).unwrap();
+        assert_eq!(active(&mut store), Some(payload(3, 50)));
+        // Refusing everything leaves nothing active, and a write still comes out newest.
+        let mut store = ParamStore::new(store.into_flash(), 0, 1024).unwrap();
+        assert_eq!(store.load_newest(&mut buffer, |_| None::<()>), None);
+        assert_eq!(store.write(&payload(4, 60)), Ok(3));
+        let mut store = ParamStore::new(store.into_flash(), 0, 1024).unwrap();
+        assert_eq!(active(&mut store), Some(payload(4, 60)));
     }
 
     #[test]

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use bench::*;
 use imucal_firmware::apply::Correction;
-use imucal_firmware::validate::validate;
+use imucal_protocol::validate;
 use imucal_protocol::{
     decode_payload, CalibrationSet, ErrorCode, Event, FrameDecoder, ParamStatus, RawSample,
     Request, RequestBody, ResponseBody, StillThresholds, StreamKind, MAX_FRAME,

@@ -20,7 +20,7 @@ use imucal_firmware::device::{Clock, Device, DeviceInfo};
 use imucal_firmware::imu::{Imu, RawSample, SensorScales};
 use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
-use imucal_firmware::validate::validate;
+use imucal_protocol::validate;
 use imucal_protocol::{
     decode_payload, encode_frame, CalibrationSet, DeviceId, DeviceMessage, FirmwareVersion,
     FrameDecoder, Request, RequestBody, Response, ResponseBody, SensorSet, MAX_FRAME,

@@ -505,6 +505,7 @@ pub fn random_plausible_set(rng: &mut Rng) -> CalibrationSet {
         for b in &mut sensor.b {
             *b = rng.range(-0.9, 0.9) * range;
         }
+        sensor.t_ref_c = rng.range(-55.0, 125.0);
         let dt = 125.0f32;
         if rng.chance(0.5) {
             let mut coeffs = [[0.0f32; 3]; 3];
@@ -514,10 +515,7 @@ pub fn random_plausible_set(rng: &mut Rng) -> CalibrationSet {
                     *c = rng.range(-1.0, 1.0) * range / 3.0 / dt.powi(degree as i32 + 1);
                 }
             }
-            sensor.bias_temp = Some(BiasTemperature {
-                t_ref_c: rng.range(-55.0, 125.0),
-                coeffs,
-            });
+            sensor.bias_temp = Some(BiasTemperature { coeffs });
         }
         if rng.chance(0.5) {
             sensor.scale_temp = Some([0; 3].map(|_| rng.range(-0.5, 0.5) / dt));
@@ -564,8 +562,8 @@ pub fn float_fields(set: &mut CalibrationSet) -> Vec<&mut f32> {
     for sensor in [&mut set.accel, &mut set.gyro, &mut set.mag] {
         fields.extend(sensor.a.iter_mut().flatten());
         fields.extend(sensor.b.iter_mut());
+        fields.push(&mut sensor.t_ref_c);
         if let Some(t) = sensor.bias_temp.as_mut() {
-            fields.push(&mut t.t_ref_c);
             fields.extend(t.coeffs.iter_mut().flatten());
         }
         if let Some(s) = sensor.scale_temp.as_mut() {
@@ -592,8 +590,8 @@ pub fn float_fields(set: &mut CalibrationSet) -> Vec<&mut f32> {
 pub fn full_set() -> CalibrationSet {
     let mut set = fitted_set();
     for sensor in [&mut set.accel, &mut set.gyro, &mut set.mag] {
+        sensor.t_ref_c = 25.0;
         sensor.bias_temp = Some(BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[1e-3, -2e-3, 5e-4], [1e-5, 0.0, -1e-5], [0.0, 1e-7, 0.0]],
         });
         sensor.scale_temp = Some([1e-4, -2e-4, 5e-5]);

@@ -51,7 +51,8 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
         ExportFormatArg::Rust => ExportFormat::Rust,
         ExportFormatArg::Json => ExportFormat::Json,
     };
-    let text = export(&set, format, &name);
+    let text = export(&set, format, &name)
+        .map_err(|reason| anyhow::anyhow!("`{shown}` is not exported: {reason}"))?;
     match &args.out {
         Some(path) => {
             std::fs::write(path, text).with_context(|| {

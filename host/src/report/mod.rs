@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use crate::device::ParamsFile;
-use crate::export::apply_sensor;
+use imucal_protocol::apply_sensor;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
 
 /// Why a report could not be built or written.
