@@ -90,8 +90,8 @@ fn extended_set() -> CalibrationSet {
         (&mut set.gyro, 1.0e-5),
         (&mut set.mag, 1.0e-2),
     ] {
+        sensor.t_ref_c = 25.0;
         sensor.bias_temp = Some(BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[unit; 3], [unit * 1.0e-2; 3], [unit * 1.0e-4; 3]],
         });
         sensor.scale_temp = Some([1.0e-4, -2.0e-4, 1.5e-4]);
