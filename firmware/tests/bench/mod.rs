@@ -4,13 +4,12 @@
 //! generators of plausible and hostile calibration sets.
 #![allow(dead_code, reason = "each test binary uses a different subset")]
 
-use std::cell::{Cell, RefCell};
-use std::collections::VecDeque;
-use std::convert::Infallible;
+use std::cell::Cell;
 use std::rc::Rc;
 
-use imucal_firmware::device::{Clock, Device, DeviceInfo};
-use imucal_firmware::imu::{Imu, RawSample, SensorScales};
+use imucal_firmware::device::{Device, DeviceInfo};
+use imucal_firmware::imu::{RawSample, SensorScales};
+pub use imucal_test_kit::shared::{FixedImu, MemoryLink, StepClock};
 use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
 use imucal_protocol::{
@@ -132,74 +131,6 @@ pub fn scales() -> SensorScales {
     }
 }
 
-/// An IMU that returns whatever sample the test put in its cell (a still board by default).
-pub struct FixedImu {
-    /// The sample every read returns.
-    pub sample: Rc<Cell<RawSample>>,
-}
-
-impl Imu for FixedImu {
-    type Error = Infallible;
-
-    fn scales(&self) -> SensorScales {
-        scales()
-    }
-
-    fn read(&mut self) -> Result<RawSample, Infallible> {
-        Ok(self.sample.get())
-    }
-}
-
-/// Both directions of the serial link, shared between the device and the test.
-#[derive(Clone, Default)]
-pub struct MemoryLink {
-    /// Bytes waiting for the device.
-    pub to_device: Rc<RefCell<VecDeque<u8>>>,
-    /// Bytes the device wrote.
-    pub from_device: Rc<RefCell<Vec<u8>>>,
-}
-
-impl embedded_io::ErrorType for MemoryLink {
-    type Error = Infallible;
-}
-
-impl embedded_io::Read for MemoryLink {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let mut queue = self.to_device.borrow_mut();
-        let count = buf.len().min(queue.len());
-        for (slot, byte) in buf.iter_mut().zip(queue.drain(..count)) {
-            *slot = byte;
-        }
-        Ok(count)
-    }
-}
-
-impl embedded_io::ReadReady for MemoryLink {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.to_device.borrow().is_empty())
-    }
-}
-
-impl embedded_io::Write for MemoryLink {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.from_device.borrow_mut().extend_from_slice(buf);
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-
-/// A clock the test advances.
-pub struct StepClock(pub Rc<Cell<u64>>);
-
-impl Clock for StepClock {
-    fn now_us(&mut self) -> u64 {
-        self.0.get()
-    }
-}
-
 /// Identity of the bench board.
 pub fn info() -> DeviceInfo {
     DeviceInfo {
@@ -263,6 +194,7 @@ impl Bench {
         let sample = Rc::new(Cell::new(STILL_SAMPLE));
         let imu = FixedImu {
             sample: sample.clone(),
+            scales: scales(),
         };
         let link = MemoryLink::default();
         let store = ParamStore::new(flash, 0, SLOT_SIZE).expect("bench slot layout fits the flash");
