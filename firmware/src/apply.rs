@@ -442,9 +442,8 @@ mod tests {
     /// The protocol's f64 reference model on the same sample in nominal units.
     fn reference(set: &CalibrationSet, raw: &RawSample) -> [[f64; 3]; 3] {
         let s = scales();
-        let nominal = |counts: [i16; 3], per_count: f32| {
-            counts.map(|c| f64::from(c) * f64::from(per_count))
-        };
+        let nominal =
+            |counts: [i16; 3], per_count: f32| counts.map(|c| f64::from(c) * f64::from(per_count));
         let out = model::apply(
             set,
             &NominalSample {
@@ -574,11 +573,13 @@ mod tests {
             let out = correction.apply(&raw).accel;
             let gain = 1.0 + 1e-4 * f64::from(temp_c - 25);
             for axis in 0..3 {
-                let expected =
-                    gain * f64::from(counts[axis]) * f64::from(s.accel_mps2_per_count);
+                let expected = gain * f64::from(counts[axis]) * f64::from(s.accel_mps2_per_count);
                 // f32 rounding of a ≈10 m/s² product: a few 1e-7 relative.
                 let error = (f64::from(out[axis]) - expected).abs();
-                assert!(error <= 1e-6 * expected.abs(), "{temp_c} °C axis {axis}: {error:e}");
+                assert!(
+                    error <= 1e-6 * expected.abs(),
+                    "{temp_c} °C axis {axis}: {error:e}"
+                );
                 if temp_c == 25 {
                     let nominal = f32::from(counts[axis]) * s.accel_mps2_per_count;
                     assert_eq!(out[axis], nominal, "no scale change at T_ref");

@@ -435,7 +435,10 @@ mod tests {
     impl<F: NorFlash> embedded_storage::nor_flash::ReadNorFlash for ReadPages<F> {
         const READ_SIZE: usize = 256;
         fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-            assert!(offset % 256 == 0 && bytes.len() % 256 == 0, "unaligned read");
+            assert!(
+                offset % 256 == 0 && bytes.len() % 256 == 0,
+                "unaligned read"
+            );
             self.0.read(offset, bytes)
         }
         fn capacity(&self) -> usize {
@@ -514,8 +517,8 @@ mod tests {
     #[test]
     fn a_flash_that_reads_whole_256_byte_pages_still_checks_its_slots() {
         // READ_SIZE = CHUNK: each read window must still take at least one payload byte.
-        let mut store = ParamStore::new(ReadPages(RamFlash::<8192, 2048, 4>::new()), 0, 2048)
-            .unwrap();
+        let mut store =
+            ParamStore::new(ReadPages(RamFlash::<8192, 2048, 4>::new()), 0, 2048).unwrap();
         assert_eq!(store.write(&payload(1, 700)), Ok(1));
         let mut store = ParamStore::new(store.into_flash(), 0, 2048).unwrap();
         assert_eq!(store.active_sequence(), Some(1));
@@ -530,7 +533,8 @@ mod tests {
         let mut store = ParamStore::new(store.into_flash(), 0, 1024).unwrap();
         let mut buffer = [0u8; 1024];
         // Refuse version 2 (as firmware with tighter limits would): version 1 becomes active.
-        let loaded = store.load_newest(&mut buffer, |bytes| (bytes[0] == 1).then(|| bytes.to_vec()));
+        let loaded =
+            store.load_newest(&mut buffer, |bytes| (bytes[0] == 1).then(|| bytes.to_vec()));
         assert_eq!(loaded, Some((payload(1, 100), 1)));
         assert_eq!(store.active_sequence(), Some(1));
         // The next write replaces the refused slot (taking its sequence number, 2): it is then

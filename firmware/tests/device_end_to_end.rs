@@ -16,8 +16,8 @@ use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
 use imucal_protocol::{
     encode_frame, CalibrationSet, DeviceId, DeviceMessage, ErrorCode, Event, FirmwareVersion,
-    FrameDecoder, InvalidParamsReason, ParamField, SensorKind, Request, RequestBody, ResponseBody, SensorSet,
-    StillThresholds, StreamKind, MAX_FRAME, PROTOCOL_VERSION,
+    FrameDecoder, InvalidParamsReason, ParamField, Request, RequestBody, ResponseBody, SensorKind,
+    SensorSet, StillThresholds, StreamKind, MAX_FRAME, PROTOCOL_VERSION,
 };
 
 const RATE_HZ: f32 = 100.0;

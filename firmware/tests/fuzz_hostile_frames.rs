@@ -231,35 +231,53 @@ fn extended_terms_beyond_their_limits_are_rejected() {
     };
     use InvalidParamsReason::{ExtendedTermOutOfRange, ReferenceTemperatureOutOfRange};
     let cases: [(&str, Corruption, InvalidParamsReason); 7] = [
-        ("bias shift 1 % beyond range at 125 °C", |s, range, dt| {
-            s.accel.bias_temp = Some(BiasTemperature {
-                coeffs: [
-                    [0.0; 3],
-                    [0.0; 3],
-                    [1.01 * range / (dt * dt * dt), 0.0, 0.0],
-                ],
-            })
-        }, ExtendedTermOutOfRange(ParamField::BiasTemperature(SensorKind::Accel))),
-        ("scale change 51 % at 125 °C", |s, _, dt| {
-            s.accel.scale_temp = Some([0.0, 0.51 / dt, 0.0])
-        }, ExtendedTermOutOfRange(ParamField::ScaleTemperature(SensorKind::Accel))),
-        ("non-linearity 51 % at full scale", |s, range, _| {
-            s.accel.nonlinearity = Some(Nonlinearity {
-                quadratic: [0.0; 3],
-                cubic: [0.0, 0.0, 0.51 / (range * range)],
-            })
-        }, ExtendedTermOutOfRange(ParamField::Nonlinearity(SensorKind::Accel))),
-        ("g-sensitivity 1 % above the limit", |s, _, _| {
-            let mut k = [[0.0; 3]; 3];
-            k[1][2] = -MAX_G_SENSITIVITY * 1.01;
-            s.gyro_g_sensitivity = Some(k)
-        }, ExtendedTermOutOfRange(ParamField::GyroGSensitivity)),
-        ("reference temperature 10³⁰ °C", |s, _, _| {
-            s.mag.t_ref_c = 1.0e30;
-            s.mag.bias_temp = Some(BiasTemperature {
-                coeffs: [[0.0; 3], [0.0; 3], [1.0e-9, 0.0, 0.0]],
-            })
-        }, ReferenceTemperatureOutOfRange(SensorKind::Mag)),
+        (
+            "bias shift 1 % beyond range at 125 °C",
+            |s, range, dt| {
+                s.accel.bias_temp = Some(BiasTemperature {
+                    coeffs: [
+                        [0.0; 3],
+                        [0.0; 3],
+                        [1.01 * range / (dt * dt * dt), 0.0, 0.0],
+                    ],
+                })
+            },
+            ExtendedTermOutOfRange(ParamField::BiasTemperature(SensorKind::Accel)),
+        ),
+        (
+            "scale change 51 % at 125 °C",
+            |s, _, dt| s.accel.scale_temp = Some([0.0, 0.51 / dt, 0.0]),
+            ExtendedTermOutOfRange(ParamField::ScaleTemperature(SensorKind::Accel)),
+        ),
+        (
+            "non-linearity 51 % at full scale",
+            |s, range, _| {
+                s.accel.nonlinearity = Some(Nonlinearity {
+                    quadratic: [0.0; 3],
+                    cubic: [0.0, 0.0, 0.51 / (range * range)],
+                })
+            },
+            ExtendedTermOutOfRange(ParamField::Nonlinearity(SensorKind::Accel)),
+        ),
+        (
+            "g-sensitivity 1 % above the limit",
+            |s, _, _| {
+                let mut k = [[0.0; 3]; 3];
+                k[1][2] = -MAX_G_SENSITIVITY * 1.01;
+                s.gyro_g_sensitivity = Some(k)
+            },
+            ExtendedTermOutOfRange(ParamField::GyroGSensitivity),
+        ),
+        (
+            "reference temperature 10³⁰ °C",
+            |s, _, _| {
+                s.mag.t_ref_c = 1.0e30;
+                s.mag.bias_temp = Some(BiasTemperature {
+                    coeffs: [[0.0; 3], [0.0; 3], [1.0e-9, 0.0, 0.0]],
+                })
+            },
+            ReferenceTemperatureOutOfRange(SensorKind::Mag),
+        ),
         (
             "reference temperature just above the die range",
             |s, _, _| {

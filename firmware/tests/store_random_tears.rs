@@ -208,10 +208,17 @@ fn random_tears_and_marginal_bits_leave_exactly_the_old_or_the_new_set() {
         store.write(&next).expect("power is on");
         let mut store = ParamStore::new(store.into_flash(), 0, SLOT).expect("layout fits");
         let reloaded = store.load_newest(&mut buffer, |bytes| Some(bytes.to_vec()));
-        assert_eq!(reloaded.map(|(b, _)| b), Some(next), "{context}: next write");
+        assert_eq!(
+            reloaded.map(|(b, _)| b),
+            Some(next),
+            "{context}: next write"
+        );
     }
     // Both outcomes occur, so the assertions above were exercised both ways.
-    assert!(kept_old > 100 && got_new > 100, "{kept_old} old, {got_new} new");
+    assert!(
+        kept_old > 100 && got_new > 100,
+        "{kept_old} old, {got_new} new"
+    );
     println!(
         "{ITERATIONS} random cuts: {got_new} new set, {kept_old} old set kept, {first_write_lost} first write lost (no old set)"
     );

@@ -201,7 +201,11 @@ fn sample_rows(suffix: &str) -> String {
             values.join(", ")
         })
         .collect::<Vec<_>>()
-        .join(if suffix.is_empty() { "],\n    [" } else { "},\n    {" })
+        .join(if suffix.is_empty() {
+            "],\n    ["
+        } else {
+            "},\n    {"
+        })
 }
 
 /// Compiles the C header of `set` with a driver that prints the nine outputs per sample.
@@ -209,7 +213,11 @@ fn compiled_c(set: &CalibrationSet, dir: &Path) -> String {
     let header = export(set, ExportFormat::CHeader, "params.json").expect("a valid set");
     std::fs::write(dir.join("imucal_calibration.h"), &header).unwrap();
     let temp = |cal: &SensorCalibration| if has_temperature(cal) { "s[9], " } else { "" };
-    let g_sensitivity = if set.gyro_g_sensitivity.is_some() { "fa, " } else { "" };
+    let g_sensitivity = if set.gyro_g_sensitivity.is_some() {
+        "fa, "
+    } else {
+        ""
+    };
     let program = format!(
         "#include <stdio.h>\n#include \"imucal_calibration.h\"\nstatic const float samples[][10] = {{\n    {{{rows}}},\n}};\nint main(void) {{\n  for (unsigned n = 0; n < sizeof samples / sizeof samples[0]; n++) {{\n    const float *s = samples[n];\n    float fa[3], fg[3], fm[3];\n    imucal_apply_accel(s, {ta}fa);\n    imucal_apply_gyro(s + 3, {tg}{g_sensitivity}fg);\n    imucal_apply_mag(s + 6, {tm}fm);\n    printf(\"%.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g\\n\", fa[0], fa[1], fa[2], fg[0], fg[1], fg[2], fm[0], fm[1], fm[2]);\n  }}\n  return 0;\n}}\n",
         rows = sample_rows("f"),
@@ -244,7 +252,11 @@ fn compiled_rust(set: &CalibrationSet, dir: &Path) -> String {
     let module = export(set, ExportFormat::Rust, "params.json").expect("a valid set");
     std::fs::write(dir.join("imucal_calibration.rs"), &module).unwrap();
     let temp = |cal: &SensorCalibration| if has_temperature(cal) { ", s[9]" } else { "" };
-    let g_sensitivity = if set.gyro_g_sensitivity.is_some() { ", fa" } else { "" };
+    let g_sensitivity = if set.gyro_g_sensitivity.is_some() {
+        ", fa"
+    } else {
+        ""
+    };
     let main = format!(
         "#[allow(dead_code)] // the constants not read here\nmod imucal_calibration {{ include!(\"imucal_calibration.rs\"); }}\nuse imucal_calibration::*;\nconst SAMPLES: &[[f32; 10]] = &[\n    [{rows}],\n];\nfn main() {{\n    for s in SAMPLES {{\n        let fa = apply_accel([s[0], s[1], s[2]]{ta});\n        let fg = apply_gyro([s[3], s[4], s[5]]{tg}{g_sensitivity});\n        let fm = apply_mag([s[6], s[7], s[8]]{tm});\n        for v in fa.iter().chain(&fg).chain(&fm) {{ print!(\"{{v:e}} \"); }}\n        println!();\n    }}\n}}\n",
         rows = sample_rows(""),
@@ -297,7 +309,10 @@ fn firmware_reference_and_compiled_c_and_rust_exports_agree_on_every_set() {
         let dir = scratch(&name.replace(' ', "-"));
         let mut implementations = vec![(
             "the firmware",
-            samples.iter().map(|raw| firmware(set, raw).to_vec()).collect(),
+            samples
+                .iter()
+                .map(|raw| firmware(set, raw).to_vec())
+                .collect(),
         )];
         implementations.push(("the Rust export", parse_rows(&compiled_rust(set, &dir))));
         if with_c {
@@ -354,7 +369,11 @@ fn export_refuses_what_the_board_would_refuse_naming_the_field() {
     for (corrupt, reason) in cases {
         let mut set = plain_set();
         corrupt(&mut set);
-        for format in [ExportFormat::CHeader, ExportFormat::Rust, ExportFormat::Json] {
+        for format in [
+            ExportFormat::CHeader,
+            ExportFormat::Rust,
+            ExportFormat::Json,
+        ] {
             assert_eq!(export(&set, format, "p.json"), Err(reason));
         }
     }

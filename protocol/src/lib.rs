@@ -102,8 +102,9 @@ pub use params::{
     SensorCalibration, SensorKind, IDENTITY_T_REF_C, PARAMS_FORMAT_VERSION, PARAMS_MAX_ENCODED,
 };
 pub use sample::{
-    Batch, BatchEntry, BatchHeader, CalibratedBatch, PackedSample, TimedCalibrated, CalibratedSample, RawSample, SampleBatch, SensorScales,
-    SensorSet, CALIBRATED_BATCH_CAPACITY, PACKED_SAMPLE_BYTES, RAW_BATCH_CAPACITY,
+    Batch, BatchEntry, BatchHeader, CalibratedBatch, CalibratedSample, PackedSample, RawSample,
+    SampleBatch, SensorScales, SensorSet, TimedCalibrated, CALIBRATED_BATCH_CAPACITY,
+    PACKED_SAMPLE_BYTES, RAW_BATCH_CAPACITY,
 };
 pub use validate::{
     validate, validate_for_ranges, FullScale, InvalidParamsReason, ParamField, MAX_DELTA_T_C,

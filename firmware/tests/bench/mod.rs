@@ -9,13 +9,13 @@ use std::rc::Rc;
 
 use imucal_firmware::device::{Device, DeviceInfo};
 use imucal_firmware::imu::{RawSample, SensorScales};
-pub use imucal_test_kit::shared::{FixedImu, MemoryLink, StepClock};
 use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
 use imucal_protocol::{
     encode_frame, BiasTemperature, CalibrationSet, DeviceId, DeviceMessage, Event, FirmwareVersion,
     FrameDecoder, Nonlinearity, Request, RequestBody, ResponseBody, SensorSet, MAX_FRAME,
 };
+pub use imucal_test_kit::shared::{FixedImu, MemoryLink, StepClock};
 
 /// Sample period of the fake IMU, µs (100 Hz).
 pub const PERIOD_US: u64 = 10_000;

@@ -156,7 +156,10 @@ fn finite(values: &[f32], field: ParamField) -> Result<(), InvalidParamsReason> 
     }
 }
 
-fn sensor_is_finite(sensor: &SensorCalibration, kind: SensorKind) -> Result<(), InvalidParamsReason> {
+fn sensor_is_finite(
+    sensor: &SensorCalibration,
+    kind: SensorKind,
+) -> Result<(), InvalidParamsReason> {
     finite(sensor.a.as_flattened(), ParamField::Matrix(kind))?;
     finite(&sensor.b, ParamField::Offset(kind))?;
     finite(&[sensor.t_ref_c], ParamField::ReferenceTemperature(kind))?;

@@ -1,6 +1,6 @@
 use super::*;
-use std::string::ToString;
 use crate::params::{BiasTemperature, Nonlinearity};
+use std::string::ToString;
 
 fn scales() -> SensorScales {
     SensorScales {
@@ -51,8 +51,14 @@ fn frobenius_condition_number_matches_the_diagonal_case() {
 #[test]
 fn nan_anywhere_is_non_finite_and_names_its_field() {
     let cases: [(fn(&mut CalibrationSet), ParamField); 6] = [
-        (|s| s.accel.a[1][2] = f32::NAN, ParamField::Matrix(SensorKind::Accel)),
-        (|s| s.mag.b[0] = f32::INFINITY, ParamField::Offset(SensorKind::Mag)),
+        (
+            |s| s.accel.a[1][2] = f32::NAN,
+            ParamField::Matrix(SensorKind::Accel),
+        ),
+        (
+            |s| s.mag.b[0] = f32::INFINITY,
+            ParamField::Offset(SensorKind::Mag),
+        ),
         (|s| s.residuals.gyro_rms = f32::NAN, ParamField::Residuals),
         (
             |s| s.gyro_g_sensitivity = Some([[0.0, f32::NAN, 0.0]; 3]),
@@ -159,7 +165,10 @@ fn an_absurd_reference_temperature_is_refused_even_without_temperature_terms() {
         ))
     );
     let sentence = reason.map(|r| r.to_string()).unwrap_or_default();
-    assert!(sentence.contains("mag.t_ref_c") && sentence.contains("-55…125 °C"), "{sentence}");
+    assert!(
+        sentence.contains("mag.t_ref_c") && sentence.contains("-55…125 °C"),
+        "{sentence}"
+    );
 }
 
 #[test]
@@ -172,7 +181,10 @@ fn sentences_name_the_field_and_the_limit() {
         SensorKind::Accel,
     ))
     .to_string();
-    assert!(scale.contains("accel.scale_temp") && scale.contains("50 %"), "{scale}");
+    assert!(
+        scale.contains("accel.scale_temp") && scale.contains("50 %"),
+        "{scale}"
+    );
 }
 
 #[test]
@@ -184,5 +196,8 @@ fn unknown_boards_are_checked_against_the_widest_supported_ranges() {
         validate(&set, &scales()),
         Err(InvalidParamsReason::OffsetOutOfRange(SensorKind::Accel))
     );
-    assert_eq!(validate_for_ranges(&set, &FullScale::WIDEST_SUPPORTED), Ok(()));
+    assert_eq!(
+        validate_for_ranges(&set, &FullScale::WIDEST_SUPPORTED),
+        Ok(())
+    );
 }
