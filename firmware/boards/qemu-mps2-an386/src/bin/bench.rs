@@ -22,11 +22,11 @@ use imucal_board_qemu_mps2_an386::{exit, ram_flash::RamNorFlash, ram_flash::SLOT
 use imucal_firmware::apply::Correction;
 use imucal_firmware::device::{Device, DeviceInfo};
 use imucal_firmware::store::ParamStore;
-use imucal_test_kit::bare::{CountingImu, SinkLink, SteppingClock};
 use imucal_protocol::{
     encode_frame, BiasTemperature, CalibrationSet, DeviceId, FirmwareVersion, Nonlinearity,
     RawSample, Request, RequestBody, SensorCalibration, SensorScales, SensorSet, StreamKind,
 };
+use imucal_test_kit::bare::{CountingImu, SinkLink, SteppingClock};
 
 /// Names of the measured regions, in the order they run (the bench driver reads the same list).
 pub const REGIONS: [&str; 4] = ["empty", "apply-plain", "apply-extended", "poll-streaming"];
