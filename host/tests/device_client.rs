@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 use device_fake::{fake_sample, scales, FakeConfig, FakeDevice};
 use imucal::device::{open_port, ClientOptions, DeviceClient, DeviceError, PoseRequest};
 use imucal_protocol::{
-    CalibrationSet, ErrorCode, InvalidParamsReason, ProtocolVersion, SensorKind, StillThresholds, StreamKind,
+    CalibrationSet, ErrorCode, InvalidParamsReason, ProtocolVersion, SensorKind, StillThresholds,
+    StreamKind,
 };
 
 /// Short timeouts: the fake answers within a few ms, so 200 ms only expires on purpose.
@@ -225,7 +226,10 @@ fn a_set_the_board_would_refuse_is_not_sent_at_all() {
     for (set, field) in [(wrong_unit, "gyro.A"), (absurd_t_ref, "accel.t_ref_c")] {
         let error = client.write_params_verified(&set).expect_err("refused");
         let message = error.to_string();
-        assert!(message.contains(field) && message.contains("not writing"), "{message}");
+        assert!(
+            message.contains(field) && message.contains("not writing"),
+            "{message}"
+        );
     }
     assert!(!fake.state().requests.contains(&"WriteParams"));
 }
