@@ -346,9 +346,12 @@ fn the_cross_check_tolerance_detects_a_missing_clamp() {
     assert!((unclamped - clamped).abs() > 1e-5 * 19.6 * 100.0);
 }
 
+/// Makes a valid set invalid.
+type Corruption = fn(&mut CalibrationSet);
+
 #[test]
 fn export_refuses_what_the_board_would_refuse_naming_the_field() {
-    let cases: [(fn(&mut CalibrationSet), InvalidParamsReason); 4] = [
+    let cases: [(Corruption, InvalidParamsReason); 4] = [
         (
             |s| s.accel.a = [[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             InvalidParamsReason::IllConditioned(SensorKind::Accel),

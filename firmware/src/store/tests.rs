@@ -17,7 +17,7 @@ impl<F: NorFlash> embedded_storage::nor_flash::ReadNorFlash for ReadPages<F> {
     const READ_SIZE: usize = 256;
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
         assert!(
-            offset % 256 == 0 && bytes.len() % 256 == 0,
+            offset.is_multiple_of(256) && bytes.len().is_multiple_of(256),
             "unaligned read"
         );
         self.0.read(offset, bytes)

@@ -211,7 +211,9 @@ fn check_extended(
         for axis in 0..3 {
             let [c1, c2, c3] = bias_temp.coeffs.map(|degree| degree[axis].abs());
             let worst_shift = dt * (c1 + dt * (c2 + dt * c3));
-            if !(worst_shift <= range) {
+            // Written so that a NaN range refuses too.
+            let within = worst_shift <= range;
+            if !within {
                 return refuse(ParamField::BiasTemperature(kind));
             }
         }
@@ -229,7 +231,8 @@ fn check_extended(
             // Relative deviation at full scale: |q|·r + |k|·r².
             let q = nonlinearity.quadratic[axis].abs();
             let k = nonlinearity.cubic[axis].abs();
-            if !(range * (q + k * range) <= MAX_NONLINEAR_CHANGE) {
+            let within = range * (q + k * range) <= MAX_NONLINEAR_CHANGE;
+            if !within {
                 return refuse(ParamField::Nonlinearity(kind));
             }
         }

@@ -20,7 +20,10 @@ fn diag(x: f32, y: f32, z: f32) -> [[f32; 3]; 3] {
     [[x, 0.0, 0.0], [0.0, y, 0.0], [0.0, 0.0, z]]
 }
 
-fn reject(corrupt: fn(&mut CalibrationSet)) -> Option<InvalidParamsReason> {
+/// Makes a valid set invalid.
+type Corruption = fn(&mut CalibrationSet);
+
+fn reject(corrupt: Corruption) -> Option<InvalidParamsReason> {
     let mut set = CalibrationSet::identity();
     corrupt(&mut set);
     validate(&set, &scales()).err()
@@ -50,7 +53,7 @@ fn frobenius_condition_number_matches_the_diagonal_case() {
 
 #[test]
 fn nan_anywhere_is_non_finite_and_names_its_field() {
-    let cases: [(fn(&mut CalibrationSet), ParamField); 6] = [
+    let cases: [(Corruption, ParamField); 6] = [
         (
             |s| s.accel.a[1][2] = f32::NAN,
             ParamField::Matrix(SensorKind::Accel),
