@@ -454,13 +454,13 @@ mod tests {
             .expect("minimal file parses");
         assert_eq!(set.gyro, SensorCalibration::identity());
         assert_eq!(set.accel.b, [0.1, 0.0, 0.0]);
-        let wrong = text.replace("\"format\": 1", "\"format\": 2");
+        let wrong = text.replace("\"format\": 1", "\"format\": 3");
         let message = ParamsFile::from_json(&wrong, "a.json")
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(
-            message.contains("format 2") && message.contains("format 1"),
+            message.contains("format 3") && message.contains("format 2"),
             "{message}"
         );
     }
