@@ -54,7 +54,7 @@ fn handshake_keeps_the_welcome_with_device_id_and_scales() {
 #[test]
 fn a_newer_board_protocol_is_refused_naming_both_versions_and_what_to_update() {
     let fake = FakeDevice::start(FakeConfig {
-        protocol: Some(ProtocolVersion { major: 2, minor: 3 }),
+        protocol: Some(ProtocolVersion { major: 3, minor: 3 }),
         ..FakeConfig::default()
     });
     let message = connect(&fake)
@@ -62,8 +62,8 @@ fn a_newer_board_protocol_is_refused_naming_both_versions_and_what_to_update() {
         .map(|e| e.to_string())
         .unwrap_or_default();
     assert!(message.contains(&fake.path), "{message}");
-    assert!(message.contains("protocol 2.3"), "{message}");
-    assert!(message.contains("speaks 1.0"), "{message}");
+    assert!(message.contains("protocol 3.3"), "{message}");
+    assert!(message.contains("speaks 2.0"), "{message}");
     assert!(message.contains("update imucal"), "{message}");
 }
 
