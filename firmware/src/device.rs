@@ -603,21 +603,20 @@ fn set_header(batch: &mut Stream, first_index: u32, t0_us: u64) {
     }
 }
 
-/// The stored set if it decodes and validates, else the identity (sequence 0).
+/// The newest stored set that decodes and validates (an older one when the newest no longer
+/// does), else the identity (sequence 0).
 fn load_active<F: NorFlash>(
     store: &mut ParamStore<F>,
     scales: &SensorScales,
 ) -> (CalibrationSet, u32, Correction) {
     let mut buffer = [0u8; PARAMS_MAX_ENCODED];
-    let stored = store
-        .read_active(&mut buffer)
-        .ok()
-        .and_then(|len| buffer.get(..len))
-        .and_then(|bytes| postcard::from_bytes::<CalibrationSet>(bytes).ok())
-        .and_then(|set| Correction::new(&set, scales).ok().map(|c| (set, c)));
-    match (stored, store.active_sequence()) {
-        (Some((set, correction)), Some(sequence)) => (set, sequence, correction),
-        _ => {
+    let stored = store.load_newest(&mut buffer, |bytes| {
+        let set = postcard::from_bytes::<CalibrationSet>(bytes).ok()?;
+        Correction::new(&set, scales).ok().map(|c| (set, c))
+    });
+    match stored {
+        Some(((set, correction), sequence)) => (set, sequence, correction),
+        None => {
             crate::log::log_warn!("no valid stored parameters; starting on the identity set");
             (CalibrationSet::identity(), 0, Correction::identity(scales))
         }

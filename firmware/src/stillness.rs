@@ -6,7 +6,7 @@
 //! error; only the final comparison with the thresholds is in floating point.
 
 use crate::imu::{RawSample, SensorScales};
-use crate::math::sqrt_f32;
+use imucal_protocol::math::sqrt_f32;
 
 /// Largest window accepted; keeps `N·Σx²` below `2^62` for `i16` counts (`N² · 2^30`).
 pub const MAX_WINDOW: usize = 1 << 15;

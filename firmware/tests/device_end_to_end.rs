@@ -16,8 +16,8 @@ use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
 use imucal_protocol::{
     encode_frame, CalibrationSet, DeviceId, DeviceMessage, ErrorCode, Event, FirmwareVersion,
-    FrameDecoder, InvalidParamsReason, Request, RequestBody, ResponseBody, SensorSet,
-    StillThresholds, StreamKind, MAX_FRAME, PROTOCOL_VERSION,
+    FrameDecoder, InvalidParamsReason, ParamField, Request, RequestBody, ResponseBody, SensorKind,
+    SensorSet, StillThresholds, StreamKind, MAX_FRAME, PROTOCOL_VERSION,
 };
 
 const RATE_HZ: f32 = 100.0;
@@ -493,7 +493,9 @@ fn rejected_parameters_leave_the_previous_set_active() {
     );
     assert_eq!(
         reply,
-        ResponseBody::Error(ErrorCode::InvalidParams(InvalidParamsReason::NonFinite))
+        ResponseBody::Error(ErrorCode::InvalidParams(InvalidParamsReason::NonFinite(
+            ParamField::Matrix(SensorKind::Gyro)
+        )))
     );
 
     let wrong_crc = good.crc32() ^ 1;

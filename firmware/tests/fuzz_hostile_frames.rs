@@ -2,20 +2,20 @@
 //! asserts the exact reply (`ErrorCode`) and that the previously committed set stays active,
 //! also across a reboot.
 //!
-//! The validation bounds are those of `imucal_firmware::validate`: finite values, RMS gain of
+//! The validation bounds are those of `imucal_protocol::validate`: finite values, RMS gain of
 //! `A` within `GAIN_LIMITS`, Frobenius condition number `κ_F ≤ 30`, offsets within the sensor's
 //! full-scale range, extended terms bounded over `|ΔT| ≤ 125 °C` with `T_ref` in −55…125 °C.
 
 mod bench;
 
 use bench::*;
-use imucal_firmware::validate::{
+use imucal_protocol::validate::{
     condition_frobenius, MAX_CONDITION_FROBENIUS, MAX_DELTA_T_C, MAX_G_SENSITIVITY,
     REFERENCE_TEMP_RANGE_C,
 };
 use imucal_protocol::{
-    BiasTemperature, CalibrationSet, ErrorCode, InvalidParamsReason, Nonlinearity, RequestBody,
-    ResponseBody, MAX_FRAME, PARAMS_FORMAT_VERSION, PROTOCOL_VERSION,
+    BiasTemperature, CalibrationSet, ErrorCode, InvalidParamsReason, Nonlinearity, ParamField,
+    RequestBody, ResponseBody, SensorKind, MAX_FRAME, PARAMS_FORMAT_VERSION, PROTOCOL_VERSION,
 };
 
 /// A bench with `fitted_set()` committed (active sequence 1).
@@ -45,12 +45,20 @@ fn assert_still_active(bench: Bench, good: &CalibrationSet) {
 /// Write `set` with its correct CRC; the reply must be `InvalidParams(reason)`, and a commit of
 /// that CRC must then find nothing staged.
 fn assert_rejected(bench: &mut Bench, set: &CalibrationSet, reason: InvalidParamsReason) {
+    assert_rejected_as(bench, set, |r| *r == reason);
+}
+
+/// As [`assert_rejected`], for a reason that `expected` accepts.
+fn assert_rejected_as(
+    bench: &mut Bench,
+    set: &CalibrationSet,
+    expected: impl Fn(&InvalidParamsReason) -> bool,
+) {
     let crc = set.crc32();
     let reply = bench.request(RequestBody::WriteParams { set: *set, crc });
-    assert_eq!(
-        reply,
-        ResponseBody::Error(ErrorCode::InvalidParams(reason)),
-        "{set:?}"
+    assert!(
+        matches!(&reply, ResponseBody::Error(ErrorCode::InvalidParams(r)) if expected(r)),
+        "{reply:?} for {set:?}"
     );
     assert_eq!(
         bench.request(RequestBody::CommitParams { crc }),
@@ -69,13 +77,16 @@ fn diag(x: f32, y: f32, z: f32) -> [[f32; 3]; 3] {
 fn nan_or_infinity_in_any_of_the_107_float_fields_is_rejected_as_non_finite() {
     let (mut bench, good) = bench_with_good_set();
     let field_count = float_fields(&mut full_set()).len();
-    assert_eq!(field_count, 3 * (9 + 3 + 10 + 3 + 6) + 9 + 2 + 3);
+    // Per sensor A, b, t_ref_c, bias polynomial, scale temperature, non-linearity.
+    assert_eq!(field_count, 3 * (9 + 3 + 1 + 9 + 3 + 6) + 9 + 2 + 3);
     let mut rejected = 0;
     for index in 0..field_count {
         for value in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
             let mut set = full_set();
             *float_fields(&mut set).swap_remove(index) = value;
-            assert_rejected(&mut bench, &set, InvalidParamsReason::NonFinite);
+            assert_rejected_as(&mut bench, &set, |r| {
+                matches!(r, InvalidParamsReason::NonFinite(_))
+            });
             rejected += 1;
         }
     }
@@ -97,12 +108,14 @@ fn huge_zero_and_tiny_scales_are_rejected_as_gain_out_of_range() {
     for scale in [0.0, 1.0e-30, 0.1, 2.5, 1.0e3, 1.0e30, f32::MAX, -1.0e30] {
         let mut set = good;
         set.accel.a = diag(scale, scale, scale);
-        assert_rejected(&mut bench, &set, InvalidParamsReason::GainOutOfRange);
+        let reason = InvalidParamsReason::GainOutOfRange(SensorKind::Accel);
+        assert_rejected(&mut bench, &set, reason);
     }
     // The magnetometer's window (0.005 … 4) admits a unit-field fit but not 1/500.
     let mut set = good;
     set.mag.a = diag(0.002, 0.002, 0.002);
-    assert_rejected(&mut bench, &set, InvalidParamsReason::GainOutOfRange);
+    let reason = InvalidParamsReason::GainOutOfRange(SensorKind::Mag);
+    assert_rejected(&mut bench, &set, reason);
     assert_still_active(bench, &good);
 }
 
@@ -134,7 +147,8 @@ fn singular_matrices_are_rejected_as_ill_conditioned() {
     for a in singular {
         let mut set = good;
         set.gyro.a = a;
-        assert_rejected(&mut bench, &set, InvalidParamsReason::IllConditioned);
+        let reason = InvalidParamsReason::IllConditioned(SensorKind::Gyro);
+        assert_rejected(&mut bench, &set, reason);
     }
     assert_still_active(bench, &good);
 }
@@ -163,7 +177,8 @@ fn condition_number_just_below_the_bound_is_accepted_and_just_above_is_rejected(
 
     let mut set = good;
     set.accel.a = above;
-    assert_rejected(&mut bench, &set, InvalidParamsReason::IllConditioned);
+    let reason = InvalidParamsReason::IllConditioned(SensorKind::Accel);
+    assert_rejected(&mut bench, &set, reason);
     assert_still_active(bench, &good);
 
     let (mut bench, _) = bench_with_good_set();
@@ -188,7 +203,8 @@ fn offsets_beyond_the_sensor_range_are_rejected() {
                 // 0.1 % beyond full scale: well above f32 resolution (6e-8 relative).
                 target.into_iter().nth(sensor).expect("three sensors").b[axis] =
                     sign * range * 1.001;
-                assert_rejected(&mut bench, &set, InvalidParamsReason::OffsetOutOfRange);
+                let reason = InvalidParamsReason::OffsetOutOfRange(SensorKind::ALL[sensor]);
+                assert_rejected(&mut bench, &set, reason);
             }
         }
     }
@@ -208,78 +224,91 @@ fn extended_terms_beyond_their_limits_are_rejected() {
     let (mut bench, good) = bench_with_good_set();
     let range = scales().accel_range_mps2;
     let dt = MAX_DELTA_T_C;
-    let bias = |t_ref_c: f32, c1: f32| {
+    let bias = |c1: f32| {
         Some(BiasTemperature {
-            t_ref_c,
             coeffs: [[c1, 0.0, 0.0], [0.0; 3], [0.0; 3]],
         })
     };
-    let cases: [(&str, Corruption); 7] = [
-        ("bias shift 1 % beyond range at 125 °C", |s, range, dt| {
-            s.accel.bias_temp = Some(BiasTemperature {
-                t_ref_c: 25.0,
-                coeffs: [
-                    [0.0; 3],
-                    [0.0; 3],
-                    [1.01 * range / (dt * dt * dt), 0.0, 0.0],
-                ],
-            })
-        }),
-        ("scale change 51 % at 125 °C", |s, _, dt| {
-            s.accel.scale_temp = Some([0.0, 0.51 / dt, 0.0])
-        }),
-        ("non-linearity 51 % at full scale", |s, range, _| {
-            s.accel.nonlinearity = Some(Nonlinearity {
-                quadratic: [0.0; 3],
-                cubic: [0.0, 0.0, 0.51 / (range * range)],
-            })
-        }),
-        ("g-sensitivity 1 % above the limit", |s, _, _| {
-            let mut k = [[0.0; 3]; 3];
-            k[1][2] = -MAX_G_SENSITIVITY * 1.01;
-            s.gyro_g_sensitivity = Some(k)
-        }),
-        ("reference temperature 10³⁰ °C", |s, _, _| {
-            s.mag.bias_temp = Some(BiasTemperature {
-                t_ref_c: 1.0e30,
-                coeffs: [[0.0; 3], [0.0; 3], [1.0e-9, 0.0, 0.0]],
-            })
-        }),
+    use InvalidParamsReason::{ExtendedTermOutOfRange, ReferenceTemperatureOutOfRange};
+    let cases: [(&str, Corruption, InvalidParamsReason); 7] = [
+        (
+            "bias shift 1 % beyond range at 125 °C",
+            |s, range, dt| {
+                s.accel.bias_temp = Some(BiasTemperature {
+                    coeffs: [
+                        [0.0; 3],
+                        [0.0; 3],
+                        [1.01 * range / (dt * dt * dt), 0.0, 0.0],
+                    ],
+                })
+            },
+            ExtendedTermOutOfRange(ParamField::BiasTemperature(SensorKind::Accel)),
+        ),
+        (
+            "scale change 51 % at 125 °C",
+            |s, _, dt| s.accel.scale_temp = Some([0.0, 0.51 / dt, 0.0]),
+            ExtendedTermOutOfRange(ParamField::ScaleTemperature(SensorKind::Accel)),
+        ),
+        (
+            "non-linearity 51 % at full scale",
+            |s, range, _| {
+                s.accel.nonlinearity = Some(Nonlinearity {
+                    quadratic: [0.0; 3],
+                    cubic: [0.0, 0.0, 0.51 / (range * range)],
+                })
+            },
+            ExtendedTermOutOfRange(ParamField::Nonlinearity(SensorKind::Accel)),
+        ),
+        (
+            "g-sensitivity 1 % above the limit",
+            |s, _, _| {
+                let mut k = [[0.0; 3]; 3];
+                k[1][2] = -MAX_G_SENSITIVITY * 1.01;
+                s.gyro_g_sensitivity = Some(k)
+            },
+            ExtendedTermOutOfRange(ParamField::GyroGSensitivity),
+        ),
+        (
+            "reference temperature 10³⁰ °C",
+            |s, _, _| {
+                s.mag.t_ref_c = 1.0e30;
+                s.mag.bias_temp = Some(BiasTemperature {
+                    coeffs: [[0.0; 3], [0.0; 3], [1.0e-9, 0.0, 0.0]],
+                })
+            },
+            ReferenceTemperatureOutOfRange(SensorKind::Mag),
+        ),
         (
             "reference temperature just above the die range",
             |s, _, _| {
+                s.gyro.t_ref_c = REFERENCE_TEMP_RANGE_C.1 + 0.5;
                 s.gyro.bias_temp = Some(BiasTemperature {
-                    t_ref_c: REFERENCE_TEMP_RANGE_C.1 + 0.5,
                     coeffs: [[1.0e-4, 0.0, 0.0], [0.0; 3], [0.0; 3]],
                 })
             },
+            ReferenceTemperatureOutOfRange(SensorKind::Gyro),
         ),
         (
-            "reference temperature just below the die range",
-            |s, _, _| {
-                s.gyro.bias_temp = Some(BiasTemperature {
-                    t_ref_c: REFERENCE_TEMP_RANGE_C.0 - 0.5,
-                    coeffs: [[1.0e-4, 0.0, 0.0], [0.0; 3], [0.0; 3]],
-                })
-            },
+            "reference temperature just below the die range, without any temperature term",
+            |s, _, _| s.gyro.t_ref_c = REFERENCE_TEMP_RANGE_C.0 - 0.5,
+            ReferenceTemperatureOutOfRange(SensorKind::Gyro),
         ),
     ];
-    for (what, corrupt) in cases {
+    for (what, corrupt, reason) in cases {
         let mut set = good;
         corrupt(&mut set, range, dt);
         let crc = set.crc32();
         assert_eq!(
             bench.request(RequestBody::WriteParams { set, crc }),
-            ResponseBody::Error(ErrorCode::InvalidParams(
-                InvalidParamsReason::ExtendedTermOutOfRange
-            )),
+            ResponseBody::Error(ErrorCode::InvalidParams(reason)),
             "{what}"
         );
     }
     // At the edges of the die range the same polynomial is accepted.
     for t_ref_c in [REFERENCE_TEMP_RANGE_C.0, REFERENCE_TEMP_RANGE_C.1] {
         let mut set = good;
-        set.gyro.bias_temp = bias(t_ref_c, 1.0e-4);
+        set.gyro.t_ref_c = t_ref_c;
+        set.gyro.bias_temp = bias(1.0e-4);
         let crc = set.crc32();
         assert!(matches!(
             bench.request(RequestBody::WriteParams { set, crc }),
@@ -295,7 +324,8 @@ fn an_unsupported_format_version_is_rejected() {
     for version in [0, PARAMS_FORMAT_VERSION + 1, u16::MAX] {
         let mut set = good;
         set.format_version = version;
-        assert_rejected(&mut bench, &set, InvalidParamsReason::UnsupportedFormat);
+        let reason = InvalidParamsReason::UnsupportedFormat { found: version };
+        assert_rejected(&mut bench, &set, reason);
     }
     assert_still_active(bench, &good);
 }

@@ -248,3 +248,31 @@ fn a_slot_torn_at_any_byte_in_any_program_order_is_ignored_at_boot() {
     }
     eprintln!("torn slots: {boots} boots over {slot} byte positions");
 }
+
+#[test]
+fn a_newest_stored_set_that_no_longer_validates_falls_back_to_the_older_set() {
+    // As after a firmware update that tightened a limit: the newest slot is intact and decodes,
+    // but validation refuses it. The device must boot on the older valid set, not the identity.
+    let flash = flash_with_old_set();
+    let mut refused = fitted_set();
+    refused.accel.a = [[9.8, 0.0, 0.0], [0.0, 9.8, 0.0], [0.0, 0.0, 9.8]];
+    let mut buffer = [0u8; imucal_protocol::PARAMS_MAX_ENCODED];
+    let bytes = postcard::to_slice(&refused, &mut buffer).expect("a set encodes");
+    let mut store = imucal_firmware::store::ParamStore::new(flash, 0, SLOT_SIZE).expect("layout");
+    assert_eq!(store.write(bytes), Ok(2), "stored behind the device's back");
+    let mut bench = Bench::boot(store.into_flash());
+    assert_eq!(bench.get_params(), fitted_set());
+    let ResponseBody::Status(status) = bench.request(RequestBody::Status) else {
+        panic!("Status request failed");
+    };
+    assert_eq!(
+        (status.active_crc, status.active_seq),
+        (fitted_set().crc32(), 1)
+    );
+    // The next commit is the newest set, across a reboot.
+    assert!(matches!(
+        bench.write_and_commit(&newer_set()),
+        ResponseBody::ParamStatus(_)
+    ));
+    assert_eq!(bench.reboot().get_params(), newer_set());
+}

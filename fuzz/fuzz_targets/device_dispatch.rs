@@ -10,21 +10,20 @@
 //! decodes; the device answers `Ping` at the end.
 #![no_main]
 
-use std::cell::{Cell, RefCell};
-use std::collections::VecDeque;
-use std::convert::Infallible;
+use std::cell::Cell;
 use std::rc::Rc;
 
 use imucal_firmware::apply::Correction;
-use imucal_firmware::device::{Clock, Device, DeviceInfo};
-use imucal_firmware::imu::{Imu, RawSample, SensorScales};
+use imucal_firmware::device::{Device, DeviceInfo};
+use imucal_firmware::imu::{RawSample, SensorScales};
 use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
-use imucal_firmware::validate::validate;
+use imucal_protocol::validate;
 use imucal_protocol::{
     decode_payload, encode_frame, CalibrationSet, DeviceId, DeviceMessage, FirmwareVersion,
     FrameDecoder, Request, RequestBody, Response, ResponseBody, SensorSet, MAX_FRAME,
 };
+use imucal_test_kit::shared::{FixedImu, MemoryLink as Link, StepClock};
 use libfuzzer_sys::fuzz_target;
 
 const FLOOD_LIMIT: usize = 256;
@@ -41,63 +40,6 @@ fn scales() -> SensorScales {
         gyro_range_rads: 245.0 * core::f32::consts::PI / 180.0,
         mag_range_ut: 400.0,
         sample_rate_hz: 100.0,
-    }
-}
-
-struct FixedImu(Rc<Cell<RawSample>>);
-
-impl Imu for FixedImu {
-    type Error = Infallible;
-    fn scales(&self) -> SensorScales {
-        scales()
-    }
-    fn read(&mut self) -> Result<RawSample, Infallible> {
-        Ok(self.0.get())
-    }
-}
-
-#[derive(Clone, Default)]
-struct Link {
-    to_device: Rc<RefCell<VecDeque<u8>>>,
-    from_device: Rc<RefCell<Vec<u8>>>,
-}
-
-impl embedded_io::ErrorType for Link {
-    type Error = Infallible;
-}
-
-impl embedded_io::Read for Link {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let mut queue = self.to_device.borrow_mut();
-        let count = buf.len().min(queue.len());
-        for (slot, byte) in buf.iter_mut().zip(queue.drain(..count)) {
-            *slot = byte;
-        }
-        Ok(count)
-    }
-}
-
-impl embedded_io::ReadReady for Link {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.to_device.borrow().is_empty())
-    }
-}
-
-impl embedded_io::Write for Link {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.from_device.borrow_mut().extend_from_slice(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-
-struct StepClock(Rc<Cell<u64>>);
-
-impl Clock for StepClock {
-    fn now_us(&mut self) -> u64 {
-        self.0.get()
     }
 }
 
@@ -138,7 +80,10 @@ impl Bench {
             },
         };
         let device = Device::new(
-            FixedImu(sample.clone()),
+            FixedImu {
+                sample: sample.clone(),
+                scales: scales(),
+            },
             link.clone(),
             store,
             StepClock(time.clone()),

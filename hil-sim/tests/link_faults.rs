@@ -143,7 +143,7 @@ fn a_board_of_another_major_answers_hello_itself_with_its_version() {
         .collect();
     assert!(
         matches!(&messages[0], DeviceMessage::Event(Event::Log(line))
-        if line.text.as_str() == "refused Hello: the host speaks imucal protocol 1.0, this board speaks 3.0")
+        if line.text.as_str() == "refused Hello: the host speaks imucal protocol 2.0, this board speaks 3.0")
     );
     assert_eq!(
         messages[1],

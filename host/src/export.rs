@@ -4,7 +4,7 @@
 //! Every export carries the model of `imucal_protocol::CalibrationSet`, per sensor:
 //!
 //! ```text
-//! ΔT = T − T_ref                (T_ref = 0 without a bias temperature term)
+//! ΔT = clamp(T − T_ref, ±125 °C) (T_ref = the sensor's t_ref_c; the protocol's one ΔT rule)
 //! u  = x − (b + c1·ΔT + c2·ΔT² + c3·ΔT³)
 //! u' = u + q∘u² + k∘u³
 //! y  = (1 + s·ΔT)∘(A·u')        and for the gyroscope  y −= K·f  (f = calibrated accelerometer)
@@ -14,12 +14,22 @@
 //! board stores, printed with the shortest text that reads back to the same `f32`, so an export
 //! applies exactly what `imucal flash` would write. The generated code contains only the terms
 //! the file has, so a plain calibration yields a plain `y = A·(x − b)`.
+//!
+//! A set is exported only after `imucal_protocol::validate_for_ranges` accepts it, so no export
+//! exists of a set an imucal board would refuse (singular `A`, a gain in the wrong units, an
+//! absurd `T_ref`, NaN). The target board is not known here, so the offset and term bounds use
+//! the widest ranges imucal supports ([`FullScale::WIDEST_SUPPORTED`]). The reference for what
+//! the generated code computes is `imucal_protocol::model::apply`.
 
-use imucal_protocol::{CalibrationSet, SensorCalibration};
+use imucal_protocol::{
+    validate_for_ranges, CalibrationSet, FullScale, InvalidParamsReason, SensorCalibration,
+    MAX_DELTA_T_C,
+};
 use serde_json::{json, Value};
 
-/// Version of the export JSON schema ([`ExportFormat::Json`]); raised on any incompatible change.
-pub const EXPORT_SCHEMA_VERSION: u32 = 1;
+/// Version of the export JSON schema ([`ExportFormat::Json`]); raised on any incompatible change
+/// (2: `t_ref_c` per sensor, ΔT clamped).
+pub const EXPORT_SCHEMA_VERSION: u32 = 2;
 
 /// Name of the export JSON schema, written in its `schema` field.
 pub const EXPORT_SCHEMA_NAME: &str = "imucal-calibration-export";
@@ -52,62 +62,21 @@ fn uses_temperature(cal: &SensorCalibration) -> bool {
 }
 
 /// The export of `set` in `format`; `source` names the parameter file in the generated comment.
-pub fn export(set: &CalibrationSet, format: ExportFormat, source: &str) -> String {
-    match format {
+/// A set that fails validation is refused with the reason (which names the field and bound).
+pub fn export(
+    set: &CalibrationSet,
+    format: ExportFormat,
+    source: &str,
+) -> Result<String, InvalidParamsReason> {
+    validate_for_ranges(set, &FullScale::WIDEST_SUPPORTED)?;
+    Ok(match format {
         ExportFormat::CHeader => c_header(set, source),
         ExportFormat::Rust => rust_module(set, source),
         ExportFormat::Json => {
             // A tree of numbers and strings always serialises.
             serde_json::to_string_pretty(&json_document(set, source)).unwrap_or_default() + "\n"
         }
-    }
-}
-
-/// Applies one sensor's calibration (every term present) to a reading `x` at `temp_c`, in f64:
-/// the host's reference for what the exported code computes.
-pub fn apply_sensor(cal: &SensorCalibration, x: [f64; 3], temp_c: f64) -> [f64; 3] {
-    let t_ref = cal.bias_temp.map_or(0.0, |t| f64::from(t.t_ref_c));
-    let dt = temp_c - t_ref;
-    let mut u = [0.0; 3];
-    for (axis, value) in u.iter_mut().enumerate() {
-        let mut offset = f64::from(cal.b[axis]);
-        if let Some(t) = &cal.bias_temp {
-            let [c1, c2, c3] = [0, 1, 2].map(|k| f64::from(t.coeffs[k][axis]));
-            offset += dt * (c1 + dt * (c2 + dt * c3));
-        }
-        let mut v = x[axis] - offset;
-        if let Some(n) = &cal.nonlinearity {
-            v += v * v * (f64::from(n.quadratic[axis]) + f64::from(n.cubic[axis]) * v);
-        }
-        *value = v;
-    }
-    let mut y = [0.0; 3];
-    for (row, out) in y.iter_mut().enumerate() {
-        *out = (0..3).map(|c| f64::from(cal.a[row][c]) * u[c]).sum();
-        if let Some(s) = &cal.scale_temp {
-            *out *= 1.0 + f64::from(s[row]) * dt;
-        }
-    }
-    y
-}
-
-/// Applies the whole set to one sample: calibrated accelerometer, gyroscope (with the
-/// g-sensitivity correction from the calibrated accelerometer) and magnetometer.
-pub fn apply_set(
-    set: &CalibrationSet,
-    accel: [f64; 3],
-    gyro: [f64; 3],
-    mag: [f64; 3],
-    temp_c: f64,
-) -> [[f64; 3]; 3] {
-    let f = apply_sensor(&set.accel, accel, temp_c);
-    let mut w = apply_sensor(&set.gyro, gyro, temp_c);
-    if let Some(k) = &set.gyro_g_sensitivity {
-        for (row, out) in w.iter_mut().enumerate() {
-            *out -= (0..3).map(|c| f64::from(k[row][c]) * f[c]).sum::<f64>();
-        }
-    }
-    [f, w, apply_sensor(&set.mag, mag, temp_c)]
+    })
 }
 
 /// Shortest decimal text that reads back to the same `f32` (always with `.` or `e`).
@@ -143,7 +112,7 @@ fn c_mat(m: &[[f32; 3]; 3]) -> String {
 fn model_comment(prefix: &str) -> String {
     [
         "Model per sensor (as the imucal firmware applies it):",
-        "  dT = T - T_ref                      (T_ref = 0 without a bias temperature term)",
+        "  dT = clamp(T - T_ref, -125, 125)    (degC; T_ref = the sensor's t_ref_c)",
         "  u  = x - (b + c1*dT + c2*dT^2 + c3*dT^3)",
         "  u' = u + q.*u^2 + k.*u^3            (element-wise)",
         "  y  = (1 + s*dT) .* (A * u')         gyroscope: y -= K * f (f = calibrated accel)",
@@ -181,10 +150,16 @@ fn c_header(set: &CalibrationSet, source: &str) -> String {
             "static const float imucal_{name}_b[3] = {};\n",
             c_vec(&cal.b)
         ));
+        // Only a sensor with a temperature term reads T_ref; an unused static would warn.
+        if uses_temperature(cal) {
+            out.push_str(&format!(
+                "static const float imucal_{name}_t_ref_c = {};\n",
+                c_float(cal.t_ref_c)
+            ));
+        }
         if let Some(t) = &cal.bias_temp {
             out.push_str(&format!(
-                "static const float imucal_{name}_t_ref_c = {};\n/* bias_temp[k][axis]: degree k+1 offset coefficient per degC^(k+1) */\nstatic const float imucal_{name}_bias_temp[3][3] = {};\n",
-                c_float(t.t_ref_c),
+                "/* bias_temp[k][axis]: degree k+1 offset coefficient per degC^(k+1) */\nstatic const float imucal_{name}_bias_temp[3][3] = {};\n",
                 c_mat(&t.coeffs)
             ));
         }
@@ -227,12 +202,10 @@ fn c_apply(set: &CalibrationSet, name: &str, cal: &SensorCalibration) -> String 
     params.push("float y[3]".to_string());
     let mut body = String::new();
     if temperature {
-        let t_ref = if cal.bias_temp.is_some() {
-            format!("imucal_{name}_t_ref_c")
-        } else {
-            "0.0f".to_string()
-        };
-        body.push_str(&format!("    const float dt = temp_c - {t_ref};\n"));
+        let limit = c_float(MAX_DELTA_T_C);
+        body.push_str(&format!(
+            "    float dt = temp_c - imucal_{name}_t_ref_c;\n    if (dt > {limit}) dt = {limit};\n    if (dt < -{limit}) dt = -{limit};\n"
+        ));
     }
     body.push_str("    float u[3];\n    for (int i = 0; i < 3; i++) {\n");
     body.push_str(&format!("        u[i] = x[i] - imucal_{name}_b[i];\n"));
@@ -297,14 +270,14 @@ fn rust_module(set: &CalibrationSet, source: &str) -> String {
         let cal = sensor(set, name);
         let upper = name.to_uppercase();
         out.push_str(&format!(
-            "\n/// {name}: correction matrix `A` (row-major); output in {unit}.\npub const {upper}_A: [[f32; 3]; 3] = {};\n/// {name}: offset `b`, in the input unit.\npub const {upper}_B: [f32; 3] = {};\n",
+            "\n/// {name}: correction matrix `A` (row-major); output in {unit}.\npub const {upper}_A: [[f32; 3]; 3] = {};\n/// {name}: offset `b`, in the input unit.\npub const {upper}_B: [f32; 3] = {};\n/// {name}: reference temperature of the temperature terms, °C.\npub const {upper}_T_REF_C: f32 = {};\n",
             rust_mat(&cal.a),
-            rust_vec(&cal.b)
+            rust_vec(&cal.b),
+            float_text(cal.t_ref_c)
         ));
         if let Some(t) = &cal.bias_temp {
             out.push_str(&format!(
-                "/// {name}: reference temperature of the offset polynomial, °C.\npub const {upper}_T_REF_C: f32 = {};\n/// {name}: offset coefficients `[degree − 1][axis]`, per °C^degree.\npub const {upper}_BIAS_TEMP: [[f32; 3]; 3] = {};\n",
-                float_text(t.t_ref_c),
+                "/// {name}: offset coefficients `[degree − 1][axis]`, per °C^degree.\npub const {upper}_BIAS_TEMP: [[f32; 3]; 3] = {};\n",
                 rust_mat(&t.coeffs)
             ));
         }
@@ -347,12 +320,10 @@ fn rust_apply(set: &CalibrationSet, name: &str, cal: &SensorCalibration) -> Stri
     }
     let mut body = String::new();
     if temperature {
-        let t_ref = if cal.bias_temp.is_some() {
-            format!("{upper}_T_REF_C")
-        } else {
-            "0.0".to_string()
-        };
-        body.push_str(&format!("    let dt = temp_c - {t_ref};\n"));
+        let limit = float_text(MAX_DELTA_T_C);
+        body.push_str(&format!(
+            "    let dt = (temp_c - {upper}_T_REF_C).clamp(-{limit}, {limit});\n"
+        ));
     }
     body.push_str("    let mut u = [0.0f32; 3];\n    for i in 0..3 {\n");
     body.push_str(&format!("        u[i] = x[i] - {upper}_B[i];\n"));
@@ -392,9 +363,10 @@ fn json_sensor(cal: &SensorCalibration, unit: &str) -> Value {
         "unit": unit,
         "A": cal.a,
         "b": cal.b,
+        "t_ref_c": cal.t_ref_c,
     });
     if let Some(t) = &cal.bias_temp {
-        object["bias_temp"] = json!({ "t_ref_c": t.t_ref_c, "coeffs": t.coeffs });
+        object["bias_temp"] = json!({ "coeffs": t.coeffs });
     }
     if let Some(s) = &cal.scale_temp {
         object["scale_temp"] = json!(s);
@@ -413,7 +385,7 @@ pub fn json_document(set: &CalibrationSet, source: &str) -> Value {
         "source": source,
         "params_format": set.format_version,
         "created_unix_s": set.created_unix_s,
-        "model": "y = (1 + s*dT) .* (A * u'), u' = u + q.*u^2 + k.*u^3, u = x - (b + c1*dT + c2*dT^2 + c3*dT^3), dT = T - T_ref; gyroscope y -= K * f",
+        "model": "y = (1 + s*dT) .* (A * u'), u' = u + q.*u^2 + k.*u^3, u = x - (b + c1*dT + c2*dT^2 + c3*dT^3), dT = clamp(T - t_ref_c, -125, 125); gyroscope y -= K * f",
         "matrix_order": "row-major",
         "reference": {
             "gravity_mps2": set.reference.gravity_mps2,

@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 use device_fake::{fake_sample, scales, FakeConfig, FakeDevice};
 use imucal::device::{open_port, ClientOptions, DeviceClient, DeviceError, PoseRequest};
 use imucal_protocol::{
-    CalibrationSet, ErrorCode, InvalidParamsReason, ProtocolVersion, StillThresholds, StreamKind,
+    CalibrationSet, ErrorCode, InvalidParamsReason, ProtocolVersion, SensorKind, StillThresholds,
+    StreamKind,
 };
 
 /// Short timeouts: the fake answers within a few ms, so 200 ms only expires on purpose.
@@ -53,7 +54,7 @@ fn handshake_keeps_the_welcome_with_device_id_and_scales() {
 #[test]
 fn a_newer_board_protocol_is_refused_naming_both_versions_and_what_to_update() {
     let fake = FakeDevice::start(FakeConfig {
-        protocol: Some(ProtocolVersion { major: 2, minor: 3 }),
+        protocol: Some(ProtocolVersion { major: 3, minor: 3 }),
         ..FakeConfig::default()
     });
     let message = connect(&fake)
@@ -61,8 +62,8 @@ fn a_newer_board_protocol_is_refused_naming_both_versions_and_what_to_update() {
         .map(|e| e.to_string())
         .unwrap_or_default();
     assert!(message.contains(&fake.path), "{message}");
-    assert!(message.contains("protocol 2.3"), "{message}");
-    assert!(message.contains("speaks 1.0"), "{message}");
+    assert!(message.contains("protocol 3.3"), "{message}");
+    assert!(message.contains("speaks 2.0"), "{message}");
     assert!(message.contains("update imucal"), "{message}");
 }
 
@@ -192,7 +193,7 @@ fn a_lost_commit_reply_is_resolved_by_the_active_crc() {
 fn a_refused_parameter_set_is_reported_with_the_boards_reason() {
     let fake = FakeDevice::start(FakeConfig {
         reject_params: Some(ErrorCode::InvalidParams(
-            InvalidParamsReason::IllConditioned,
+            InvalidParamsReason::IllConditioned(SensorKind::Accel),
         )),
         ..FakeConfig::default()
     });
@@ -203,16 +204,34 @@ fn a_refused_parameter_set_is_reported_with_the_boards_reason() {
     assert_eq!(
         error.device_code(),
         Some(ErrorCode::InvalidParams(
-            InvalidParamsReason::IllConditioned
+            InvalidParamsReason::IllConditioned(SensorKind::Accel)
         ))
     );
     let message = error.to_string();
     assert!(message.contains("refused WriteParams"), "{message}");
-    assert!(
-        message.contains(InvalidParamsReason::IllConditioned.describe()),
-        "{message}"
-    );
+    assert!(message.contains("accel.A is singular"), "{message}");
     assert!(!fake.state().requests.contains(&"CommitParams"));
+}
+
+#[test]
+fn a_set_the_board_would_refuse_is_not_sent_at_all() {
+    // A fit in the wrong unit (gain 9.8) and an absurd reference temperature: the host applies
+    // the board's own validation first and names the field.
+    let fake = FakeDevice::start(FakeConfig::default());
+    let mut client = connect(&fake).expect("connect");
+    let mut wrong_unit = calibrated_set();
+    wrong_unit.gyro.a = [[9.8, 0.0, 0.0], [0.0, 9.8, 0.0], [0.0, 0.0, 9.8]];
+    let mut absurd_t_ref = calibrated_set();
+    absurd_t_ref.accel.t_ref_c = 1e30;
+    for (set, field) in [(wrong_unit, "gyro.A"), (absurd_t_ref, "accel.t_ref_c")] {
+        let error = client.write_params_verified(&set).expect_err("refused");
+        let message = error.to_string();
+        assert!(
+            message.contains(field) && message.contains("not writing"),
+            "{message}"
+        );
+    }
+    assert!(!fake.state().requests.contains(&"WriteParams"));
 }
 
 #[test]

@@ -1,25 +1,62 @@
-//! `imucal export`: the C header and the Rust module compile, and applied to readings they give
-//! what the host computes within f32 precision; the JSON carries its schema and the values.
+//! One calibration model, four implementations: the firmware's folded `f32` path
+//! (`imucal_firmware::apply::Correction`), the protocol's `f64` reference
+//! (`imucal_protocol::model::apply`), and the C header and Rust module of `imucal export`,
+//! compiled here with gcc and rustc. The same sets (plain, every extended term, scale
+//! temperature alone) and the same raw samples (rails included, temperatures far beyond the
+//! ±125 °C ΔT clamp) go through all four, which must agree within f32 precision. Export also
+//! refuses what the board refuses, and its JSON carries its schema and exact values.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use imucal::export::{apply_set, export, ExportFormat, EXPORT_SCHEMA_NAME, EXPORT_SCHEMA_VERSION};
-use imucal_protocol::{BiasTemperature, CalibrationSet, Nonlinearity, SensorCalibration};
+use imucal::export::{export, ExportFormat, EXPORT_SCHEMA_NAME, EXPORT_SCHEMA_VERSION};
+use imucal_firmware::apply::Correction;
+use imucal_protocol::{
+    model, BiasTemperature, CalibrationSet, InvalidParamsReason, NominalSample, Nonlinearity,
+    ParamField, RawSample, SensorCalibration, SensorKind, SensorScales,
+};
 
-/// A set using every term of the model, with values of realistic size.
-fn full_set() -> CalibrationSet {
+/// An LSM9DS1-like board: ±2 g, ±250 °/s, ±4 gauss, 16 counts per °C about 25 °C.
+const SCALES: SensorScales = SensorScales {
+    accel_mps2_per_count: 0.000_598_5,
+    gyro_rads_per_count: 0.000_152_7,
+    mag_ut_per_count: 0.014,
+    temp_c_per_count: 1.0 / 16.0,
+    temp_offset_c: 25.0,
+    accel_range_mps2: 19.6,
+    gyro_range_rads: 4.36,
+    mag_range_ut: 400.0,
+    sample_rate_hz: 100.0,
+};
+
+/// A set with `A` and `b` only.
+fn plain_set() -> CalibrationSet {
     let mut set = CalibrationSet::identity();
     set.created_unix_s = 1_763_700_000;
+    set.accel.a = [
+        [1.0123, 0.0021, -0.0034],
+        [0.0, 0.9876, 0.0045],
+        [0.0, 0.0, 1.0045],
+    ];
+    set.accel.b = [0.123, -0.0456, 0.0789];
+    set.gyro.a = [
+        [1.01, -0.002, 0.003],
+        [0.001, 0.995, -0.004],
+        [0.002, 0.001, 1.003],
+    ];
+    set.gyro.b = [0.0123, -0.0071, 0.0034];
+    set.mag.a = [[0.97, 0.012, -0.008], [0.0, 1.031, 0.02], [0.0, 0.0, 0.994]];
+    set.mag.b = [12.5, -30.25, 7.125];
+    set.reference.field_ut = 48.5;
+    set
+}
+
+/// Every term of the model, with values of a poor but real MEMS part and distinct `T_ref`s.
+fn full_set() -> CalibrationSet {
+    let mut set = plain_set();
     set.accel = SensorCalibration {
-        a: [
-            [1.0123, 0.0021, -0.0034],
-            [0.0, 0.9876, 0.0045],
-            [0.0, 0.0, 1.0045],
-        ],
-        b: [0.123, -0.0456, 0.0789],
+        t_ref_c: 25.0,
         bias_temp: Some(BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[1.2e-3, -8e-4, 5e-4], [2e-5, 0.0, -1e-5], [0.0, 3e-7, 0.0]],
         }),
         scale_temp: Some([1e-4, -5e-5, 2e-5]),
@@ -27,47 +64,109 @@ fn full_set() -> CalibrationSet {
             quadratic: [1e-4, -2e-4, 5e-5],
             cubic: [1e-6, 0.0, -2e-6],
         }),
+        ..set.accel
     };
     set.gyro = SensorCalibration {
-        a: [
-            [1.01, -0.002, 0.003],
-            [0.001, 0.995, -0.004],
-            [0.002, 0.001, 1.003],
-        ],
-        b: [0.0123, -0.0071, 0.0034],
-        bias_temp: None,
+        t_ref_c: 31.5,
+        bias_temp: Some(BiasTemperature {
+            coeffs: [[1e-4, -2e-4, 3e-5], [0.0; 3], [0.0; 3]],
+        }),
         scale_temp: Some([2e-4, 1e-4, -1e-4]),
-        nonlinearity: None,
+        ..set.gyro
     };
-    set.mag = SensorCalibration {
-        a: [[0.97, 0.012, -0.008], [0.0, 1.031, 0.02], [0.0, 0.0, 0.994]],
-        b: [12.5, -30.25, 7.125],
-        ..SensorCalibration::identity()
-    };
+    set.mag.t_ref_c = 18.0;
+    set.mag.scale_temp = Some([0.0, 0.0, 3e-4]);
     set.gyro_g_sensitivity = Some([[1e-4, 0.0, 2e-5], [0.0, -1e-4, 0.0], [3e-5, 0.0, 5e-5]]);
-    set.reference.field_ut = 48.5;
     set
 }
 
-/// One sample: accelerometer m/s², gyroscope rad/s, magnetometer µT, temperature °C.
-type Reading = ([f64; 3], [f64; 3], [f64; 3], f64);
+/// Scale temperature alone, about its own reference (format 1 took 0 °C here).
+fn scale_temperature_only_set() -> CalibrationSet {
+    let mut set = plain_set();
+    set.accel.t_ref_c = 25.0;
+    set.accel.scale_temp = Some([1e-4; 3]);
+    set
+}
 
-/// Readings spread over the sensors' ranges.
-const READINGS: [Reading; 3] = [
-    (
-        [9.81, 0.12, -0.3],
-        [0.01, -0.02, 0.5],
-        [20.0, -5.0, 40.0],
-        31.5,
-    ),
-    (
-        [-0.2, -9.7, 0.4],
-        [-1.5, 0.3, 0.0],
-        [-35.0, 12.0, -8.0],
-        18.0,
-    ),
-    ([3.0, 4.0, 8.1], [0.0, 0.0, 0.0], [0.5, 45.0, 3.0], 25.0),
-];
+/// Raw samples over the count range, at −40, 10, 25, 40 and 85 °C and on both thermometer
+/// rails (−2023 °C and 2073 °C, far beyond the clamp).
+fn samples() -> Vec<RawSample> {
+    let temps = [-1040i16, -240, 0, 240, 960, i16::MIN, i16::MAX];
+    let vectors = [
+        [16_384i16, 200, -300],
+        [-150, -16_200, 700],
+        [5_000, 6_500, 13_000],
+        [i16::MAX, i16::MIN, 0],
+    ];
+    let mut out = Vec::new();
+    for (i, temp) in temps.into_iter().enumerate() {
+        for (j, v) in vectors.iter().enumerate() {
+            let k = (i + j) % vectors.len();
+            out.push(RawSample {
+                accel: *v,
+                gyro: vectors[k].map(|c| c / 8),
+                mag: vectors[(k + 1) % vectors.len()].map(|c| c / 2),
+                temp,
+            });
+        }
+    }
+    out
+}
+
+/// A sample in nominal units as `f32`, as a board without imucal firmware would hold it.
+fn nominal_f32(raw: &RawSample) -> [f32; 10] {
+    let s = SCALES;
+    let scale = |c: [i16; 3], per: f32| c.map(|v| f32::from(v) * per);
+    let [a, g, m] = [
+        scale(raw.accel, s.accel_mps2_per_count),
+        scale(raw.gyro, s.gyro_rads_per_count),
+        scale(raw.mag, s.mag_ut_per_count),
+    ];
+    let t = s.temp_offset_c + s.temp_c_per_count * f32::from(raw.temp);
+    [a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2], t]
+}
+
+/// The protocol's f64 reference on the same f32 nominal values the exports receive.
+fn reference(set: &CalibrationSet, raw: &RawSample) -> [f64; 9] {
+    let x = nominal_f32(raw).map(f64::from);
+    let out = model::apply(
+        set,
+        &NominalSample {
+            accel: [x[0], x[1], x[2]],
+            gyro: [x[3], x[4], x[5]],
+            mag: [x[6], x[7], x[8]],
+            temp_c: x[9],
+        },
+    );
+    let [a, g, m] = [out.accel, out.gyro, out.mag];
+    [a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2]]
+}
+
+fn firmware(set: &CalibrationSet, raw: &RawSample) -> [f64; 9] {
+    let out = Correction::new(set, &SCALES)
+        .expect("the test sets are valid")
+        .apply(raw);
+    let [a, g, m] = [out.accel, out.gyro, out.mag];
+    [a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2]].map(f64::from)
+}
+
+/// Each output passes through about twenty f32 roundings (ε = 6e-8) of operands up to about
+/// twice the sensor's full scale, so 1e-5 of full scale bounds f32 evaluation in any order and
+/// nothing looser: a missing term or a different ΔT rule moves outputs by 1e-3 and more.
+fn assert_agree(what: &str, set_name: &str, got: &[f64], truth: &[f64; 9], sample: usize) {
+    let full_scale = [
+        SCALES.accel_range_mps2,
+        SCALES.gyro_range_rads,
+        SCALES.mag_range_ut,
+    ];
+    for (i, (got, want)) in got.iter().zip(truth).enumerate() {
+        let tolerance = 1e-5 * f64::from(full_scale[i / 3]);
+        assert!(
+            (got - want).abs() <= tolerance,
+            "{set_name}, sample {sample}, output {i}: {what} gives {got}, the reference {want}"
+        );
+    }
+}
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("imucal-export-{}-{name}", std::process::id()));
@@ -86,45 +185,46 @@ fn run(command: &mut Command) -> String {
     String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
-/// Compares printed outputs (9 numbers per reading) with the host's f64 apply. Each output
-/// passes through about twenty f32 roundings (ε = 6e-8 relative) on operands at most ~50 in
-/// size, so 2e-5 absolute plus 1e-6 relative bounds f32 evaluation and nothing looser.
-fn assert_matches_host(set: &CalibrationSet, printed: &str) {
-    let values: Vec<f64> = printed
-        .split_whitespace()
-        .map(|v| v.parse().expect("a number"))
-        .collect();
-    assert_eq!(values.len(), READINGS.len() * 9, "{printed}");
-    for (i, (a, g, m, t)) in READINGS.iter().enumerate() {
-        let host = apply_set(set, *a, *g, *m, *t);
-        for (j, expected) in host.iter().flatten().enumerate() {
-            let got = values[i * 9 + j];
-            assert!(
-                (got - expected).abs() <= 2e-5 + 1e-6 * expected.abs(),
-                "reading {i} output {j}: exported code gives {got}, host {expected}"
-            );
-        }
-    }
+fn has_temperature(cal: &SensorCalibration) -> bool {
+    cal.bias_temp.is_some() || cal.scale_temp.is_some()
 }
 
-#[test]
-fn c_header_compiles_warning_free_and_applies_like_the_host() {
-    let set = full_set();
-    let dir = scratch("c");
-    let header = export(&set, ExportFormat::CHeader, "params.json");
-    assert!(header.contains("#pragma once"));
-    assert!(header.contains("static const float imucal_accel_A[3][3]"));
-    assert!(header.contains("y = A * (x - b)"));
+/// The samples as rows of `{x0, …, x8, T}` literals, in C (`f` suffix) or Rust syntax.
+fn sample_rows(suffix: &str) -> String {
+    samples()
+        .iter()
+        .map(|raw| {
+            let values: Vec<String> = nominal_f32(raw)
+                .iter()
+                .map(|v| format!("{v:?}{suffix}"))
+                .collect();
+            values.join(", ")
+        })
+        .collect::<Vec<_>>()
+        .join(if suffix.is_empty() {
+            "],\n    ["
+        } else {
+            "},\n    {"
+        })
+}
+
+/// Compiles the C header of `set` with a driver that prints the nine outputs per sample.
+fn compiled_c(set: &CalibrationSet, dir: &Path) -> String {
+    let header = export(set, ExportFormat::CHeader, "params.json").expect("a valid set");
     std::fs::write(dir.join("imucal_calibration.h"), &header).unwrap();
-    let mut program =
-        String::from("#include <stdio.h>\n#include \"imucal_calibration.h\"\nint main(void) {\n");
-    for (a, g, m, t) in READINGS {
-        program.push_str(&format!(
-            "  {{ const float a[3] = {{{:?}f, {:?}f, {:?}f}}, g[3] = {{{:?}f, {:?}f, {:?}f}}, m[3] = {{{:?}f, {:?}f, {:?}f}};\n    float fa[3], fg[3], fm[3];\n    imucal_apply_accel(a, {t:?}f, fa);\n    imucal_apply_gyro(g, {t:?}f, fa, fg);\n    imucal_apply_mag(m, fm);\n    for (int i = 0; i < 3; i++) printf(\"%.9g %.9g %.9g\\n\", fa[i], fg[i], fm[i]);\n  }}\n",
-            a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2]
-        ));
-    }
-    program.push_str("  return 0;\n}\n");
+    let temp = |cal: &SensorCalibration| if has_temperature(cal) { "s[9], " } else { "" };
+    let g_sensitivity = if set.gyro_g_sensitivity.is_some() {
+        "fa, "
+    } else {
+        ""
+    };
+    let program = format!(
+        "#include <stdio.h>\n#include \"imucal_calibration.h\"\nstatic const float samples[][10] = {{\n    {{{rows}}},\n}};\nint main(void) {{\n  for (unsigned n = 0; n < sizeof samples / sizeof samples[0]; n++) {{\n    const float *s = samples[n];\n    float fa[3], fg[3], fm[3];\n    imucal_apply_accel(s, {ta}fa);\n    imucal_apply_gyro(s + 3, {tg}{g_sensitivity}fg);\n    imucal_apply_mag(s + 6, {tm}fm);\n    printf(\"%.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g %.9g\\n\", fa[0], fa[1], fa[2], fg[0], fg[1], fg[2], fm[0], fm[1], fm[2]);\n  }}\n  return 0;\n}}\n",
+        rows = sample_rows("f"),
+        ta = temp(&set.accel),
+        tg = temp(&set.gyro),
+        tm = temp(&set.mag),
+    );
     std::fs::write(dir.join("main.c"), program).unwrap();
     let strict = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"];
     // Included twice: `#pragma once` must make the second inclusion harmless.
@@ -141,79 +241,165 @@ fn c_header_compiles_warning_free_and_applies_like_the_host() {
         .args(strict)
         .arg("-O2")
         .arg("-o")
-        .arg(dir.join("apply"))
+        .arg(dir.join("apply_c"))
         .arg(dir.join("main.c")));
-    let printed = run(&mut Command::new(dir.join("apply")));
-    // The C program prints per axis (accel, gyro, mag); reorder to per sensor.
-    let rows: Vec<Vec<&str>> = printed
-        .lines()
-        .map(|l| l.split_whitespace().collect())
-        .collect();
-    let mut per_sensor = Vec::new();
-    for reading in rows.chunks(3) {
-        for sensor in 0..3 {
-            for axis in reading {
-                per_sensor.push(axis[sensor]);
-            }
-        }
-    }
-    assert_matches_host(&set, &per_sensor.join(" "));
-    let _ = std::fs::remove_dir_all(dir);
+    run(&mut Command::new(dir.join("apply_c")))
 }
 
-#[test]
-fn rust_module_compiles_without_warnings_and_applies_like_the_host() {
-    let set = full_set();
-    let dir = scratch("rust");
-    let module = export(&set, ExportFormat::Rust, "params.json");
-    assert!(module.contains("pub const ACCEL_A: [[f32; 3]; 3]"));
+/// Compiles the Rust module of `set` (alone as a library with `-D warnings`, then with a
+/// driver) and returns what the driver prints: nine outputs per sample.
+fn compiled_rust(set: &CalibrationSet, dir: &Path) -> String {
+    let module = export(set, ExportFormat::Rust, "params.json").expect("a valid set");
     std::fs::write(dir.join("imucal_calibration.rs"), &module).unwrap();
-    let mut main = String::from("#[allow(dead_code)] // the constants not read here\nmod imucal_calibration { include!(\"imucal_calibration.rs\"); }\nuse imucal_calibration::*;\nfn main() {\n");
-    for (a, g, m, t) in READINGS {
-        main.push_str(&format!(
-            "    let fa = apply_accel([{:?}, {:?}, {:?}], {t:?});\n    let fg = apply_gyro([{:?}, {:?}, {:?}], {t:?}, fa);\n    let fm = apply_mag([{:?}, {:?}, {:?}]);\n    for v in fa.iter().chain(&fg).chain(&fm) {{ print!(\"{{v:e}} \"); }}\n",
-            a[0], a[1], a[2], g[0], g[1], g[2], m[0], m[1], m[2]
-        ));
-    }
-    main.push_str("}\n");
+    let temp = |cal: &SensorCalibration| if has_temperature(cal) { ", s[9]" } else { "" };
+    let g_sensitivity = if set.gyro_g_sensitivity.is_some() {
+        ", fa"
+    } else {
+        ""
+    };
+    let main = format!(
+        "#[allow(dead_code)] // the constants not read here\nmod imucal_calibration {{ include!(\"imucal_calibration.rs\"); }}\nuse imucal_calibration::*;\nconst SAMPLES: &[[f32; 10]] = &[\n    [{rows}],\n];\nfn main() {{\n    for s in SAMPLES {{\n        let fa = apply_accel([s[0], s[1], s[2]]{ta});\n        let fg = apply_gyro([s[3], s[4], s[5]]{tg}{g_sensitivity});\n        let fm = apply_mag([s[6], s[7], s[8]]{tm});\n        for v in fa.iter().chain(&fg).chain(&fm) {{ print!(\"{{v:e}} \"); }}\n        println!();\n    }}\n}}\n",
+        rows = sample_rows(""),
+        ta = temp(&set.accel),
+        tg = temp(&set.gyro),
+        tm = temp(&set.mag),
+    );
     std::fs::write(dir.join("main.rs"), main).unwrap();
     let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".to_string());
     run(Command::new(&rustc)
-        .args([
-            "--edition",
-            "2021",
-            "--crate-type",
-            "lib",
-            "-D",
-            "warnings",
-            "--out-dir",
-        ])
-        .arg(&dir)
+        .args(["--edition", "2021", "--crate-type", "lib", "-D", "warnings"])
+        .arg("--out-dir")
+        .arg(dir)
         .arg(dir.join("imucal_calibration.rs")));
     run(Command::new(&rustc)
         .args(["--edition", "2021", "-D", "warnings", "-o"])
-        .arg(dir.join("apply"))
+        .arg(dir.join("apply_rs"))
         .arg(dir.join("main.rs")));
-    let printed = run(&mut Command::new(dir.join("apply")));
-    assert_matches_host(&set, &printed);
-    let _ = std::fs::remove_dir_all(dir);
+    run(&mut Command::new(dir.join("apply_rs")))
+}
+
+fn parse_rows(printed: &str) -> Vec<Vec<f64>> {
+    printed
+        .lines()
+        .map(|line| {
+            line.split_whitespace()
+                .map(|v| v.parse().expect("a number"))
+                .collect()
+        })
+        .collect()
+}
+
+fn gcc_available() -> bool {
+    Command::new("gcc").arg("--version").output().is_ok()
+}
+
+#[test]
+fn firmware_reference_and_compiled_c_and_rust_exports_agree_on_every_set() {
+    let sets = [
+        ("plain", plain_set()),
+        ("every extended term", full_set()),
+        ("scale temperature alone", scale_temperature_only_set()),
+    ];
+    let with_c = gcc_available();
+    if !with_c {
+        eprintln!("SKIPPED the C export: no `gcc` on PATH (install a C compiler to run it)");
+    }
+    let samples = samples();
+    for (name, set) in &sets {
+        let dir = scratch(&name.replace(' ', "-"));
+        let mut implementations = vec![(
+            "the firmware",
+            samples
+                .iter()
+                .map(|raw| firmware(set, raw).to_vec())
+                .collect(),
+        )];
+        implementations.push(("the Rust export", parse_rows(&compiled_rust(set, &dir))));
+        if with_c {
+            implementations.push(("the C export", parse_rows(&compiled_c(set, &dir))));
+        }
+        for (what, rows) in &implementations {
+            assert_eq!(rows.len(), samples.len(), "{what} printed {rows:?}");
+            for (n, (row, raw)) in rows.iter().zip(&samples).enumerate() {
+                assert_eq!(row.len(), 9, "{what}: {row:?}");
+                assert_agree(what, name, row, &reference(set, raw), n);
+            }
+        }
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+#[test]
+fn the_cross_check_tolerance_detects_a_missing_clamp() {
+    // Guards the test above: without the clamp the full set's output at the rail differs from
+    // the reference by far more than the tolerance.
+    let set = full_set();
+    let hot = RawSample {
+        accel: [16_384, 0, 0],
+        temp: i16::MAX,
+        ..RawSample::default()
+    };
+    let x = nominal_f32(&hot).map(f64::from);
+    let dt = x[9] - f64::from(set.accel.t_ref_c);
+    let unclamped = (1.0 + 1e-4 * dt) * f64::from(set.accel.a[0][0]) * x[0];
+    let clamped = reference(&set, &hot)[0];
+    assert!((unclamped - clamped).abs() > 1e-5 * 19.6 * 100.0);
+}
+
+/// Makes a valid set invalid.
+type Corruption = fn(&mut CalibrationSet);
+
+#[test]
+fn export_refuses_what_the_board_would_refuse_naming_the_field() {
+    let cases: [(Corruption, InvalidParamsReason); 4] = [
+        (
+            |s| s.accel.a = [[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            InvalidParamsReason::IllConditioned(SensorKind::Accel),
+        ),
+        (
+            |s| s.gyro.a = [[9.8, 0.0, 0.0], [0.0, 9.8, 0.0], [0.0, 0.0, 9.8]],
+            InvalidParamsReason::GainOutOfRange(SensorKind::Gyro),
+        ),
+        (
+            |s| s.mag.t_ref_c = 1e30,
+            InvalidParamsReason::ReferenceTemperatureOutOfRange(SensorKind::Mag),
+        ),
+        (
+            |s| s.accel.b[1] = f32::NAN,
+            InvalidParamsReason::NonFinite(ParamField::Offset(SensorKind::Accel)),
+        ),
+    ];
+    for (corrupt, reason) in cases {
+        let mut set = plain_set();
+        corrupt(&mut set);
+        for format in [
+            ExportFormat::CHeader,
+            ExportFormat::Rust,
+            ExportFormat::Json,
+        ] {
+            assert_eq!(export(&set, format, "p.json"), Err(reason));
+        }
+    }
+    let sentence = InvalidParamsReason::ReferenceTemperatureOutOfRange(SensorKind::Mag).to_string();
+    assert!(sentence.contains("mag.t_ref_c"), "{sentence}");
 }
 
 #[test]
 fn plain_calibration_exports_only_a_and_b_and_a_temperature_free_apply() {
     let mut set = CalibrationSet::identity();
     set.accel.b = [0.1, 0.2, 0.3];
-    let header = export(&set, ExportFormat::CHeader, "p.json");
+    let header = export(&set, ExportFormat::CHeader, "p.json").unwrap();
     assert!(!header.contains("bias_temp") && !header.contains("scale_temp"));
     assert!(header.contains("imucal_apply_accel(const float x[3], float y[3])"));
-    let module = export(&set, ExportFormat::Rust, "p.json");
+    assert!(header.contains("y = A * (x - b)"));
+    let module = export(&set, ExportFormat::Rust, "p.json").unwrap();
     assert!(module.contains("pub fn apply_accel(x: [f32; 3]) -> [f32; 3]"));
 }
 
 #[test]
 fn json_export_names_its_schema_and_keeps_every_f32_exactly() {
     let set = full_set();
-    let text = export(&set, ExportFormat::Json, "params.json");
+    let text = export(&set, ExportFormat::Json, "params.json").unwrap();
     let doc: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
     assert_eq!(doc["schema"], EXPORT_SCHEMA_NAME);
     assert_eq!(doc["schema_version"], EXPORT_SCHEMA_VERSION);
@@ -222,7 +408,8 @@ fn json_export_names_its_schema_and_keeps_every_f32_exactly() {
     assert_eq!(a01, set.accel.a[0][1]);
     let b2 = doc["mag"]["b"][2].as_f64().unwrap() as f32;
     assert_eq!(b2, set.mag.b[2]);
-    assert_eq!(doc["accel"]["bias_temp"]["t_ref_c"], 25.0);
+    assert_eq!(doc["gyro"]["t_ref_c"], 31.5);
+    assert_eq!(doc["mag"]["t_ref_c"], 18.0);
     assert!(doc["mag"].get("bias_temp").is_none());
     assert_eq!(
         doc["gyro_g_sensitivity"][2][0].as_f64().unwrap() as f32,

@@ -261,8 +261,8 @@ fn the_cli_exits_non_zero_naming_the_port_when_it_vanishes_mid_stream() {
 #[test]
 fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both_ends() {
     for (major, advice) in [
-        (2, "update imucal (the host tool)"),
-        (0, "update the board's firmware"),
+        (3, "update imucal (the host tool)"),
+        (1, "update the board's firmware"),
     ] {
         let faults = LinkFaults {
             protocol_major: Some(major),
@@ -274,7 +274,7 @@ fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both
         assert_eq!(
             error.to_string(),
             format!(
-                "{} speaks imucal protocol {major}.0, this imucal speaks 1.0; {advice}",
+                "{} speaks imucal protocol {major}.0, this imucal speaks 2.0; {advice}",
                 sim.port_path()
             )
         );
@@ -282,7 +282,7 @@ fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both
         assert_eq!(
             sim.take_notes(),
             vec![format!(
-                "refused Hello: the host speaks imucal protocol 1.0, this board speaks {major}.0"
+                "refused Hello: the host speaks imucal protocol 2.0, this board speaks {major}.0"
             )]
         );
     }
@@ -291,7 +291,7 @@ fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both
 #[test]
 fn the_cli_reports_a_protocol_mismatch_and_exits_non_zero() {
     let faults = LinkFaults {
-        protocol_major: Some(2),
+        protocol_major: Some(3),
         ..LinkFaults::default()
     };
     let sim = board_with(27, faults);
@@ -302,7 +302,7 @@ fn the_cli_reports_a_protocol_mismatch_and_exits_non_zero() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
     assert!(
-        stderr.contains("speaks imucal protocol 2.0, this imucal speaks 1.0"),
+        stderr.contains("speaks imucal protocol 3.0, this imucal speaks 2.0"),
         "stderr: {stderr}"
     );
 }

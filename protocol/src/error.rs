@@ -5,48 +5,7 @@ use core::fmt;
 
 use serde::{Deserialize, Serialize};
 
-/// Why a device rejected a calibration parameter set.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum InvalidParamsReason {
-    /// A value is NaN or infinite.
-    NonFinite,
-    /// A matrix `A` is singular or its condition number exceeds the device's bound.
-    IllConditioned,
-    /// An offset `b` lies outside the sensor's full-scale range.
-    OffsetOutOfRange,
-    /// A matrix `A` scales readings implausibly far from 1.
-    GainOutOfRange,
-    /// A temperature, non-linearity or g-sensitivity term is implausibly large.
-    ExtendedTermOutOfRange,
-    /// The set's `format_version` is not understood by this firmware.
-    UnsupportedFormat,
-}
-
-impl InvalidParamsReason {
-    /// A sentence for the user: what is wrong and what to try.
-    pub fn describe(&self) -> &'static str {
-        match self {
-            Self::NonFinite => {
-                "the parameter set contains NaN or infinite values; refit the calibration from new data"
-            }
-            Self::IllConditioned => {
-                "a calibration matrix is singular or badly conditioned; check the fit (enough distinct poses?) and refit"
-            }
-            Self::OffsetOutOfRange => {
-                "an offset lies outside the sensor's range; check the units of the data used for the fit"
-            }
-            Self::GainOutOfRange => {
-                "a calibration matrix scales readings implausibly; check the units and reference magnitudes of the fit"
-            }
-            Self::ExtendedTermOutOfRange => {
-                "a temperature, non-linearity or g-sensitivity term is implausibly large; refit without that effect"
-            }
-            Self::UnsupportedFormat => {
-                "the firmware does not understand this parameter format version; update the firmware or the host tool"
-            }
-        }
-    }
-}
+use crate::validate::InvalidParamsReason;
 
 /// An error reply from the device, in place of the expected response body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -143,6 +102,7 @@ impl fmt::Display for ErrorCode {
                 "CRC {received:#010x} sent, {computed:#010x} computed: {}",
                 self.describe()
             ),
+            Self::InvalidParams(reason) => write!(f, "parameter set refused: {reason}"),
             _ => f.write_str(self.describe()),
         }
     }

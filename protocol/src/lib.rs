@@ -31,6 +31,13 @@
 //! written in two steps: `WriteParams` stages a whole [`CalibrationSet`] with its CRC, and
 //! `CommitParams` with the same CRC makes it active.
 //!
+//! # Calibration model and validation
+//!
+//! [`CalibrationSet`] documents the model every implementation computes, including the one ΔT
+//! rule (clamp to ±[`MAX_DELTA_T_C`]); [`model::apply`] is its reference implementation and
+//! [`validate()`] the check that the firmware applies before storing a set and the host before
+//! flashing or exporting one, so both refuse the same sets with the same [`InvalidParamsReason`].
+//!
 //! # Versioning
 //!
 //! [`PROTOCOL_VERSION`] is `major.minor`. Messages and enum variants are only ever appended in a
@@ -64,15 +71,21 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+#[cfg(test)]
+extern crate std;
+
 pub mod error;
 pub mod feed;
 pub mod frame;
+pub mod math;
 pub mod messages;
+pub mod model;
 pub mod params;
 pub mod sample;
+pub mod validate;
 pub mod version;
 
-pub use error::{BatchError, EncodeError, ErrorCode, FrameError, InvalidParamsReason};
+pub use error::{BatchError, EncodeError, ErrorCode, FrameError};
 pub use feed::{FeedDecoder, FeedFrame, MAX_FEED_FRAME};
 pub use frame::{
     decode_payload, encode_frame, max_frame_len, FrameDecoder, Messages, CRC_BYTES, MAX_FRAME,
@@ -83,13 +96,18 @@ pub use messages::{
     ParamStatus, PoseStats, Request, RequestBody, Response, ResponseBody, StillThresholds,
     StreamKind, Welcome, LOG_TEXT_MAX,
 };
+pub use model::{apply, apply_sensor, delta_t_c, NominalSample};
 pub use params::{
     BiasTemperature, CalibrationSet, FitResiduals, Nonlinearity, ReferenceMagnitudes,
-    SensorCalibration, PARAMS_FORMAT_VERSION, PARAMS_MAX_ENCODED,
+    SensorCalibration, SensorKind, IDENTITY_T_REF_C, PARAMS_FORMAT_VERSION, PARAMS_MAX_ENCODED,
 };
 pub use sample::{
-    BatchHeader, CalibratedBatch, CalibratedSample, RawSample, SampleBatch, SensorScales,
-    SensorSet, CALIBRATED_BATCH_CAPACITY, PACKED_SAMPLE_BYTES, RAW_BATCH_CAPACITY,
+    Batch, BatchEntry, BatchHeader, CalibratedBatch, CalibratedSample, PackedSample, RawSample,
+    SampleBatch, SensorScales, SensorSet, TimedCalibrated, CALIBRATED_BATCH_CAPACITY,
+    PACKED_SAMPLE_BYTES, RAW_BATCH_CAPACITY,
+};
+pub use validate::{
+    validate, validate_for_ranges, FullScale, InvalidParamsReason, ParamField, MAX_DELTA_T_C,
 };
 pub use version::{
     check_hello, FirmwareVersion, ProtocolVersion, PROTOCOL_MAJOR, PROTOCOL_MINOR, PROTOCOL_VERSION,

@@ -3,22 +3,26 @@
 use serde::{Deserialize, Serialize};
 
 use crate::frame::crc32_of;
+#[cfg(doc)]
+use crate::validate::MAX_DELTA_T_C;
 
 /// Format version of [`CalibrationSet`] written by this crate.
-pub const PARAMS_FORMAT_VERSION: u16 = 1;
+///
+/// Version 2 moved the reference temperature out of the bias polynomial into every sensor
+/// ([`SensorCalibration::t_ref_c`]), so that a scale-temperature term has its own reference.
+pub const PARAMS_FORMAT_VERSION: u16 = 2;
 
 /// Upper bound of the postcard encoding of a [`CalibrationSet`], bytes.
 ///
-/// Per sensor: `a` 36, `b` 12, three option tags 3, bias temperature 40, scale temperature 12,
-/// non-linearity 24, in all 127; three sensors 381; plus `format_version` ≤ 3 (varint),
+/// Per sensor: `a` 36, `b` 12, `t_ref_c` 4, three option tags 3, bias temperature 36, scale
+/// temperature 12, non-linearity 24, in all 127; three sensors 381; plus `format_version` ≤ 3 (varint),
 /// `created_unix_s` ≤ 10 (varint), g-sensitivity 1 + 36, reference 8, residuals 12.
 pub const PARAMS_MAX_ENCODED: usize = 3 * 127 + 3 + 10 + 37 + 8 + 12;
 
-/// Temperature dependence of a sensor's offset: a cubic polynomial in `ΔT = T − t_ref_c`.
+/// Temperature dependence of a sensor's offset: a cubic polynomial in `ΔT`, taken about the
+/// sensor's [`SensorCalibration::t_ref_c`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BiasTemperature {
-    /// Reference temperature `T_ref`, °C.
-    pub t_ref_c: f32,
     /// `coeffs[k][axis]` is the degree-(k+1) coefficient for that raw axis, in the sensor's
     /// nominal unit per °C^(k+1); unused degrees are 0.
     pub coeffs: [[f32; 3]; 3],
@@ -33,6 +37,34 @@ pub struct Nonlinearity {
     pub cubic: [f32; 3],
 }
 
+/// Reference temperature of an identity calibration, °C (room temperature; no term uses it).
+pub const IDENTITY_T_REF_C: f32 = 25.0;
+
+/// Which of the three calibrated sensors a value belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum SensorKind {
+    /// Accelerometer (m/s²).
+    Accel,
+    /// Gyroscope (rad/s).
+    Gyro,
+    /// Magnetometer (µT).
+    Mag,
+}
+
+impl SensorKind {
+    /// The three sensors in the order a [`CalibrationSet`] holds them.
+    pub const ALL: [SensorKind; 3] = [SensorKind::Accel, SensorKind::Gyro, SensorKind::Mag];
+
+    /// The sensor's name as in parameter files: `accel`, `gyro`, `mag`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Accel => "accel",
+            Self::Gyro => "gyro",
+            Self::Mag => "mag",
+        }
+    }
+}
+
 /// Calibration of one three-axis sensor; see [`CalibrationSet`] for how the terms combine.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SensorCalibration {
@@ -40,6 +72,9 @@ pub struct SensorCalibration {
     pub a: [[f32; 3]; 3],
     /// Offset `b` in the sensor's nominal unit (raw frame).
     pub b: [f32; 3],
+    /// Reference temperature `T_ref` of every temperature term of this sensor, °C: the
+    /// temperature the fit was made around. Always present, also when no term uses it.
+    pub t_ref_c: f32,
     /// Temperature dependence of the offset, if modelled.
     pub bias_temp: Option<BiasTemperature>,
     /// Relative scale change per °C, per output axis (`s`), if modelled.
@@ -54,6 +89,7 @@ impl SensorCalibration {
         Self {
             a: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             b: [0.0; 3],
+            t_ref_c: IDENTITY_T_REF_C,
             bias_temp: None,
             scale_temp: None,
             nonlinearity: None,
@@ -87,7 +123,7 @@ pub struct FitResiduals {
 /// reading of one sensor, `T` the die temperature in °C. For each sensor:
 ///
 /// ```text
-/// ΔT    = T − T_ref
+/// ΔT    = clamp(T − T_ref, −MAX_DELTA_T_C, +MAX_DELTA_T_C)     (T_ref = the sensor's t_ref_c)
 /// b(T)  = b + c1·ΔT + c2·ΔT² + c3·ΔT³          (bias_temp, if present; ck = coeffs[k-1])
 /// u     = x − b(T)
 /// u'    = u + q∘u² + k∘u³                       (nonlinearity, element-wise, if present)
@@ -97,6 +133,12 @@ pub struct FitResiduals {
 /// ```
 ///
 /// Without extended terms this is `y = A·(x − b)`. `∘` is the element-wise product.
+///
+/// **The ΔT rule.** [`crate::validate`] checks every temperature term over
+/// `|ΔT| ≤` [`MAX_DELTA_T_C`] (125 °C, the whole −40…85 °C industrial range from any plausible
+/// reference), so every implementation clamps ΔT to that span: a thermometer reading on its
+/// rail then still gives the checked, finite correction of the span's edge. The firmware, the
+/// reference [`crate::model::apply`] and the generated C and Rust exports all apply this rule.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CalibrationSet {
     /// Layout version of this set ([`PARAMS_FORMAT_VERSION`] when written by this crate).
@@ -118,6 +160,15 @@ pub struct CalibrationSet {
 }
 
 impl CalibrationSet {
+    /// The calibration of one sensor.
+    pub fn sensor(&self, kind: SensorKind) -> &SensorCalibration {
+        match kind {
+            SensorKind::Accel => &self.accel,
+            SensorKind::Gyro => &self.gyro,
+            SensorKind::Mag => &self.mag,
+        }
+    }
+
     /// The set that leaves every reading unchanged (what `ResetParams` installs).
     pub const fn identity() -> Self {
         Self {

@@ -103,11 +103,25 @@ impl BatchHeader {
     }
 }
 
-/// One raw sample packed as fixed-width little-endian bytes (accel, gyro, mag, temp, offset).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-struct PackedSample([u8; PACKED_SAMPLE_BYTES]);
+/// How a sample type is stored in a [`Batch`]: a fixed wire layout that holds the sample and
+/// its time offset in ticks after the batch's start.
+pub trait BatchEntry: Sized {
+    /// The sample as producers and consumers see it.
+    type Sample;
+    /// The stored entry for `sample` taken `offset_ticks` after the batch's start.
+    fn pack(sample: &Self::Sample, offset_ticks: u16) -> Self;
+    /// The sample and its offset in ticks.
+    fn unpack(&self) -> (Self::Sample, u16);
+}
 
-impl PackedSample {
+/// One raw sample packed as fixed-width little-endian bytes (accel, gyro, mag, temp, offset),
+/// [`PACKED_SAMPLE_BYTES`] on the wire whatever the values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PackedSample([u8; PACKED_SAMPLE_BYTES]);
+
+impl BatchEntry for PackedSample {
+    type Sample = RawSample;
+
     fn pack(sample: &RawSample, offset_ticks: u16) -> Self {
         let mut bytes = [0u8; PACKED_SAMPLE_BYTES];
         let values = sample
@@ -141,14 +155,36 @@ impl PackedSample {
     }
 }
 
-/// A batch of raw samples, as streamed by `StartStream { kind: Raw, .. }`.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct SampleBatch {
-    header: BatchHeader,
-    samples: Vec<PackedSample, RAW_BATCH_CAPACITY>,
+/// One calibrated sample with its time offset in ticks (4 fixed bytes per value, varint offset).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TimedCalibrated(CalibratedSample, u16);
+
+impl BatchEntry for TimedCalibrated {
+    type Sample = CalibratedSample;
+
+    fn pack(sample: &CalibratedSample, offset_ticks: u16) -> Self {
+        Self(*sample, offset_ticks)
+    }
+
+    fn unpack(&self) -> (CalibratedSample, u16) {
+        (self.0, self.1)
+    }
 }
 
-impl SampleBatch {
+/// A batch of up to `N` samples sharing one [`BatchHeader`], each stored as an entry `E`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Batch<E, const N: usize> {
+    header: BatchHeader,
+    samples: Vec<E, N>,
+}
+
+/// A batch of raw samples, as streamed by `StartStream { kind: Raw, .. }`.
+pub type SampleBatch = Batch<PackedSample, RAW_BATCH_CAPACITY>;
+
+/// A batch of calibrated samples, as streamed by `StartStream { kind: Calibrated, .. }`.
+pub type CalibratedBatch = Batch<TimedCalibrated, CALIBRATED_BATCH_CAPACITY>;
+
+impl<E: BatchEntry, const N: usize> Batch<E, N> {
     /// An empty batch with the given timing.
     pub fn new(header: BatchHeader) -> Self {
         Self {
@@ -163,13 +199,13 @@ impl SampleBatch {
     }
 
     /// Appends a sample taken at `t_us` (device clock, µs).
-    pub fn push(&mut self, sample: &RawSample, t_us: u64) -> Result<(), BatchError> {
+    pub fn push(&mut self, sample: &E::Sample, t_us: u64) -> Result<(), BatchError> {
         if self.samples.is_full() {
             return Err(BatchError::Full);
         }
         let offset = self.header.offset_ticks(t_us)?;
         self.samples
-            .push(PackedSample::pack(sample, offset))
+            .push(E::pack(sample, offset))
             .map_err(|_| BatchError::Full)
     }
 
@@ -183,7 +219,7 @@ impl SampleBatch {
         self.samples.is_empty()
     }
 
-    /// Whether the batch holds [`RAW_BATCH_CAPACITY`] samples.
+    /// Whether the batch holds its capacity `N` of samples.
     pub fn is_full(&self) -> bool {
         self.samples.is_full()
     }
@@ -195,17 +231,17 @@ impl SampleBatch {
     }
 
     /// The sample at `index` and its time in µs.
-    pub fn get(&self, index: usize) -> Option<(RawSample, u64)> {
-        self.samples.get(index).map(|p| self.unpack(p))
+    pub fn get(&self, index: usize) -> Option<(E::Sample, u64)> {
+        self.samples.get(index).map(|e| self.unpack(e))
     }
 
     /// All samples in order, each with its time in µs.
-    pub fn iter(&self) -> impl Iterator<Item = (RawSample, u64)> + '_ {
-        self.samples.iter().map(|p| self.unpack(p))
+    pub fn iter(&self) -> impl Iterator<Item = (E::Sample, u64)> + '_ {
+        self.samples.iter().map(|e| self.unpack(e))
     }
 
-    fn unpack(&self, packed: &PackedSample) -> (RawSample, u64) {
-        let (sample, offset) = packed.unpack();
+    fn unpack(&self, entry: &E) -> (E::Sample, u64) {
+        let (sample, offset) = entry.unpack();
         (sample, self.header.time_us(offset))
     }
 }
@@ -221,72 +257,4 @@ pub struct CalibratedSample {
     pub mag: [f32; 3],
     /// Die temperature, °C.
     pub temp_c: f32,
-}
-
-/// A batch of calibrated samples, as streamed by `StartStream { kind: Calibrated, .. }`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CalibratedBatch {
-    header: BatchHeader,
-    samples: Vec<(CalibratedSample, u16), CALIBRATED_BATCH_CAPACITY>,
-}
-
-impl CalibratedBatch {
-    /// An empty batch with the given timing.
-    pub fn new(header: BatchHeader) -> Self {
-        Self {
-            header,
-            samples: Vec::new(),
-        }
-    }
-
-    /// The batch's timing.
-    pub fn header(&self) -> &BatchHeader {
-        &self.header
-    }
-
-    /// Appends a sample taken at `t_us` (device clock, µs).
-    pub fn push(&mut self, sample: &CalibratedSample, t_us: u64) -> Result<(), BatchError> {
-        if self.samples.is_full() {
-            return Err(BatchError::Full);
-        }
-        let offset = self.header.offset_ticks(t_us)?;
-        self.samples
-            .push((*sample, offset))
-            .map_err(|_| BatchError::Full)
-    }
-
-    /// Number of samples held.
-    pub fn len(&self) -> usize {
-        self.samples.len()
-    }
-
-    /// Whether the batch holds no samples.
-    pub fn is_empty(&self) -> bool {
-        self.samples.is_empty()
-    }
-
-    /// Whether the batch holds [`CALIBRATED_BATCH_CAPACITY`] samples.
-    pub fn is_full(&self) -> bool {
-        self.samples.is_full()
-    }
-
-    /// Removes all samples and sets new timing, for reuse without a new allocation.
-    pub fn reset(&mut self, header: BatchHeader) {
-        self.header = header;
-        self.samples.clear();
-    }
-
-    /// The sample at `index` and its time in µs.
-    pub fn get(&self, index: usize) -> Option<(CalibratedSample, u64)> {
-        self.samples
-            .get(index)
-            .map(|(s, offset)| (*s, self.header.time_us(*offset)))
-    }
-
-    /// All samples in order, each with its time in µs.
-    pub fn iter(&self) -> impl Iterator<Item = (CalibratedSample, u64)> + '_ {
-        self.samples
-            .iter()
-            .map(|(s, offset)| (*s, self.header.time_us(*offset)))
-    }
 }

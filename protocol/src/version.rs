@@ -14,7 +14,7 @@ pub struct ProtocolVersion {
 }
 
 /// Major version of the protocol implemented by this crate.
-pub const PROTOCOL_MAJOR: u16 = 1;
+pub const PROTOCOL_MAJOR: u16 = 2;
 /// Minor version of the protocol implemented by this crate.
 pub const PROTOCOL_MINOR: u16 = 0;
 /// The protocol version implemented by this crate.

@@ -67,9 +67,9 @@ fn random_set(rng: &mut Rng) -> CalibrationSet {
     for sensor in [&mut set.accel, &mut set.gyro, &mut set.mag] {
         sensor.a = [[rng.f32(), rng.f32(), rng.f32()]; 3];
         sensor.b = [rng.f32(), rng.f32(), rng.f32()];
+        sensor.t_ref_c = rng.f32();
         if rng.below(2) == 0 {
             sensor.bias_temp = Some(BiasTemperature {
-                t_ref_c: rng.f32(),
                 coeffs: [[rng.f32(); 3]; 3],
             });
             sensor.scale_temp = Some([rng.f32(); 3]);

@@ -115,12 +115,17 @@ fn every_error_code_has_a_distinct_actionable_description() {
             computed: 2,
         },
         ErrorCode::NothingStaged,
-        ErrorCode::InvalidParams(InvalidParamsReason::NonFinite),
-        ErrorCode::InvalidParams(InvalidParamsReason::IllConditioned),
-        ErrorCode::InvalidParams(InvalidParamsReason::OffsetOutOfRange),
-        ErrorCode::InvalidParams(InvalidParamsReason::GainOutOfRange),
-        ErrorCode::InvalidParams(InvalidParamsReason::ExtendedTermOutOfRange),
-        ErrorCode::InvalidParams(InvalidParamsReason::UnsupportedFormat),
+        ErrorCode::InvalidParams(InvalidParamsReason::NonFinite(ParamField::Reference)),
+        ErrorCode::InvalidParams(InvalidParamsReason::IllConditioned(SensorKind::Accel)),
+        ErrorCode::InvalidParams(InvalidParamsReason::OffsetOutOfRange(SensorKind::Gyro)),
+        ErrorCode::InvalidParams(InvalidParamsReason::GainOutOfRange(SensorKind::Mag)),
+        ErrorCode::InvalidParams(InvalidParamsReason::ReferenceTemperatureOutOfRange(
+            SensorKind::Mag,
+        )),
+        ErrorCode::InvalidParams(InvalidParamsReason::ExtendedTermOutOfRange(
+            ParamField::GyroGSensitivity,
+        )),
+        ErrorCode::InvalidParams(InvalidParamsReason::UnsupportedFormat { found: 1 }),
         ErrorCode::FlashError,
     ];
     let descriptions: std::collections::HashSet<_> = codes.iter().map(|c| c.describe()).collect();
@@ -129,5 +134,81 @@ fn every_error_code_has_a_distinct_actionable_description() {
         // Each sentence names a cause and, after a separator, what to do.
         assert!(d.contains(';') || d.contains(','), "no remedy in: {d}");
         assert!(d.len() > 30, "too terse: {d}");
+    }
+}
+
+/// The format-1 layout of a set: `t_ref_c` inside the bias polynomial, none per sensor.
+mod format_1 {
+    use serde::Serialize;
+
+    #[derive(Serialize)]
+    pub struct BiasTemperature {
+        pub t_ref_c: f32,
+        pub coeffs: [[f32; 3]; 3],
+    }
+
+    #[derive(Serialize)]
+    pub struct Sensor {
+        pub a: [[f32; 3]; 3],
+        pub b: [f32; 3],
+        pub bias_temp: Option<BiasTemperature>,
+        pub scale_temp: Option<[f32; 3]>,
+        pub nonlinearity: Option<([f32; 3], [f32; 3])>,
+    }
+
+    #[derive(Serialize)]
+    pub struct Set {
+        pub format_version: u16,
+        pub created_unix_s: u64,
+        pub sensors: [Sensor; 3],
+        pub gyro_g_sensitivity: Option<[[f32; 3]; 3]>,
+        pub reference: [f32; 2],
+        pub residuals: [f32; 3],
+    }
+}
+
+#[test]
+fn a_format_1_set_is_never_taken_for_a_format_2_one() {
+    // Stored by older firmware or sent by an older host: it either fails to decode or decodes
+    // to a set that validation refuses by its format version; it is never applied.
+    let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let sensor = |with_bias: bool| format_1::Sensor {
+        a: identity,
+        b: [0.1, -0.2, 0.3],
+        bias_temp: with_bias.then_some(format_1::BiasTemperature {
+            t_ref_c: 25.0,
+            coeffs: [[1e-4; 3], [0.0; 3], [0.0; 3]],
+        }),
+        scale_temp: None,
+        nonlinearity: None,
+    };
+    for with_bias in [false, true] {
+        let old = format_1::Set {
+            format_version: 1,
+            created_unix_s: 1_763_700_000,
+            sensors: [sensor(with_bias), sensor(false), sensor(with_bias)],
+            gyro_g_sensitivity: None,
+            reference: [9.806_65, 1.0],
+            residuals: [0.0; 3],
+        };
+        let mut buffer = [0u8; PARAMS_MAX_ENCODED];
+        let bytes = postcard::to_slice(&old, &mut buffer).expect("encodes");
+        if let Ok(set) = postcard::from_bytes::<CalibrationSet>(bytes) {
+            let scales = SensorScales {
+                accel_mps2_per_count: 6e-4,
+                gyro_rads_per_count: 1.5e-4,
+                mag_ut_per_count: 0.014,
+                temp_c_per_count: 0.0625,
+                temp_offset_c: 25.0,
+                accel_range_mps2: 19.6,
+                gyro_range_rads: 4.36,
+                mag_range_ut: 400.0,
+                sample_rate_hz: 100.0,
+            };
+            assert_eq!(
+                validate(&set, &scales),
+                Err(InvalidParamsReason::UnsupportedFormat { found: 1 })
+            );
+        }
     }
 }

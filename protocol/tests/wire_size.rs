@@ -98,8 +98,8 @@ fn worst_calibration_set() -> CalibrationSet {
     let sensor = SensorCalibration {
         a: [[nan; 3]; 3],
         b: [nan; 3],
+        t_ref_c: nan,
         bias_temp: Some(BiasTemperature {
-            t_ref_c: nan,
             coeffs: [[nan; 3]; 3],
         }),
         scale_temp: Some([nan; 3]),

@@ -4,19 +4,18 @@
 //! generators of plausible and hostile calibration sets.
 #![allow(dead_code, reason = "each test binary uses a different subset")]
 
-use std::cell::{Cell, RefCell};
-use std::collections::VecDeque;
-use std::convert::Infallible;
+use std::cell::Cell;
 use std::rc::Rc;
 
-use imucal_firmware::device::{Clock, Device, DeviceInfo};
-use imucal_firmware::imu::{Imu, RawSample, SensorScales};
+use imucal_firmware::device::{Device, DeviceInfo};
+use imucal_firmware::imu::{RawSample, SensorScales};
 use imucal_firmware::ram_flash::RamFlash;
 use imucal_firmware::store::ParamStore;
 use imucal_protocol::{
     encode_frame, BiasTemperature, CalibrationSet, DeviceId, DeviceMessage, Event, FirmwareVersion,
     FrameDecoder, Nonlinearity, Request, RequestBody, ResponseBody, SensorSet, MAX_FRAME,
 };
+pub use imucal_test_kit::shared::{FixedImu, MemoryLink, StepClock};
 
 /// Sample period of the fake IMU, µs (100 Hz).
 pub const PERIOD_US: u64 = 10_000;
@@ -132,74 +131,6 @@ pub fn scales() -> SensorScales {
     }
 }
 
-/// An IMU that returns whatever sample the test put in its cell (a still board by default).
-pub struct FixedImu {
-    /// The sample every read returns.
-    pub sample: Rc<Cell<RawSample>>,
-}
-
-impl Imu for FixedImu {
-    type Error = Infallible;
-
-    fn scales(&self) -> SensorScales {
-        scales()
-    }
-
-    fn read(&mut self) -> Result<RawSample, Infallible> {
-        Ok(self.sample.get())
-    }
-}
-
-/// Both directions of the serial link, shared between the device and the test.
-#[derive(Clone, Default)]
-pub struct MemoryLink {
-    /// Bytes waiting for the device.
-    pub to_device: Rc<RefCell<VecDeque<u8>>>,
-    /// Bytes the device wrote.
-    pub from_device: Rc<RefCell<Vec<u8>>>,
-}
-
-impl embedded_io::ErrorType for MemoryLink {
-    type Error = Infallible;
-}
-
-impl embedded_io::Read for MemoryLink {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let mut queue = self.to_device.borrow_mut();
-        let count = buf.len().min(queue.len());
-        for (slot, byte) in buf.iter_mut().zip(queue.drain(..count)) {
-            *slot = byte;
-        }
-        Ok(count)
-    }
-}
-
-impl embedded_io::ReadReady for MemoryLink {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(!self.to_device.borrow().is_empty())
-    }
-}
-
-impl embedded_io::Write for MemoryLink {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.from_device.borrow_mut().extend_from_slice(buf);
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
-
-/// A clock the test advances.
-pub struct StepClock(pub Rc<Cell<u64>>);
-
-impl Clock for StepClock {
-    fn now_us(&mut self) -> u64 {
-        self.0.get()
-    }
-}
-
 /// Identity of the bench board.
 pub fn info() -> DeviceInfo {
     DeviceInfo {
@@ -263,6 +194,7 @@ impl Bench {
         let sample = Rc::new(Cell::new(STILL_SAMPLE));
         let imu = FixedImu {
             sample: sample.clone(),
+            scales: scales(),
         };
         let link = MemoryLink::default();
         let store = ParamStore::new(flash, 0, SLOT_SIZE).expect("bench slot layout fits the flash");
@@ -505,6 +437,7 @@ pub fn random_plausible_set(rng: &mut Rng) -> CalibrationSet {
         for b in &mut sensor.b {
             *b = rng.range(-0.9, 0.9) * range;
         }
+        sensor.t_ref_c = rng.range(-55.0, 125.0);
         let dt = 125.0f32;
         if rng.chance(0.5) {
             let mut coeffs = [[0.0f32; 3]; 3];
@@ -514,10 +447,7 @@ pub fn random_plausible_set(rng: &mut Rng) -> CalibrationSet {
                     *c = rng.range(-1.0, 1.0) * range / 3.0 / dt.powi(degree as i32 + 1);
                 }
             }
-            sensor.bias_temp = Some(BiasTemperature {
-                t_ref_c: rng.range(-55.0, 125.0),
-                coeffs,
-            });
+            sensor.bias_temp = Some(BiasTemperature { coeffs });
         }
         if rng.chance(0.5) {
             sensor.scale_temp = Some([0; 3].map(|_| rng.range(-0.5, 0.5) / dt));
@@ -564,8 +494,8 @@ pub fn float_fields(set: &mut CalibrationSet) -> Vec<&mut f32> {
     for sensor in [&mut set.accel, &mut set.gyro, &mut set.mag] {
         fields.extend(sensor.a.iter_mut().flatten());
         fields.extend(sensor.b.iter_mut());
+        fields.push(&mut sensor.t_ref_c);
         if let Some(t) = sensor.bias_temp.as_mut() {
-            fields.push(&mut t.t_ref_c);
             fields.extend(t.coeffs.iter_mut().flatten());
         }
         if let Some(s) = sensor.scale_temp.as_mut() {
@@ -592,8 +522,8 @@ pub fn float_fields(set: &mut CalibrationSet) -> Vec<&mut f32> {
 pub fn full_set() -> CalibrationSet {
     let mut set = fitted_set();
     for sensor in [&mut set.accel, &mut set.gyro, &mut set.mag] {
+        sensor.t_ref_c = 25.0;
         sensor.bias_temp = Some(BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[1e-3, -2e-3, 5e-4], [1e-5, 0.0, -1e-5], [0.0, 1e-7, 0.0]],
         });
         sensor.scale_temp = Some([1e-4, -2e-4, 5e-5]);

@@ -198,6 +198,8 @@ impl SensorAnalysis {
         let a = self.calibration.a;
         out.a = [0, 1, 2].map(|r| [0, 1, 2].map(|c| a[(r, c)] as f32));
         out.b = [0, 1, 2].map(|k| self.calibration.b[k] as f32);
+        // Every temperature term was fitted about T₀, the poses' mean temperature.
+        out.t_ref_c = self.t_ref_c as f32;
         let mut g_sens = None;
         let p = &self.final_fit.params;
         let mut offset = self.problem.base_params();
@@ -215,10 +217,7 @@ impl SensorAnalysis {
                     {
                         *row = [0, 1, 2].map(|axis| value(3 * k + axis) as f32);
                     }
-                    out.bias_temp = Some(BiasTemperature {
-                        t_ref_c: self.t_ref_c as f32,
-                        coeffs,
-                    });
+                    out.bias_temp = Some(BiasTemperature { coeffs });
                 }
                 EffectKind::ScaleTemperature => {
                     out.scale_temp = Some([0, 1, 2].map(|k| value(k) as f32))

@@ -70,7 +70,8 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
             return export_adafruit(&set, args);
         }
     };
-    let text = export(&set, format, &name);
+    let text = export(&set, format, &name)
+        .map_err(|reason| anyhow::anyhow!("`{shown}` is not exported: {reason}"))?;
     write_output(args.out.as_deref(), text.as_bytes())
 }
 

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use super::gauge::symmetric_gauge;
 use super::CompatError;
 use crate::device::UnitSample;
-use crate::export::apply_set;
+use imucal_protocol::model::{apply as apply_set_model, NominalSample};
 
 /// Standard gravity for expressing accelerometer errors in mg, m/s².
 const G_MPS2: f64 = 9.806_65;
@@ -290,7 +290,16 @@ pub fn limitations(
     let field = f64::from(set.reference.field_ut).abs();
     let mut costs = [0.0_f64; 3];
     for pose in poses {
-        let full = apply_set(set, pose.accel, pose.gyro, pose.mag, pose.temp_c);
+        let out = apply_set_model(
+            set,
+            &NominalSample {
+                accel: pose.accel,
+                gyro: pose.gyro,
+                mag: pose.mag,
+                temp_c: pose.temp_c,
+            },
+        );
+        let full = [out.accel, out.gyro, out.mag];
         let lib = cal.apply(pose.accel, pose.gyro, pose.mag);
         let dist = |a: [f64; 3], b: [f64; 3]| (Vector3::from(a) - Vector3::from(b)).norm();
         costs[0] = costs[0].max(dist(full[0], lib[0]) / G_MPS2 * 1000.0);
@@ -379,8 +388,8 @@ mod tests {
     #[test]
     fn temperature_terms_are_listed_as_unapplied() {
         let mut set = CalibrationSet::identity();
+        set.gyro.t_ref_c = 25.0;
         set.gyro.bias_temp = Some(imucal_protocol::BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[1e-3, 0.0, 0.0], [0.0; 3], [0.0; 3]],
         });
         // 10 °C away from the reference: 1e-2 rad/s of bias the library leaves in.

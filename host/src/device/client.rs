@@ -443,6 +443,13 @@ impl<L: Read + Write> DeviceClient<L> {
 
     /// Stages `set` (CRC computed here) and checks that the board staged that very CRC.
     pub fn stage_params(&mut self, set: &CalibrationSet) -> Result<ParamStatus, DeviceError> {
+        // The board's own check, here first: nothing is sent that it would refuse.
+        imucal_protocol::validate(set, &self.welcome.scales).map_err(|reason| {
+            DeviceError::InvalidParams {
+                port: self.port.clone(),
+                reason,
+            }
+        })?;
         let crc = set.crc32();
         let status =
             self.param_request("WriteParams", RequestBody::WriteParams { set: *set, crc })?;

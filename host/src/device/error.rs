@@ -1,7 +1,7 @@
 //! Errors of talking to a board. Every message is a sentence that names the port, says what
 //! happened and what to try.
 
-use imucal_protocol::{ErrorCode, ProtocolVersion};
+use imucal_protocol::{ErrorCode, InvalidParamsReason, ProtocolVersion};
 
 /// Why an operation on a board failed.
 #[derive(Debug, thiserror::Error)]
@@ -94,6 +94,14 @@ pub enum DeviceError {
         request: &'static str,
         /// The board's error code (its `Display` says what to try).
         code: ErrorCode,
+    },
+    /// The set fails the protocol's validation for this board, so nothing was sent.
+    #[error("not writing to {port}, which would refuse the set: {reason}")]
+    InvalidParams {
+        /// The port.
+        port: String,
+        /// Which field broke which bound.
+        reason: InvalidParamsReason,
     },
     /// The board answered with a response of the wrong kind.
     #[error("{port} answered {request} with {answer}, which is not a valid answer; update the firmware and imucal to matching versions")]

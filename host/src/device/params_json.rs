@@ -1,11 +1,11 @@
 //! The calibration parameter file (JSON) that `imucal calibrate` writes and `imucal flash`
 //! reads. It mirrors the protocol's `CalibrationSet` (model `y = (1+s·ΔT)∘(A·u')`,
-//! `u = x − b(T)`, see `imucal_protocol::CalibrationSet`), versioned by `"format": 1`:
+//! `u = x − b(T)`, see `imucal_protocol::CalibrationSet`), versioned by `"format": 2`:
 //!
 //! ```json
-//! { "format": 1, "created_unix_s": 1763700000,
-//!   "accel": { "A": [[1,0,0],[0,1,0],[0,0,1]], "b": [0,0,0],
-//!              "bias_temp": { "t_ref_c": 25, "coeffs": [[0,0,0],[0,0,0],[0,0,0]] },
+//! { "format": 2, "created_unix_s": 1763700000,
+//!   "accel": { "A": [[1,0,0],[0,1,0],[0,0,1]], "b": [0,0,0], "t_ref_c": 25,
+//!              "bias_temp": { "coeffs": [[0,0,0],[0,0,0],[0,0,0]] },
 //!              "scale_temp": [0,0,0], "nonlinearity": { "quadratic": [0,0,0], "cubic": [0,0,0] } },
 //!   "gyro": { "A": ..., "b": ... }, "mag": { "A": ..., "b": ... },
 //!   "gyro_g_sensitivity": [[0,0,0],[0,0,0],[0,0,0]],
@@ -18,6 +18,8 @@
 //! `"input_unit": "counts"`: its `A` maps counts, which suits other firmware reading raw counts
 //! but not this board. `provenance` records the tool, source, methods and time. Units are those
 //! of the protocol: m/s², rad/s, µT, °C.
+//! Format 1 files are still read: their reference temperature sat inside `bias_temp`, and a
+//! sensor without one used 0 °C.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -29,7 +31,10 @@ use imucal_protocol::{
 use serde::{Deserialize, Serialize};
 
 /// Format version of the parameter file written by this tool.
-pub const PARAMS_FILE_FORMAT: u16 = 1;
+pub const PARAMS_FILE_FORMAT: u16 = 2;
+
+/// Oldest parameter file format this tool reads.
+pub const OLDEST_PARAMS_FILE_FORMAT: u16 = 1;
 
 /// Why a parameter file could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -76,8 +81,9 @@ pub enum ParamsFileError {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BiasTemperatureJson {
-    /// Reference temperature, °C.
-    pub t_ref_c: f64,
+    /// Reference temperature, °C (format 1 only; format 2 has it per sensor).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub t_ref_c: Option<f64>,
     /// `coeffs[k][axis]`: degree-(k+1) coefficient per raw axis, unit per °C^(k+1).
     pub coeffs: [[f64; 3]; 3],
 }
@@ -101,6 +107,9 @@ pub struct SensorJson {
     pub a: [[f64; 3]; 3],
     /// Offset `b`, in the sensor's unit.
     pub b: [f64; 3],
+    /// Reference temperature of the temperature terms, °C (always written; absent in format 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub t_ref_c: Option<f64>,
     /// Temperature dependence of the offset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bias_temp: Option<BiasTemperatureJson>,
@@ -207,8 +216,9 @@ impl From<&SensorCalibration> for SensorJson {
         Self {
             a: c.a.map(|row| row.map(f64::from)),
             b: c.b.map(f64::from),
+            t_ref_c: Some(f64::from(c.t_ref_c)),
             bias_temp: c.bias_temp.map(|t| BiasTemperatureJson {
-                t_ref_c: f64::from(t.t_ref_c),
+                t_ref_c: None,
                 coeffs: t.coeffs.map(|row| row.map(f64::from)),
             }),
             scale_temp: c.scale_temp.map(|s| s.map(f64::from)),
@@ -286,9 +296,15 @@ impl Narrow<'_> {
         Ok(SensorCalibration {
             a: self.mat3(&format!("{name}.A"), &s.a)?,
             b: self.vec3(&format!("{name}.b"), &s.b)?,
+            // Format 1 kept T_ref in the bias polynomial and meant 0 °C without one.
+            t_ref_c: self.one(
+                &format!("{name}.t_ref_c"),
+                s.t_ref_c
+                    .or(s.bias_temp.as_ref().and_then(|t| t.t_ref_c))
+                    .unwrap_or(0.0),
+            )?,
             bias_temp: match &s.bias_temp {
                 Some(t) => Some(BiasTemperature {
-                    t_ref_c: self.one(&format!("{name}.bias_temp.t_ref_c"), t.t_ref_c)?,
                     coeffs: self.mat3(&format!("{name}.bias_temp.coeffs"), &t.coeffs)?,
                 }),
                 None => None,
@@ -328,7 +344,7 @@ impl ParamsFile {
             path: path.to_string(),
             cause,
         })?;
-        if file.format != PARAMS_FILE_FORMAT {
+        if !(OLDEST_PARAMS_FILE_FORMAT..=PARAMS_FILE_FORMAT).contains(&file.format) {
             return Err(ParamsFileError::UnsupportedFormat {
                 path: path.to_string(),
                 found: file.format,
@@ -388,8 +404,8 @@ mod tests {
         set.created_unix_s = 1_763_700_000;
         set.accel.a = [[1.01, 0.002, 0.0], [0.0, 0.99, -0.003], [0.001, 0.0, 1.02]];
         set.accel.b = [0.12, -0.05, 0.3];
+        set.gyro.t_ref_c = 31.5;
         set.gyro.bias_temp = Some(BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[1e-4, -2e-4, 3e-5], [1e-6, 0.0, 0.0], [0.0; 3]],
         });
         set.mag.scale_temp = Some([1e-4, 2e-4, -1e-4]);
@@ -400,6 +416,21 @@ mod tests {
         set.gyro_g_sensitivity = Some([[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-4]]);
         set.reference.field_ut = 48.5;
         set
+    }
+
+    #[test]
+    fn a_format_1_file_keeps_its_reference_temperature_meaning() {
+        // Format 1: T_ref inside bias_temp, and 0 °C for a sensor without a bias polynomial.
+        let text = r#"{ "format": 1, "reference": { "gravity_mps2": 9.81, "field_ut": 1 },
+            "accel": { "A": [[1,0,0],[0,1,0],[0,0,1]], "b": [0,0,0], "scale_temp": [1e-4,0,0] },
+            "gyro": { "A": [[1,0,0],[0,1,0],[0,0,1]], "b": [0,0,0],
+                      "bias_temp": { "t_ref_c": 30, "coeffs": [[1e-4,0,0],[0,0,0],[0,0,0]] } } }"#;
+        let set = ParamsFile::from_json(text, "old.json")
+            .unwrap()
+            .to_calibration_set("old.json")
+            .unwrap();
+        assert_eq!((set.accel.t_ref_c, set.gyro.t_ref_c), (0.0, 30.0));
+        assert_eq!(set.format_version, PARAMS_FORMAT_VERSION);
     }
 
     #[test]
@@ -423,13 +454,13 @@ mod tests {
             .expect("minimal file parses");
         assert_eq!(set.gyro, SensorCalibration::identity());
         assert_eq!(set.accel.b, [0.1, 0.0, 0.0]);
-        let wrong = text.replace("\"format\": 1", "\"format\": 2");
+        let wrong = text.replace("\"format\": 1", "\"format\": 3");
         let message = ParamsFile::from_json(&wrong, "a.json")
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(
-            message.contains("format 2") && message.contains("format 1"),
+            message.contains("format 3") && message.contains("format 2"),
             "{message}"
         );
     }

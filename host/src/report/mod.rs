@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use crate::device::ParamsFile;
-use crate::export::apply_sensor;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
+use imucal_protocol::apply_sensor;
 
 /// Why a report could not be built or written.
 #[derive(Debug, thiserror::Error)]

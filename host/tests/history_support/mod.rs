@@ -61,6 +61,7 @@ fn sensor(truth: &SensorTruth, sigma_b: f64, sigma_a: f64, rng: &mut impl Rng) -
     SensorJson {
         a: truth.a_true.map(|row| row.map(|v| v + a.sample(rng))),
         b: truth.b_true.map(|v| v + b.sample(rng)),
+        t_ref_c: Some(25.0),
         bias_temp: None,
         scale_temp: None,
         nonlinearity: None,

@@ -67,15 +67,17 @@ pub fn sensor_calibration() -> BoxedStrategy<SensorCalibration> {
     (
         mat3(),
         vec3(),
-        prop::option::of((any_f32(), mat3())),
+        any_f32(),
+        prop::option::of(mat3()),
         prop::option::of(vec3()),
         prop::option::of((vec3(), vec3())),
     )
         .prop_map(
-            |(a, b, bias_temp, scale_temp, nonlinearity)| SensorCalibration {
+            |(a, b, t_ref_c, bias_temp, scale_temp, nonlinearity)| SensorCalibration {
                 a,
                 b,
-                bias_temp: bias_temp.map(|(t_ref_c, coeffs)| BiasTemperature { t_ref_c, coeffs }),
+                t_ref_c,
+                bias_temp: bias_temp.map(|coeffs| BiasTemperature { coeffs }),
                 scale_temp,
                 nonlinearity: nonlinearity
                     .map(|(quadratic, cubic)| Nonlinearity { quadratic, cubic }),
@@ -165,14 +167,23 @@ pub fn request() -> BoxedStrategy<Request> {
 }
 
 pub fn invalid_params_reason() -> impl Strategy<Value = InvalidParamsReason> {
-    prop::sample::select(vec![
-        InvalidParamsReason::NonFinite,
-        InvalidParamsReason::IllConditioned,
-        InvalidParamsReason::OffsetOutOfRange,
-        InvalidParamsReason::GainOutOfRange,
-        InvalidParamsReason::ExtendedTermOutOfRange,
-        InvalidParamsReason::UnsupportedFormat,
-    ])
+    let sensor = || prop::sample::select(SensorKind::ALL.to_vec());
+    let field = prop_oneof![
+        sensor().prop_map(ParamField::Matrix),
+        sensor().prop_map(ParamField::ReferenceTemperature),
+        sensor().prop_map(ParamField::Nonlinearity),
+        Just(ParamField::GyroGSensitivity),
+        Just(ParamField::Residuals),
+    ];
+    prop_oneof![
+        field.clone().prop_map(InvalidParamsReason::NonFinite),
+        sensor().prop_map(InvalidParamsReason::IllConditioned),
+        sensor().prop_map(InvalidParamsReason::OffsetOutOfRange),
+        sensor().prop_map(InvalidParamsReason::GainOutOfRange),
+        sensor().prop_map(InvalidParamsReason::ReferenceTemperatureOutOfRange),
+        field.prop_map(InvalidParamsReason::ExtendedTermOutOfRange),
+        any::<u16>().prop_map(|found| InvalidParamsReason::UnsupportedFormat { found }),
+    ]
 }
 
 pub fn error_code() -> BoxedStrategy<ErrorCode> {

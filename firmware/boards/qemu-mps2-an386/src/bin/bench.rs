@@ -14,20 +14,19 @@
 #![no_std]
 #![no_main]
 
-use core::convert::Infallible;
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
 use imucal_board_qemu_mps2_an386::{exit, ram_flash::RamNorFlash, ram_flash::SLOT_SIZE};
 use imucal_firmware::apply::Correction;
-use imucal_firmware::device::{Clock, Device, DeviceInfo};
-use imucal_firmware::imu::Imu;
+use imucal_firmware::device::{Device, DeviceInfo};
 use imucal_firmware::store::ParamStore;
 use imucal_protocol::{
     encode_frame, BiasTemperature, CalibrationSet, DeviceId, FirmwareVersion, Nonlinearity,
     RawSample, Request, RequestBody, SensorCalibration, SensorScales, SensorSet, StreamKind,
 };
+use imucal_test_kit::bare::{CountingImu, SinkLink, SteppingClock};
 
 /// Names of the measured regions, in the order they run (the bench driver reads the same list).
 pub const REGIONS: [&str; 4] = ["empty", "apply-plain", "apply-extended", "poll-streaming"];
@@ -90,8 +89,8 @@ fn extended_set() -> CalibrationSet {
         (&mut set.gyro, 1.0e-5),
         (&mut set.mag, 1.0e-2),
     ] {
+        sensor.t_ref_c = 25.0;
         sensor.bias_temp = Some(BiasTemperature {
-            t_ref_c: 25.0,
             coeffs: [[unit; 3], [unit * 1.0e-2; 3], [unit * 1.0e-4; 3]],
         });
         sensor.scale_temp = Some([1.0e-4, -2.0e-4, 1.5e-4]);
@@ -135,74 +134,6 @@ static SAMPLES: [RawSample; SAMPLE_PERIOD] = {
     }
     samples
 };
-
-/// The bench's IMU: a new sample on every read.
-struct CountingImu(u32);
-
-impl Imu for CountingImu {
-    type Error = Infallible;
-
-    fn scales(&self) -> SensorScales {
-        SCALES
-    }
-
-    fn read(&mut self) -> Result<RawSample, Infallible> {
-        self.0 = self.0.wrapping_add(1);
-        Ok(sample(self.0))
-    }
-}
-
-/// A clock that advances one sample period per reading, so every `poll()` takes a sample.
-struct SteppingClock {
-    now_us: u64,
-    step_us: u64,
-}
-
-impl Clock for SteppingClock {
-    fn now_us(&mut self) -> u64 {
-        self.now_us += self.step_us;
-        self.now_us
-    }
-}
-
-/// A link whose input is one pre-encoded request and whose output is counted, not sent.
-struct SinkLink {
-    input: [u8; 32],
-    input_len: usize,
-    read_at: usize,
-    bytes_out: u32,
-}
-
-impl embedded_io::ErrorType for SinkLink {
-    type Error = Infallible;
-}
-
-impl embedded_io::ReadReady for SinkLink {
-    fn read_ready(&mut self) -> Result<bool, Infallible> {
-        Ok(self.read_at < self.input_len)
-    }
-}
-
-impl embedded_io::Read for SinkLink {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
-        let rest = self.input.get(self.read_at..self.input_len).unwrap_or(&[]);
-        let n = rest.len().min(buf.len());
-        buf[..n].copy_from_slice(&rest[..n]);
-        self.read_at += n;
-        Ok(n)
-    }
-}
-
-impl embedded_io::Write for SinkLink {
-    fn write(&mut self, buf: &[u8]) -> Result<usize, Infallible> {
-        self.bytes_out = self.bytes_out.wrapping_add(buf.len() as u32);
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> Result<(), Infallible> {
-        Ok(())
-    }
-}
 
 /// The empty region: each iteration picks its sample from [`SAMPLES`] and makes it observable,
 /// exactly as [`measure_apply`] does before calibrating it, so that subtracting this region
@@ -254,12 +185,6 @@ fn main() -> ! {
     let Ok(store) = ParamStore::new(flash, 0, SLOT_SIZE as u32) else {
         exit(false)
     };
-    let mut link = SinkLink {
-        input: [0; 32],
-        input_len: 0,
-        read_at: 0,
-        bytes_out: 0,
-    };
     let start_stream = Request {
         seq: 1,
         body: RequestBody::StartStream {
@@ -267,10 +192,11 @@ fn main() -> ! {
             decimation: 1,
         },
     };
-    let Ok(len) = encode_frame(&start_stream, &mut link.input) else {
+    let mut request = [0u8; 32];
+    let Ok(len) = encode_frame(&start_stream, &mut request) else {
         exit(false)
     };
-    link.input_len = len;
+    let link = SinkLink::<32>::new(request.get(..len).unwrap_or(&[]));
     let info = DeviceInfo {
         device_id: DeviceId::from_u64(1),
         firmware_version: FirmwareVersion {
@@ -289,7 +215,12 @@ fn main() -> ! {
         now_us: 0,
         step_us: (1.0e6 / SCALES.sample_rate_hz) as u64 + 1,
     };
-    let Ok(mut device) = Device::<_, _, _, _>::new(CountingImu(0), link, store, clock, info) else {
+    let imu = CountingImu {
+        count: 0,
+        scales: SCALES,
+        sample,
+    };
+    let Ok(mut device) = Device::<_, _, _, _>::new(imu, link, store, clock, info) else {
         exit(false)
     };
     // The first poll takes the StartStream request and its Ack; measure steady streaming after it.

@@ -4,14 +4,25 @@
 //! number (u32), payload length (u32), CRC-32/ISO-HDLC over the first 16 header bytes and the
 //! payload (u32) — then the payload, padded with `0xFF` to the program size. All little-endian.
 //!
-//! A write goes to the inactive slot: erase, program (header last), read back and compare. Only a
-//! verified slot has a valid CRC with a higher sequence number, so a power cut at any step leaves
-//! either the previous set or the new one active, never a corrupt one. On boot the valid slot with
-//! the newer sequence number wins; sequence numbers compare by serial-number arithmetic
+//! A write goes to the inactive slot: erase, program every chunk after the first, then the first
+//! chunk (header and the start of the payload), read back and compare. The header is programmed
+//! at the *start* of that final operation, so a cut inside it can leave a complete header over a
+//! payload that is not; what makes the store safe is the CRC over header fields and payload,
+//! not the order. The order only means that before the final operation the slot has no magic.
+//! Only a slot whose CRC checks counts, so a power cut at any step leaves either the previous set
+//! or the new one, never a corrupt one. Sequence numbers compare by serial-number arithmetic
 //! (RFC 1982), so wrapping past `u32::MAX` keeps the order.
 //!
-//! The payload (the postcard-encoded parameter set) is opaque here; checking its content is the
-//! caller's job before [`ParamStore::write`].
+//! On boot [`ParamStore::load_newest`] offers the valid slots newest first to the caller, who
+//! decodes and validates the payload: a newest set that no longer passes (after an update
+//! tightened the limits, or a marginal bit that reads back differently the second time) falls
+//! back to the older valid slot instead of to nothing. Every read re-checks the CRC.
+//!
+//! Why not the `sequential-storage` crate: it keeps a key-value map or queue in a log of items,
+//! needs `MultiwriteNorFlash` (programming a word twice, which ECC-protected internal flash
+//! forbids) and async flash traits, and would change the on-flash format for a single ≤ 1 KiB
+//! record that two A/B slots hold with one erase per write. Its test method is what we adopt:
+//! random tears and marginal bits over many seeded iterations (`tests/store_random_tears.rs`).
 
 use embedded_storage::nor_flash::{NorFlash, NorFlashError, NorFlashErrorKind};
 
@@ -169,6 +180,36 @@ impl<F: NorFlash> ParamStore<F> {
         }
     }
 
+    /// Offer the valid slots' payloads to `accept`, newest first, and make the first accepted
+    /// one active; returns what `accept` made of it and its sequence number. A slot whose CRC
+    /// fails on this read, or whose payload `accept` refuses, is passed over, so a newest set
+    /// that no longer validates falls back to the older one. `None` when no slot is accepted.
+    pub fn load_newest<T>(
+        &mut self,
+        buffer: &mut [u8],
+        mut accept: impl FnMut(&[u8]) -> Option<T>,
+    ) -> Option<(T, u32)> {
+        let [first, second] = [0, 1].map(|index| self.check_slot(index, None).ok().flatten());
+        let newest_first = match (first, second) {
+            (Some(a), Some(b)) if is_newer(a.sequence, b.sequence) => [Some(a), Some(b)],
+            (a, b) => [b, a],
+        };
+        for slot in newest_first.into_iter().flatten() {
+            let Some(target) = buffer.get_mut(..slot.len) else {
+                continue;
+            };
+            if self.check_slot(slot.index, Some(target)) != Ok(Some(slot)) {
+                continue;
+            }
+            if let Some(value) = buffer.get(..slot.len).and_then(&mut accept) {
+                self.active = Some(slot);
+                return Some((value, slot.sequence));
+            }
+        }
+        self.active = None;
+        None
+    }
+
     /// Store `payload` as the new active set; on any error the previous set stays active.
     ///
     /// Returns the new sequence number.
@@ -180,7 +221,13 @@ impl<F: NorFlash> ParamStore<F> {
                 max,
             });
         }
-        let (index, sequence) = match self.active {
+        // With no active set, a slot the caller refused may still hold the newest sequence:
+        // write after it, into the other slot, so that the order stays right.
+        let newest = match self.active {
+            Some(slot) => Some(slot),
+            None => self.scan(),
+        };
+        let (index, sequence) = match newest {
             Some(slot) => (1 - slot.index, slot.sequence.wrapping_add(1)),
             None => (0, 1),
         };
@@ -190,8 +237,8 @@ impl<F: NorFlash> ParamStore<F> {
             .erase(start, start + self.slot_size)
             .map_err(flash_error)?;
 
-        // Program every chunk after the first, then the first (with the header): until the last
-        // program step the slot has no magic, and the CRC covers everything anyway.
+        // Program every chunk after the first, then the first (header at its start): until the
+        // final operation the slot has no magic; within it, the CRC rejects a partial image.
         let image_len = round_up(HEADER_LEN + payload.len(), F::WRITE_SIZE);
         let chunks = image_len.div_ceil(CHUNK);
         let mut buffer = [0u8; CHUNK];
@@ -292,9 +339,11 @@ impl<F: NorFlash> ParamStore<F> {
         let mut done = 0;
         while done < len {
             let offset = HEADER_LEN + done;
-            let take = (len - done).min(CHUNK - F::READ_SIZE);
-            // Read an aligned window that covers [offset, offset + take).
-            let aligned = offset - offset % F::READ_SIZE;
+            // Read an aligned window that covers [offset, offset + take) and fits the buffer.
+            // `offset % READ_SIZE < READ_SIZE ≤ CHUNK`, so every pass takes at least one byte.
+            let misalignment = offset % F::READ_SIZE;
+            let take = (len - done).min(CHUNK - misalignment);
+            let aligned = offset - misalignment;
             let window = round_up(offset + take - aligned, F::READ_SIZE);
             let Some(bytes) = buffer.get_mut(..window) else {
                 return Err(StoreError::Geometry);
@@ -370,152 +419,4 @@ fn fill_image(bytes: &mut [u8], offset: usize, header: &[u8; HEADER_LEN], payloa
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::ram_flash::RamFlash;
-
-    /// Deterministic payload bytes that differ between versions.
-    fn payload(version: u8, len: usize) -> std::vec::Vec<u8> {
-        (0..len)
-            .map(|i| (i as u8).wrapping_mul(31).wrapping_add(version))
-            .collect()
-    }
-
-    fn active<F: NorFlash>(store: &mut ParamStore<F>) -> Option<std::vec::Vec<u8>> {
-        let mut buffer = [0u8; 4096];
-        let len = store.read_active(&mut buffer).ok()?;
-        Some(buffer[..len].to_vec())
-    }
-
-    #[test]
-    fn a_written_set_survives_a_reboot_and_the_newest_wins() {
-        let flash = RamFlash::<8192, 1024, 4>::new();
-        let mut store = ParamStore::new(flash, 0, 2048).unwrap();
-        assert_eq!(store.read_active(&mut [0; 64]), Err(StoreError::Empty));
-        assert_eq!(store.write(&payload(1, 300)), Ok(1));
-        assert_eq!(store.write(&payload(2, 301)), Ok(2));
-        assert_eq!(store.write(&payload(3, 17)), Ok(3));
-        let mut store = ParamStore::new(store.into_flash(), 0, 2048).unwrap();
-        assert_eq!(store.active_sequence(), Some(3));
-        assert_eq!(active(&mut store), Some(payload(3, 17)));
-    }
-
-    #[test]
-    fn sequence_order_survives_wrapping_past_u32_max() {
-        assert!(is_newer(0, u32::MAX));
-        assert!(is_newer(1, u32::MAX - 5));
-        assert!(!is_newer(u32::MAX, 0));
-        // Put a slot with sequence u32::MAX in place, then write over the wrap.
-        let mut flash = RamFlash::<4096, 1024, 1>::new();
-        let header = header_bytes(u32::MAX, &payload(7, 10));
-        flash.write(0, &header).unwrap();
-        flash.write(HEADER_LEN as u32, &payload(7, 10)).unwrap();
-        let mut store = ParamStore::new(flash, 0, 1024).unwrap();
-        assert_eq!(store.active_sequence(), Some(u32::MAX));
-        assert_eq!(store.write(&payload(8, 10)), Ok(0));
-        let mut store = ParamStore::new(store.into_flash(), 0, 1024).unwrap();
-        assert_eq!(store.active_sequence(), Some(0));
-        assert_eq!(active(&mut store), Some(payload(8, 10)));
-    }
-
-    #[test]
-    fn a_flipped_bit_invalidates_only_its_own_slot() {
-        let mut store = ParamStore::new(RamFlash::<4096, 1024, 4>::new(), 0, 1024).unwrap();
-        store.write(&payload(1, 100)).unwrap();
-        store.write(&payload(2, 100)).unwrap();
-        let mut flash = store.into_flash();
-        // Slot 1 holds sequence 2; damage one payload bit there.
-        flash.memory_mut()[1024 + HEADER_LEN + 50] ^= 0x10;
-        let mut store = ParamStore::new(flash, 0, 1024).unwrap();
-        assert_eq!(store.active_sequence(), Some(1));
-        assert_eq!(active(&mut store), Some(payload(1, 100)));
-    }
-
-    #[test]
-    fn oversized_payload_and_bad_layouts_are_refused() {
-        let mut store = ParamStore::new(RamFlash::<4096, 1024, 4>::new(), 0, 1024).unwrap();
-        assert_eq!(
-            store.write(&[0; 1005]),
-            Err(StoreError::TooLarge {
-                len: 1005,
-                max: 1004
-            })
-        );
-        let geometry =
-            |base, size| ParamStore::new(RamFlash::<4096, 1024, 4>::new(), base, size).err();
-        assert_eq!(geometry(0, 1000), Some(StoreError::Geometry)); // not a sector multiple
-        assert_eq!(geometry(512, 1024), Some(StoreError::Geometry)); // base off a sector boundary
-        assert_eq!(geometry(2048, 2048), Some(StoreError::Geometry)); // past the end
-        assert_eq!(geometry(u32::MAX - 1023, 1024), Some(StoreError::Geometry));
-        // u32 overflow
-    }
-
-    /// Cut the power at every step of a write and check that a reboot finds old or new, intact.
-    /// Returns the number of cut points tested.
-    fn power_cut_at_every_step<const SIZE: usize, const ERASE: usize, const WRITE: usize>(
-        slot_size: u32,
-        old_len: usize,
-        new_len: usize,
-        writes_before: u8,
-    ) -> u32 {
-        // Prepare a flash holding `writes_before` earlier sets; the last is "old".
-        let mut store =
-            ParamStore::new(RamFlash::<SIZE, ERASE, WRITE>::new(), 0, slot_size).unwrap();
-        for version in 1..=writes_before {
-            store.write(&payload(version, old_len)).unwrap();
-        }
-        let mut prepared = store.into_flash();
-        prepared.restore_power(); // count steps of the write under test only
-        let old = (writes_before > 0).then(|| payload(writes_before, old_len));
-        let new = payload(writes_before + 1, new_len);
-
-        // The number of steps of an uninterrupted write bounds the cut points.
-        let mut probe = ParamStore::new(prepared.clone(), 0, slot_size).unwrap();
-        probe.write(&new).unwrap();
-        let total_steps = probe.into_flash().steps();
-        // One step per erased sector and per program word of the padded image: no step is skipped.
-        let sectors = slot_size as usize / ERASE;
-        let words = (HEADER_LEN + new_len).div_ceil(WRITE);
-        assert_eq!(total_steps as usize, sectors + words);
-
-        for cut in 0..=total_steps {
-            let mut flash = prepared.clone();
-            flash.cut_power_at_step(Some(cut));
-            let mut store = ParamStore::new(flash, 0, slot_size).unwrap();
-            let result = store.write(&new);
-            assert_eq!(result.is_ok(), cut == total_steps, "cut at step {cut}");
-            let mut flash = store.into_flash();
-            flash.restore_power();
-            let mut rebooted = ParamStore::new(flash, 0, slot_size).unwrap();
-            let found = active(&mut rebooted);
-            if cut == total_steps {
-                assert_eq!(found.as_ref(), Some(&new), "completed write must be active");
-            } else {
-                assert!(
-                    found == old || found.as_ref() == Some(&new),
-                    "cut at step {cut}: {found:?}"
-                );
-            }
-            // The device keeps working after the reboot.
-            rebooted.write(&payload(99, 40)).unwrap();
-            assert_eq!(active(&mut rebooted), Some(payload(99, 40)));
-        }
-        total_steps + 1
-    }
-
-    #[test]
-    fn power_cut_at_any_step_leaves_the_old_or_the_new_set() {
-        let mut tested = 0;
-        // Byte-programmable flash, slot of one sector, first write ever (old = none).
-        tested += power_cut_at_every_step::<4096, 1024, 1>(1024, 0, 300, 0);
-        // Byte-programmable, replacing an existing set (written into slot 1).
-        tested += power_cut_at_every_step::<4096, 1024, 1>(1024, 200, 300, 1);
-        // Word-programmable, replacing the set in slot 0 (two earlier writes), two sectors per slot.
-        tested += power_cut_at_every_step::<8192, 512, 4>(1024, 280, 700, 2);
-        // 8-byte program words, payload not a multiple of the word.
-        tested += power_cut_at_every_step::<8192, 2048, 8>(2048, 333, 1001, 3);
-        // (1 + 320) + (1 + 320) + (2 + 180) + (1 + 128) steps, each cut, plus 4 completed writes.
-        assert_eq!(tested, 957);
-        std::println!("power-cut points tested: {tested}");
-    }
-}
+mod tests;

@@ -1,5 +1,6 @@
-//! Square roots for the `no_std` core, which has no libm: Newton's iteration from a bit-level
-//! first guess. Only used off the per-sample path (reports and load-time checks).
+//! Square roots for `no_std` code without libm (this crate and the firmware core): Newton's
+//! iteration from a bit-level first guess. Meant for load-time checks and reports, not for a
+//! per-sample path.
 
 /// `√x` for `f32`; NaN for negative or NaN input.
 pub fn sqrt_f32(x: f32) -> f32 {
