@@ -354,6 +354,7 @@ fn to_json(result: &SensorResult) -> Value {
             "output_unit": result.output_unit,
             "condition_number": fit.condition_number,
             "iterations": fit.iterations,
+            "termination": fit.termination.map(|t| t.name()),
             "verdict": verdict(result, fit),
             "note": note,
         }),

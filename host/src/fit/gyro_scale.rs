@@ -13,9 +13,8 @@
 
 use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion};
 
-use super::covariance::{
-    calibration_std, normal_covariance, param_names, reduced_chi_square, FULL_MATRIX_LAYOUT,
-};
+use super::covariance::{calibration_std, normal_covariance, param_names, FULL_MATRIX_LAYOUT};
+use super::uncertainty::{scaled_covariance, NoiseLevel};
 use super::gyro_bias::fit_gyro_bias;
 use super::linalg::{condition_number, rms};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
@@ -160,15 +159,18 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
     let p0 = DVector::from_row_slice(a0.transpose().as_slice());
     let sol = levenberg_marquardt(&problem, p0, &LmOptions::default())
         .map_err(|e| e.into_fit_error("gyroscope scale (Tedaldi)"))?;
-    let n_res = sol.residuals.len();
-    let noise = reduced_chi_square(sol.cost, n_res, 9);
-    let covariance = normal_covariance(&sol.jtj).map(|c| c * noise.unwrap_or(0.0));
-    if covariance.is_none() {
-        return Err(FitError::Underdetermined(
-            "the motions do not turn the board about enough different axes to separate all nine \
-             gyroscope terms; add turns about each of the board's axes (not about the vertical)"
-                .into(),
-        ));
+    check_observability(&sol.jtj)?;
+    // One policy (`uncertainty`): the angle noise is unknown and estimated from the residual;
+    // without scatter to estimate it from (ν = 0 or an exact fit) there is no covariance.
+    let covariance = scaled_covariance(
+        normal_covariance(&sol.jtj),
+        sol.cost,
+        sol.residuals.len(),
+        9,
+        NoiseLevel::Unknown,
+    );
+    if let Some(cov) = &covariance {
+        check_precision(cov)?;
     }
     let std = covariance
         .as_ref()
@@ -193,8 +195,67 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
         std,
         condition_number: condition_number(&sol.jacobian),
         iterations: sol.iterations,
+        termination: Some(sol.termination),
         reference: 1.0,
     })
+}
+
+/// Largest condition number of the equilibrated information matrix accepted: beyond
+/// `1/√ε_mach` the covariance has lost half its digits to round-off, so the worst-determined
+/// combination of entries is fixed by the start, not by the data.
+const MAX_INFORMATION_CONDITION: f64 = 6.7e7;
+
+/// Largest one-sigma uncertainty accepted on an entry of `A` (nominally 1): beyond 0.1 a gain
+/// or cross-axis term is not known to 10 %, i.e. the data do not determine it.
+const MAX_ENTRY_STD: f64 = 0.1;
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// The raw gyroscope axis (column of `A`) that carries most of a 9-vector over `A`'s entries.
+fn dominant_axis(v: &DVector<f64>) -> &'static str {
+    let weight = |c: usize| (0..3).map(|r| v[3 * r + c].powi(2)).sum::<f64>();
+    let c = (0..3)
+        .max_by(|&a, &b| weight(a).total_cmp(&weight(b)))
+        .unwrap_or(0);
+    AXES[c]
+}
+
+fn lacking_rotation(axis: &str) -> FitError {
+    FitError::Underdetermined(format!(
+        "the motions barely turn the board about its gyroscope {axis} axis, so the terms of that \
+         axis are not determined; add turns of at least 90° about {axis} (not about the vertical)"
+    ))
+}
+
+/// Refuse a nearly unobservable direction: condition number of the equilibrated information.
+fn check_observability(jtj: &DMatrix<f64>) -> Result<(), FitError> {
+    let d: Vec<f64> = (0..9).map(|i| jtj[(i, i)].max(0.0).sqrt()).collect();
+    if let Some(c) = d.iter().position(|v| *v == 0.0 || !v.is_finite()) {
+        return Err(lacking_rotation(AXES[c % 3]));
+    }
+    let scaled = DMatrix::from_fn(9, 9, |i, j| jtj[(i, j)] / (d[i] * d[j]));
+    let eig = scaled.symmetric_eigen();
+    let (k_min, min) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .map_or((0, 0.0), |(k, v)| (k, *v));
+    let max = eig.eigenvalues.max();
+    if !(min > 0.0 && max / min <= MAX_INFORMATION_CONDITION) {
+        let v = eig.eigenvectors.column(k_min).into_owned();
+        return Err(lacking_rotation(dominant_axis(&v)));
+    }
+    Ok(())
+}
+
+/// Refuse when an entry's uncertainty shows the motions do not determine it.
+fn check_precision(cov: &DMatrix<f64>) -> Result<(), FitError> {
+    let sd = DVector::from_fn(9, |i, _| cov[(i, i)].max(0.0).sqrt());
+    if sd.amax() > MAX_ENTRY_STD {
+        return Err(lacking_rotation(dominant_axis(&sd)));
+    }
+    Ok(())
 }
 
 /// Still time (seconds) kept on each side of a motion: the hold boundaries come from windowed

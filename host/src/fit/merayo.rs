@@ -16,6 +16,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::uncertainty::{noise_scale, NoiseLevel};
 use super::covariance::{calibration_std, param_names, UPPER_TRIANGULAR_LAYOUT};
 use super::linalg::{least_squares, rms};
 use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
@@ -135,9 +136,11 @@ fn fit_merayo_unchecked(
 
     // Covariance: residual variance of the linear fit, propagated through ellipsoid_params.
     let fit_residual = &design * &theta - DVector::from_element(n, 1.0);
-    let sigma2 = fit_residual.norm_squared() / (n - 9) as f64;
+    // Noise unknown: estimated from the residual by the common policy (`uncertainty`).
+    let sigma2 = noise_scale(fit_residual.norm_squared(), n, 9, NoiseLevel::Unknown)
+        .map(|s| s.variance_factor);
     let covariance = (design.transpose() * &design).cholesky().and_then(|c| {
-        let cov_theta = c.inverse() * sigma2;
+        let cov_theta = c.inverse() * sigma2?;
         let mut g = DMatrix::zeros(9, 9);
         for k in 0..9 {
             let h = 1e-6 * theta[k].abs().max(1e-3);
@@ -171,6 +174,7 @@ fn fit_merayo_unchecked(
         std,
         condition_number: ls.condition_number,
         iterations: 0,
+        termination: None,
         reference,
     })
 }

@@ -65,6 +65,7 @@ pub fn fit_minmax(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
         std,
         condition_number: 1.0,
         iterations: 0,
+        termination: None,
         reference,
     })
 }

@@ -21,6 +21,7 @@ pub mod merayo;
 pub mod minmax;
 pub mod norm_lm;
 pub mod six_position;
+pub mod uncertainty;
 pub mod validate;
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
@@ -109,6 +110,10 @@ pub struct Fit {
     pub condition_number: f64,
     /// Iterations used (0 for closed-form methods).
     pub iterations: usize,
+    /// Why the iterative solver stopped (`None` for closed-form methods and for the methods
+    /// with their own Gauss–Newton loop). Always a convergence reason: a solver that stopped
+    /// for any other reason makes the fit fail with [`FitError::NotConverged`].
+    pub termination: Option<lm::Termination>,
     /// Reference magnitude the fit was normalised to (g, field strength, or 1).
     pub reference: f64,
 }
@@ -138,6 +143,7 @@ impl Fit {
             std: None,
             condition_number,
             iterations: 0,
+            termination: None,
             reference,
         }
     }

@@ -30,6 +30,7 @@ use super::linalg::upper_triangular_gauge;
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
 use super::loo::leave_one_out_rms;
 use super::six_position::fit_six_position;
+use super::uncertainty::{scaled_covariance, NoiseLevel};
 use super::validate::{
     check_finite_points, check_finite_poses, guard_fit, CoverageHint, EllipsoidModel,
 };
@@ -72,8 +73,9 @@ impl NormObservations {
 pub struct NormLmOptions {
     /// Solver settings.
     pub lm: LmOptions,
-    /// `true` when `sigma` is the real noise (covariance = `(JᵀJ)⁻¹`); `false` when it is only
-    /// relative, so the covariance is scaled by the reduced chi-square.
+    /// `true` when `sigma` is the real noise (covariance `(JᵀJ)⁻¹`, inflated by the Birge ratio
+    /// when the scatter exceeds it); `false` when it is only relative, so the noise is estimated
+    /// from the residual. See [`super::uncertainty`].
     pub noise_known: bool,
     /// Remove the `σ_t²/(2n)` lengthening of each norm by tangential noise in the final pass
     /// (with unknown noise, σ is first estimated from the residual).
@@ -347,16 +349,20 @@ pub fn refine_lm_detailed(
     let to_natural: Vec<f64> = (0..9)
         .map(|k| signs[k] * if k < 6 { reference / s } else { s })
         .collect();
-    let covariance = normal_covariance(&sol.jtj).map(|cov_scaled| {
-        let noise_factor = if opts.noise_known {
-            1.0
-        } else {
-            chi2_red.unwrap_or(1.0)
-        };
-        DMatrix::from_fn(9, 9, |i, j| {
-            cov_scaled[(i, j)] * to_natural[i] * to_natural[j] * noise_factor
-        })
-    });
+    // One policy for every fit (`uncertainty`): Birge-inflated with known noise, estimated
+    // from the residual otherwise.
+    let level = if opts.noise_known {
+        NoiseLevel::Known
+    } else {
+        NoiseLevel::Unknown
+    };
+    let covariance = scaled_covariance(normal_covariance(&sol.jtj), sol.cost, n, 9, level).map(
+        |cov_scaled| {
+            DMatrix::from_fn(9, 9, |i, j| {
+                cov_scaled[(i, j)] * to_natural[i] * to_natural[j]
+            })
+        },
+    );
     let std = covariance
         .as_ref()
         .map(|c| calibration_std(c, &UPPER_TRIANGULAR_LAYOUT));
@@ -377,6 +383,7 @@ pub fn refine_lm_detailed(
         std,
         condition_number: condition_number(&sol.jacobian),
         iterations,
+        termination: Some(sol.termination),
         reference,
     };
     Ok(NormLmOutcome {

@@ -438,6 +438,7 @@ mod tests {
             std: None,
             condition_number: 1.0,
             iterations: 0,
+            termination: None,
             reference: 9.8,
         };
         let got = max_norm_sigma(&fit).expect("a covariance");
