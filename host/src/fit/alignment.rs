@@ -217,7 +217,8 @@ pub fn fit_alignment(accel: &[Vec3], mag: &[Vec3]) -> Result<Alignment, FitError
     }
     // One policy (`uncertainty`): the angle noise is estimated from the residual; a noise-free
     // (exact) fit has no estimate, and its σ are NaN rather than a false zero.
-    let covariance = scaled_covariance(unit_covariance, cost, n, 4, NoiseLevel::Unknown);
+    let covariance =
+        scaled_covariance(unit_covariance, cost, n, 4, NoiseLevel::Unknown).map(|s| s.covariance);
     let sd = |k: usize| {
         covariance
             .as_ref()

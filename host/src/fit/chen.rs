@@ -25,7 +25,7 @@ use super::linalg::{
 };
 use super::loo::leave_one_out_rms;
 use super::six_position::six_position_calibration;
-use super::uncertainty::{scaled_covariance, NoiseLevel};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{
     check_distinct, check_finite_poses, check_reference, check_spread, find_faces, MIN_SPREAD_DEG,
 };
@@ -104,6 +104,7 @@ fn fit_chen_unchecked(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
         condition_number: refined.condition_number,
         iterations: refined.iterations,
         termination: None,
+        coverage_factor: refined.coverage_factor,
         reference,
     })
 }
@@ -133,6 +134,8 @@ pub struct Refined {
     pub iterations: usize,
     /// Covariance of the 9 unknowns, if a noise estimate exists.
     pub covariance: Option<DMatrix<f64>>,
+    /// `k` such that `±k·σ` is a 95 % interval ([`super::uncertainty`]).
+    pub coverage_factor: f64,
     /// Condition number of the weighted 9-column Jacobian at the solution.
     pub condition_number: f64,
 }
@@ -244,12 +247,14 @@ pub fn refine_norm_model(
     } else {
         NoiseLevel::Unknown
     };
-    let covariance =
-        scaled_covariance(inverse_spd(&normal), chi_square, poses.len(), 9, level);
+    let scaled = scaled_covariance(inverse_spd(&normal), chi_square, poses.len(), 9, level);
+    let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
+    let covariance = scaled.map(|s| s.covariance);
     Ok(Refined {
         cal,
         iterations,
         covariance,
+        coverage_factor,
         condition_number,
     })
 }

@@ -12,7 +12,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::covariance::normal_covariance;
-use super::uncertainty::{scaled_covariance, NoiseLevel};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::linalg::{condition_number, rms};
 use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
@@ -172,13 +172,15 @@ fn fit_frosio_unchecked(
     let (r, j) = residuals_and_jacobian(&p, points, reference);
     let chi2 = r.norm_squared();
     // Noise unknown: estimated from the residual by the common policy (`uncertainty`).
-    let covariance = scaled_covariance(
+    let scaled = scaled_covariance(
         normal_covariance(&(j.transpose() * &j)),
         chi2,
         points.len(),
         9,
         NoiseLevel::Unknown,
     );
+    let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
+    let covariance = scaled.map(|s| s.covariance);
     let std = covariance.as_ref().map(|c| {
         let s = |k: usize| c[(k, k)].max(0.0).sqrt();
         CalibrationStd {
@@ -202,6 +204,7 @@ fn fit_frosio_unchecked(
         condition_number: condition_number(&j),
         iterations,
         termination: None,
+        coverage_factor,
         reference,
     })
 }

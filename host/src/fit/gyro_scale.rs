@@ -14,7 +14,7 @@
 use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion};
 
 use super::covariance::{calibration_std, normal_covariance, param_names, FULL_MATRIX_LAYOUT};
-use super::uncertainty::{scaled_covariance, NoiseLevel};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::gyro_bias::fit_gyro_bias;
 use super::linalg::{condition_number, rms};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
@@ -162,13 +162,15 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
     check_observability(&sol.jtj)?;
     // One policy (`uncertainty`): the angle noise is unknown and estimated from the residual;
     // without scatter to estimate it from (ν = 0 or an exact fit) there is no covariance.
-    let covariance = scaled_covariance(
+    let scaled = scaled_covariance(
         normal_covariance(&sol.jtj),
         sol.cost,
         sol.residuals.len(),
         9,
         NoiseLevel::Unknown,
     );
+    let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
+    let covariance = scaled.map(|s| s.covariance);
     if let Some(cov) = &covariance {
         check_precision(cov)?;
     }
@@ -196,6 +198,7 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
         condition_number: condition_number(&sol.jacobian),
         iterations: sol.iterations,
         termination: Some(sol.termination),
+        coverage_factor,
         reference: 1.0,
     })
 }

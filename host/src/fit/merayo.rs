@@ -16,7 +16,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::uncertainty::{noise_scale, NoiseLevel};
+use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
 use super::covariance::{calibration_std, param_names, UPPER_TRIANGULAR_LAYOUT};
 use super::linalg::{least_squares, rms};
 use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
@@ -137,8 +137,9 @@ fn fit_merayo_unchecked(
     // Covariance: residual variance of the linear fit, propagated through ellipsoid_params.
     let fit_residual = &design * &theta - DVector::from_element(n, 1.0);
     // Noise unknown: estimated from the residual by the common policy (`uncertainty`).
-    let sigma2 = noise_scale(fit_residual.norm_squared(), n, 9, NoiseLevel::Unknown)
-        .map(|s| s.variance_factor);
+    let scale = noise_scale(fit_residual.norm_squared(), n, 9, NoiseLevel::Unknown);
+    let coverage_factor = scale.map_or(Z_95, |s| s.coverage_factor);
+    let sigma2 = scale.map(|s| s.variance_factor);
     let covariance = (design.transpose() * &design).cholesky().and_then(|c| {
         let cov_theta = c.inverse() * sigma2?;
         let mut g = DMatrix::zeros(9, 9);
@@ -175,6 +176,7 @@ fn fit_merayo_unchecked(
         condition_number: ls.condition_number,
         iterations: 0,
         termination: None,
+        coverage_factor,
         reference,
     })
 }

@@ -114,6 +114,10 @@ pub struct Fit {
     /// with their own Gauss–Newton loop). Always a convergence reason: a solver that stopped
     /// for any other reason makes the fit fail with [`FitError::NotConverged`].
     pub termination: Option<lm::Termination>,
+    /// `k` such that `±k·σ` (from `std`) is a 95 % interval: 1.96 with known noise that the
+    /// residuals agree with, Student's t when the noise scale was estimated (see
+    /// [`uncertainty`]).
+    pub coverage_factor: f64,
     /// Reference magnitude the fit was normalised to (g, field strength, or 1).
     pub reference: f64,
 }
@@ -144,6 +148,7 @@ impl Fit {
             condition_number,
             iterations: 0,
             termination: None,
+            coverage_factor: crate::fit::uncertainty::Z_95,
             reference,
         }
     }

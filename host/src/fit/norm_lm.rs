@@ -30,7 +30,7 @@ use super::linalg::upper_triangular_gauge;
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
 use super::loo::leave_one_out_rms;
 use super::six_position::fit_six_position;
-use super::uncertainty::{scaled_covariance, NoiseLevel};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{
     check_finite_points, check_finite_poses, guard_fit, CoverageHint, EllipsoidModel,
 };
@@ -356,13 +356,13 @@ pub fn refine_lm_detailed(
     } else {
         NoiseLevel::Unknown
     };
-    let covariance = scaled_covariance(normal_covariance(&sol.jtj), sol.cost, n, 9, level).map(
-        |cov_scaled| {
-            DMatrix::from_fn(9, 9, |i, j| {
-                cov_scaled[(i, j)] * to_natural[i] * to_natural[j]
-            })
-        },
-    );
+    let scaled = scaled_covariance(normal_covariance(&sol.jtj), sol.cost, n, 9, level);
+    let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
+    let covariance = scaled.map(|s| {
+        DMatrix::from_fn(9, 9, |i, j| {
+            s.covariance[(i, j)] * to_natural[i] * to_natural[j]
+        })
+    });
     let std = covariance
         .as_ref()
         .map(|c| calibration_std(c, &UPPER_TRIANGULAR_LAYOUT));
@@ -384,6 +384,7 @@ pub fn refine_lm_detailed(
         condition_number: condition_number(&sol.jacobian),
         iterations,
         termination: Some(sol.termination),
+        coverage_factor,
         reference,
     };
     Ok(NormLmOutcome {

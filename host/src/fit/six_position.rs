@@ -10,7 +10,7 @@ use nalgebra::DMatrix;
 
 use super::linalg::{least_squares, rms, std_from_covariance};
 use super::loo::leave_one_out_rms_indexed;
-use super::uncertainty::{noise_scale, NoiseLevel};
+use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
 use super::validate::{
     check_finite_poses, check_reference, check_spread, face_of, median_centre, FACE_TOLERANCE_DEG,
     MIN_SPREAD_DEG,
@@ -51,7 +51,10 @@ pub fn fit_six_position(
         solve(rest, &rest_dirs, reference).map(|s| s.cal)
     });
 
-    let covariance = covariance(poses, &dirs, &solved, reference);
+    let (covariance, coverage_factor) = match covariance(poses, &dirs, &solved, reference) {
+        Some((cov, k)) => (Some(cov), k),
+        None => (None, Z_95),
+    };
     let std = covariance.as_ref().map(|cov| {
         let s = std_from_covariance(cov);
         CalibrationStd {
@@ -72,6 +75,7 @@ pub fn fit_six_position(
         condition_number: solved.condition_number,
         iterations: 0,
         termination: None,
+        coverage_factor,
         reference,
     })
 }
@@ -209,7 +213,13 @@ fn solve(poses: &[Pose], dirs: &[Vec3], reference: f64) -> Result<Solved, FitErr
 }
 
 /// Linear LS covariance of `(A, b)` (see [`fit_six_position`]); `None` if no noise estimate exists.
-fn covariance(poses: &[Pose], dirs: &[Vec3], s: &Solved, reference: f64) -> Option<DMatrix<f64>> {
+/// The covariance and its 95 % coverage factor ([`super::uncertainty`]).
+fn covariance(
+    poses: &[Pose],
+    dirs: &[Vec3],
+    s: &Solved,
+    reference: f64,
+) -> Option<(DMatrix<f64>, f64)> {
     let n = poses.len();
     let a = s.cal.a;
     // Per output axis: the noise of output j in pose i is Σ_k A_jk² var(mean_ik). The variance
@@ -222,6 +232,7 @@ fn covariance(poses: &[Pose], dirs: &[Vec3], s: &Solved, reference: f64) -> Opti
     };
     let known = poses.iter().all(|p| (0..3).all(|j| noise_of(p, j) > 0.0));
     let mut sigma_sq = [0.0; 3];
+    let mut coverage_factor = Z_95;
     for (j, sj) in sigma_sq.iter_mut().enumerate() {
         let residual = |p: &Pose, u: &Vec3| s.cal.apply(&p.mean)[j] - u[j] * reference;
         let (chi_square, level) = if known {
@@ -235,7 +246,9 @@ fn covariance(poses: &[Pose], dirs: &[Vec3], s: &Solved, reference: f64) -> Opti
             let rss: f64 = poses.iter().zip(dirs).map(|(p, u)| residual(p, u).powi(2)).sum();
             (rss, NoiseLevel::Unknown)
         };
-        let factor = noise_scale(chi_square, n, 4, level)?.variance_factor;
+        let scale = noise_scale(chi_square, n, 4, level)?;
+        coverage_factor = coverage_factor.max(scale.coverage_factor);
+        let factor = scale.variance_factor;
         // Known noise: the unit covariance carries the mean pose noise; unknown: unit weights.
         let unit = if known {
             poses.iter().map(|p| noise_of(p, j)).sum::<f64>() / n as f64
@@ -273,5 +286,7 @@ fn covariance(poses: &[Pose], dirs: &[Vec3], s: &Solved, reference: f64) -> Opti
         }
     }
     let cov = &jac * cov_theta * jac.transpose();
-    cov.iter().all(|v| v.is_finite()).then_some(cov)
+    cov.iter()
+        .all(|v| v.is_finite())
+        .then_some((cov, coverage_factor))
 }

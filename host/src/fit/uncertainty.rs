@@ -1,20 +1,20 @@
 //! One uncertainty policy for every fit: how the covariance from the Jacobian at the solution is
-//! scaled by what the residuals say about the noise.
+//! scaled by what the residuals say about the noise, and which factor turns σ into a 95 %
+//! interval.
 //!
 //! The unit covariance `(JᵀJ)⁻¹` (residuals divided by their assumed σ) is multiplied by a
 //! variance factor:
-//! - **known noise** (per-pose variances): the Birge ratio `R_B² = χ²/ν` (R. T. Birge 1932),
-//!   ν = N − P residual degrees of freedom, tests whether the scatter matches the assumed noise.
-//!   The 95 % interval reported is the wider of the known-noise interval (factor 1) and the
-//!   interval with the scale estimated from the residuals (factor `χ²/ν`, Student-t with ν
-//!   degrees of freedom): `max(1, w_ν·χ²/ν)`. Placement error, tremor and correlated samples
-//!   all show up as `χ²/ν > 1`, whatever their cause.
-//! - **unknown noise** (relative weights only): the scale is estimated, factor `w_ν·χ²/ν`; with
+//! - **known noise** (per-pose variances): the Birge ratio `R_B² = χ²/ν` (R. T. Birge 1932; the
+//!   Particle Data Group's scale factor), ν = N − P residual degrees of freedom; the covariance
+//!   is inflated by `max(1, χ²/ν)`. Placement error, tremor, drift between holds and correlated
+//!   samples (an effective sample size below n) all show up as `χ²/ν > 1`, whatever the cause.
+//! - **unknown noise** (relative weights only): the scale is estimated, factor `χ²/ν`; with
 //!   ν = 0 or χ² = 0 there is no estimate and no covariance (never a zero covariance).
 //!
-//! `w_ν = (t_{0.975,ν}/z_{0.975})²` widens σ so that `±1.96σ` is the Student-t 95 % interval: an
-//! estimated scale with few degrees of freedom is itself uncertain (with 12 poses and 9
-//! parameters ν = 3 and `t = 3.18`). The reported σ are thus "95 %-calibrated": use `±1.96σ`.
+//! The 95 % interval is `±k·σ` (GUM's expanded uncertainty, JCGM 100:2008 §6): with unknown noise
+//! `k = t_{0.975,ν}` (an estimated scale is itself uncertain: 12 poses and 9 parameters leave
+//! ν = 3 and `t = 3.18`); with known noise the interval is the wider of the known-noise one
+//! (`1.96·σ₀`) and the estimated-scale one (`t·σ₀·√(χ²/ν)`), so `k` is continuous in `χ²/ν`.
 
 use nalgebra::DMatrix;
 
@@ -35,15 +35,17 @@ pub enum NoiseLevel {
 pub struct NoiseScale {
     /// Factor multiplying `(JᵀJ)⁻¹`.
     pub variance_factor: f64,
+    /// `k` such that `±k·σ` is the 95 % interval of each parameter.
+    pub coverage_factor: f64,
     /// `χ²/ν`, `None` when ν = 0.
     pub reduced_chi_square: Option<f64>,
     /// Residual degrees of freedom ν = N − P (0 when N ≤ P).
     pub dof: usize,
 }
 
-/// The variance factor of the policy in the module comment, for `chi_square` over `residuals`
-/// residuals and `params` parameters. `None` when the noise is unknown and cannot be estimated
-/// (ν = 0, or an exact fit, or a non-finite χ²).
+/// The scale of the policy in the module comment, for `chi_square` over `residuals` residuals
+/// and `params` parameters. `None` when the noise is unknown and cannot be estimated (ν = 0, an
+/// exact fit, or a non-finite χ²).
 pub fn noise_scale(
     chi_square: f64,
     residuals: usize,
@@ -55,46 +57,63 @@ pub fn noise_scale(
     }
     let dof = residuals.saturating_sub(params);
     let reduced = (dof > 0).then(|| chi_square / dof as f64);
-    let estimated = reduced.map(|r| r * t_widening(dof));
-    let variance_factor = match noise {
-        NoiseLevel::Known => estimated.map_or(1.0, |e| e.max(1.0)),
-        NoiseLevel::Unknown => estimated.filter(|e| *e > 0.0)?,
+    let (variance_factor, coverage_factor) = match (noise, reduced) {
+        (NoiseLevel::Known, None) => (1.0, Z_95),
+        (NoiseLevel::Known, Some(rc)) => {
+            let factor = rc.max(1.0);
+            let half_width = Z_95.max(student_t_975(dof) * rc.sqrt());
+            (factor, half_width / factor.sqrt())
+        }
+        (NoiseLevel::Unknown, None) => return None,
+        (NoiseLevel::Unknown, Some(rc)) => {
+            if rc <= 0.0 {
+                return None;
+            }
+            (rc, student_t_975(dof))
+        }
     };
     Some(NoiseScale {
         variance_factor,
+        coverage_factor,
         reduced_chi_square: reduced,
         dof,
     })
 }
 
-/// `cov·factor` of [`noise_scale`]; `None` when the scale is not available.
+/// A covariance scaled by the policy, with its 95 % coverage factor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScaledCovariance {
+    /// The parameter covariance.
+    pub covariance: DMatrix<f64>,
+    /// `k` such that `±k·σ` is the 95 % interval.
+    pub coverage_factor: f64,
+}
+
+/// `cov·factor` of [`noise_scale`]; `None` when the unit covariance or the scale is not available.
 pub fn scaled_covariance(
     unit_covariance: Option<DMatrix<f64>>,
     chi_square: f64,
     residuals: usize,
     params: usize,
     noise: NoiseLevel,
-) -> Option<DMatrix<f64>> {
+) -> Option<ScaledCovariance> {
     let scale = noise_scale(chi_square, residuals, params, noise)?;
-    unit_covariance.map(|c| c * scale.variance_factor)
+    unit_covariance.map(|c| ScaledCovariance {
+        covariance: c * scale.variance_factor,
+        coverage_factor: scale.coverage_factor,
+    })
 }
 
-/// `(t_{0.975,ν}/z_{0.975})²`: the variance widening that makes `±1.96σ` a 95 % interval when σ
-/// is estimated with ν degrees of freedom (1 for ν = 0, where nothing is estimated).
-pub fn t_widening(dof: usize) -> f64 {
-    if dof == 0 {
-        return 1.0;
-    }
-    (student_t_975(dof) / Z_95).powi(2)
-}
-
-/// Upper 97.5 % quantile of Student's t with ν degrees of freedom: exact for ν = 1, 2, and the
-/// Cornish–Fisher expansion in 1/ν (Abramowitz & Stegun 26.7.5) beyond, within 0.1 % for ν ≥ 3.
+/// Upper 97.5 % quantile of Student's t with ν degrees of freedom: tabulated for ν ≤ 5, and the
+/// Cornish–Fisher expansion in 1/ν (Abramowitz & Stegun 26.7.5) beyond, within 0.01 % for ν ≥ 6.
 pub fn student_t_975(dof: usize) -> f64 {
     match dof {
         0 => f64::INFINITY,
         1 => 12.706_204_736_174_7,
         2 => 4.302_652_729_749_46,
+        3 => 3.182_446_305_284_26,
+        4 => 2.776_445_105_197_8,
+        5 => 2.570_581_835_636_31,
         _ => {
             let z = Z_95;
             let n = dof as f64;
@@ -118,7 +137,7 @@ mod tests {
     #[test]
     fn student_t_quantiles_match_the_tables() {
         // Tabulated t_{0.975,ν} (e.g. NIST/SEMATECH handbook, table 1.3.6.7.2), 4 digits.
-        for (dof, t) in [(3, 3.182), (5, 2.571), (9, 2.262), (15, 2.131), (30, 2.042)] {
+        for (dof, t) in [(3, 3.182), (6, 2.447), (9, 2.262), (15, 2.131), (30, 2.042)] {
             assert!((student_t_975(dof) - t).abs() < 2e-3, "ν = {dof}");
         }
         assert!((student_t_975(100_000) - Z_95).abs() < 1e-4);
@@ -126,13 +145,22 @@ mod tests {
 
     #[test]
     fn known_noise_is_inflated_only_when_the_scatter_exceeds_it() {
-        // χ²/ν = 0.5 with ν = 100: the data agree with the noise; factor 1.
+        // χ²/ν = 0.5 with ν = 100: the data agree with the noise; factor 1, interval ±1.96σ.
         let s = noise_scale(50.0, 109, 9, NoiseLevel::Known).unwrap();
         assert_eq!(s.variance_factor, 1.0);
-        // χ²/ν = 9.6 (the Xsens case): σ grows by about √9.6 ≈ 3.1 (×t widening, ν = 100).
+        assert_eq!(s.coverage_factor, Z_95);
+        // χ²/ν = 9.6 (the Xsens case): σ grows by √9.6 ≈ 3.1, the interval uses t with ν = 100.
         let s = noise_scale(960.0, 109, 9, NoiseLevel::Known).unwrap();
-        assert!((s.variance_factor / (9.6 * t_widening(100)) - 1.0).abs() < 1e-12);
-        assert!(s.variance_factor > 9.6 && s.variance_factor < 10.0);
+        assert!((s.variance_factor - 9.6).abs() < 1e-12);
+        assert!((s.coverage_factor - student_t_975(100)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_coverage_factor_is_continuous_where_the_birge_ratio_crosses_one() {
+        let below = noise_scale(2.999_999, 12, 9, NoiseLevel::Known).unwrap();
+        let above = noise_scale(3.000_001, 12, 9, NoiseLevel::Known).unwrap();
+        assert!((below.coverage_factor - above.coverage_factor).abs() < 1e-5);
+        assert!((above.coverage_factor - 3.182).abs() < 1e-3);
     }
 
     #[test]

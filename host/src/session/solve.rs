@@ -439,6 +439,7 @@ mod tests {
             condition_number: 1.0,
             iterations: 0,
             termination: None,
+            coverage_factor: crate::fit::uncertainty::Z_95,
             reference: 9.8,
         };
         let got = max_norm_sigma(&fit).expect("a covariance");
