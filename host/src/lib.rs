@@ -3,6 +3,7 @@
 #![forbid(unsafe_code)]
 
 pub mod analysis;
+pub mod coverage;
 pub mod device;
 pub mod export;
 pub mod fit;

@@ -13,8 +13,8 @@
 use nalgebra::{DMatrix, DVector, Rotation3};
 
 use super::covariance::normal_covariance;
-use super::uncertainty::{scaled_covariance, NoiseLevel};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use super::uncertainty::{scaled_covariance, NoiseLevel};
 use super::{Calibration, FitError, Mat3, Vec3};
 
 /// The fitted alignment.

@@ -12,8 +12,8 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::covariance::normal_covariance;
-use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::linalg::{condition_number, rms};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
 

@@ -14,10 +14,10 @@
 use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion};
 
 use super::covariance::{calibration_std, normal_covariance, param_names, FULL_MATRIX_LAYOUT};
-use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::gyro_bias::fit_gyro_bias;
 use super::linalg::{condition_number, rms};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
 use crate::recording::{Recording, Sensor};
 use crate::still::StillReport;

@@ -226,7 +226,14 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             ));
         }
         if cost <= zero_cost {
-            return Ok(finish(problem, p, r, cost, evaluations, Termination::ExactFit));
+            return Ok(finish(
+                problem,
+                p,
+                r,
+                cost,
+                evaluations,
+                Termination::ExactFit,
+            ));
         }
         if gradient_cosine(&jac, &grad, cost) <= opts.gradient_tolerance {
             return Ok(finish(
@@ -263,8 +270,8 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
         // Both tests are made on the Gauss–Newton step (λ = 0), the best the linear model can
         // do: a step that is short only because λ is large is not convergence. Without a
         // Gauss–Newton step (singular JᵀJ) the damped step stands in when λ ≤ 1.
-        let gauss_newton = damped_step(&jtj, &grad, 0.0)
-            .or_else(|| (lambda <= 1.0).then(|| step.clone()));
+        let gauss_newton =
+            damped_step(&jtj, &grad, 0.0).or_else(|| (lambda <= 1.0).then(|| step.clone()));
         let xtol_bound = opts.step_tolerance * (p.norm() + opts.step_tolerance);
         let step_converged = gauss_newton
             .as_ref()

@@ -56,8 +56,8 @@ fn linear_problem_is_solved_by_the_first_undamped_step() {
         initial_lambda: 0.0,
         ..LmOptions::default()
     };
-    let sol = levenberg_marquardt(&Line { t, y }, DVector::from_vec(vec![-50.0, 40.0]), &opts)
-        .unwrap();
+    let sol =
+        levenberg_marquardt(&Line { t, y }, DVector::from_vec(vec![-50.0, 40.0]), &opts).unwrap();
     // The first step lands on the minimum (to round-off); the second only confirms it.
     assert!(sol.iterations <= 2, "iterations = {}", sol.iterations);
     assert!((sol.params[0] - 2.0).abs() < 1e-10 && (sol.params[1] - 3.0).abs() < 1e-10);
@@ -124,8 +124,8 @@ fn an_exhausted_budget_is_reported_as_not_converged() {
         max_iterations: 2,
         ..LmOptions::default()
     };
-    let err = levenberg_marquardt(&Rosenbrock, DVector::from_vec(vec![-1.2, 1.0]), &opts)
-        .unwrap_err();
+    let err =
+        levenberg_marquardt(&Rosenbrock, DVector::from_vec(vec![-1.2, 1.0]), &opts).unwrap_err();
     assert_eq!(err.iterations, 2);
 }
 
@@ -155,10 +155,22 @@ impl LeastSquaresProblem for PowellSingular {
             4,
             4,
             &[
-                1.0, 10.0, 0.0, 0.0, //
-                0.0, 0.0, s5, -s5, //
-                0.0, d3, -2.0 * d3, 0.0, //
-                d4, 0.0, 0.0, -d4,
+                1.0,
+                10.0,
+                0.0,
+                0.0, //
+                0.0,
+                0.0,
+                s5,
+                -s5, //
+                0.0,
+                d3,
+                -2.0 * d3,
+                0.0, //
+                d4,
+                0.0,
+                0.0,
+                -d4,
             ],
         )
     }
@@ -241,8 +253,16 @@ fn brown_badly_scaled_reaches_its_minimum_across_twelve_decades() {
     )
     .expect("Brown badly scaled converges");
     // Zero-residual problem: each parameter to a relative 1e-8 despite the 10¹² spread.
-    assert!((sol.params[0] / 1e6 - 1.0).abs() < 1e-8, "x1 = {}", sol.params[0]);
-    assert!((sol.params[1] / 2e-6 - 1.0).abs() < 1e-8, "x2 = {}", sol.params[1]);
+    assert!(
+        (sol.params[0] / 1e6 - 1.0).abs() < 1e-8,
+        "x1 = {}",
+        sol.params[0]
+    );
+    assert!(
+        (sol.params[1] / 2e-6 - 1.0).abs() < 1e-8,
+        "x2 = {}",
+        sol.params[1]
+    );
     assert!(sol.termination.is_converged(), "{:?}", sol.termination);
 }
 
@@ -255,9 +275,21 @@ fn freudenstein_roth_stops_in_the_known_local_minimum_by_a_convergence_test() {
     )
     .expect("Freudenstein-Roth converges to its local minimum");
     // MGH report F = 48.9842 (to the digits printed) at the local minimum.
-    assert!((sol.cost - 48.984_253_679_8).abs() < 1e-6, "F = {}", sol.cost);
-    assert!((sol.params[0] - 11.4128).abs() < 1e-3, "x1 = {}", sol.params[0]);
-    assert!((sol.params[1] + 0.896_805).abs() < 1e-5, "x2 = {}", sol.params[1]);
+    assert!(
+        (sol.cost - 48.984_253_679_8).abs() < 1e-6,
+        "F = {}",
+        sol.cost
+    );
+    assert!(
+        (sol.params[0] - 11.4128).abs() < 1e-3,
+        "x1 = {}",
+        sol.params[0]
+    );
+    assert!(
+        (sol.params[1] + 0.896_805).abs() < 1e-5,
+        "x2 = {}",
+        sol.params[1]
+    );
     // A non-zero residual: it is the cost or gradient test that holds, not an exact fit.
     assert!(
         matches!(
@@ -303,8 +335,12 @@ fn a_residual_the_jacobian_does_not_describe_is_a_failure_not_a_minimum() {
             DMatrix::from_element(1, 1, -1.0)
         }
     }
-    let err = levenberg_marquardt(&WrongSign, DVector::from_vec(vec![0.0]), &LmOptions::default())
-        .unwrap_err();
+    let err = levenberg_marquardt(
+        &WrongSign,
+        DVector::from_vec(vec![0.0]),
+        &LmOptions::default(),
+    )
+    .unwrap_err();
     assert_eq!(err.termination, Termination::DampingOverflow);
     assert!(!err.termination.is_converged());
 }
@@ -325,8 +361,8 @@ fn the_budget_failure_names_its_reason() {
         max_iterations: 3,
         ..LmOptions::default()
     };
-    let err = levenberg_marquardt(&Rosenbrock, DVector::from_vec(vec![-1.2, 1.0]), &opts)
-        .unwrap_err();
+    let err =
+        levenberg_marquardt(&Rosenbrock, DVector::from_vec(vec![-1.2, 1.0]), &opts).unwrap_err();
     assert_eq!(err.termination, Termination::EvaluationBudget);
     let message = err.into_fit_error("lm").to_string();
     assert!(message.contains("evaluation_budget"), "{message}");

@@ -16,9 +16,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
 use super::covariance::{calibration_std, param_names, UPPER_TRIANGULAR_LAYOUT};
 use super::linalg::{least_squares, rms};
+use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
 use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
 use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
 

@@ -243,7 +243,11 @@ fn covariance(
                 .sum();
             (chi, NoiseLevel::Known)
         } else {
-            let rss: f64 = poses.iter().zip(dirs).map(|(p, u)| residual(p, u).powi(2)).sum();
+            let rss: f64 = poses
+                .iter()
+                .zip(dirs)
+                .map(|(p, u)| residual(p, u).powi(2))
+                .sum();
             (rss, NoiseLevel::Unknown)
         };
         let scale = noise_scale(chi_square, n, 4, level)?;
