@@ -159,7 +159,10 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
     let p0 = DVector::from_row_slice(a0.transpose().as_slice());
     let sol = levenberg_marquardt(&problem, p0, &LmOptions::default())
         .map_err(|e| e.into_fit_error("gyroscope scale (Tedaldi)"))?;
-    check_observability(&sol.jtj)?;
+    let refusal = || lacking_rotation(least_turned_axis(&matrix_from(&sol.params), motions));
+    if !check_observability(&sol.jtj) {
+        return Err(refusal());
+    }
     // One policy (`uncertainty`): the angle noise is unknown and estimated from the residual;
     // without scatter to estimate it from (ν = 0 or an exact fit) there is no covariance.
     let scaled = scaled_covariance(
@@ -171,8 +174,8 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
     );
     let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
     let covariance = scaled.map(|s| s.covariance);
-    if let Some(cov) = &covariance {
-        check_precision(cov)?;
+    if covariance.as_ref().is_some_and(|c| !check_precision(c)) {
+        return Err(refusal());
     }
     let std = covariance
         .as_ref()
@@ -214,13 +217,15 @@ const MAX_ENTRY_STD: f64 = 0.1;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 
-/// The raw gyroscope axis (column of `A`) that carries most of a 9-vector over `A`'s entries.
-fn dominant_axis(v: &DVector<f64>) -> &'static str {
-    let weight = |c: usize| (0..3).map(|r| v[3 * r + c].powi(2)).sum::<f64>();
-    let c = (0..3)
-        .max_by(|&a, &b| weight(a).total_cmp(&weight(b)))
-        .unwrap_or(0);
-    AXES[c]
+/// The calibrated axis about which the motions turn the least: `Σ ∫|(A·ω_raw)_k| dt`.
+fn least_turned_axis(a: &Mat3, motions: &[GyroMotion]) -> &'static str {
+    let mut turned = Vec3::zeros();
+    for m in motions {
+        for w in &m.rates {
+            turned += (a * w).abs() * m.dt;
+        }
+    }
+    AXES[turned.imin()]
 }
 
 fn lacking_rotation(axis: &str) -> FitError {
@@ -231,34 +236,20 @@ fn lacking_rotation(axis: &str) -> FitError {
 }
 
 /// Refuse a nearly unobservable direction: condition number of the equilibrated information.
-fn check_observability(jtj: &DMatrix<f64>) -> Result<(), FitError> {
+fn check_observability(jtj: &DMatrix<f64>) -> bool {
     let d: Vec<f64> = (0..9).map(|i| jtj[(i, i)].max(0.0).sqrt()).collect();
-    if let Some(c) = d.iter().position(|v| *v == 0.0 || !v.is_finite()) {
-        return Err(lacking_rotation(AXES[c % 3]));
+    if d.iter().any(|v| *v == 0.0 || !v.is_finite()) {
+        return false;
     }
     let scaled = DMatrix::from_fn(9, 9, |i, j| jtj[(i, j)] / (d[i] * d[j]));
-    let eig = scaled.symmetric_eigen();
-    let (k_min, min) = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(b.1))
-        .map_or((0, 0.0), |(k, v)| (k, *v));
-    let max = eig.eigenvalues.max();
-    if !(min > 0.0 && max / min <= MAX_INFORMATION_CONDITION) {
-        let v = eig.eigenvectors.column(k_min).into_owned();
-        return Err(lacking_rotation(dominant_axis(&v)));
-    }
-    Ok(())
+    let eig = scaled.symmetric_eigenvalues();
+    let (min, max) = (eig.min(), eig.max());
+    min > 0.0 && max / min <= MAX_INFORMATION_CONDITION
 }
 
 /// Refuse when an entry's uncertainty shows the motions do not determine it.
-fn check_precision(cov: &DMatrix<f64>) -> Result<(), FitError> {
-    let sd = DVector::from_fn(9, |i, _| cov[(i, i)].max(0.0).sqrt());
-    if sd.amax() > MAX_ENTRY_STD {
-        return Err(lacking_rotation(dominant_axis(&sd)));
-    }
-    Ok(())
+fn check_precision(cov: &DMatrix<f64>) -> bool {
+    (0..9).all(|i| cov[(i, i)].max(0.0).sqrt() <= MAX_ENTRY_STD)
 }
 
 /// Still time (seconds) kept on each side of a motion: the hold boundaries come from windowed
