@@ -9,6 +9,7 @@
 pub mod alignment;
 pub mod axis_aligned;
 pub mod chen;
+pub(crate) mod corrected_score;
 pub mod covariance;
 pub mod frosio;
 pub mod gyro_bias;

@@ -25,6 +25,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::chen::fit_chen;
+use super::corrected_score::{re_evaluate, solve_corrected_score, upper_from_params};
 use super::covariance::{
     calibration_std, condition_number, normal_covariance, param_names, reduced_chi_square,
     UPPER_TRIANGULAR_LAYOUT,
@@ -117,10 +118,6 @@ struct NormProblem {
     tangential: Vec<f64>,
 }
 
-fn upper_from_params(p: &DVector<f64>) -> Mat3 {
-    Mat3::new(p[0], p[1], p[2], 0.0, p[3], p[4], 0.0, 0.0, p[5])
-}
-
 impl LeastSquaresProblem for NormProblem {
     fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
         let r = upper_from_params(p);
@@ -177,78 +174,6 @@ impl LeastSquaresProblem for NormProblem {
         }
         j
     }
-}
-
-/// `Σᵢ E[rᵢ·∇rᵢ]` at `p` to second order in the noise (per-axis variance `noise_var[i]` of
-/// point `i`, scaled units): the residual and its gradient share the noise of `xᵢ`, so the
-/// least-squares score `Jᵀr` does not vanish in expectation at the truth. With `u = x − b`,
-/// `v = Ru`, `v̂ = v/|v|`, `P_t = I − v̂v̂ᵀ` and `n` the noise: `r ≈ w·v̂ᵀRn`,
-/// `∂r/∂R_jk = w·v̂_j(n)·u_k(n)`, `∂r/∂b = −w·Rᵀv̂(n)` with `v̂(n) ≈ v̂ + P_tRn/|v|`, so
-/// `E[r ∂r/∂R_jk] = w²σ²(v̂_j (Rᵀv̂)_k + u_k (P_tRRᵀv̂)_j/|v|)` and
-/// `E[r ∂r/∂b] = −w²σ² RᵀP_tRRᵀv̂/|v|`.
-fn score_bias(problem: &NormProblem, p: &DVector<f64>, noise_var: &[f64]) -> DVector<f64> {
-    let r = upper_from_params(p);
-    let b = Vec3::new(p[6], p[7], p[8]);
-    let mut total = DVector::zeros(9);
-    for ((x, w), var) in problem.points.iter().zip(&problem.weights).zip(noise_var) {
-        let u = x - b;
-        let v = r * u;
-        let n = v.norm();
-        if n == 0.0 {
-            continue;
-        }
-        let vh = v / n;
-        let radial = r.transpose() * vh;
-        let tangential = (r * radial - vh * vh.dot(&(r * radial))) / n;
-        let c = w * w * var;
-        for (k, &(row, col)) in UPPER_ENTRIES.iter().enumerate() {
-            total[k] += c * (vh[row] * radial[col] + u[col] * tangential[row]);
-        }
-        let db = -(r.transpose() * tangential);
-        for k in 0..3 {
-            total[6 + k] += c * db[k];
-        }
-    }
-    total
-}
-
-/// Entries `(row, col)` of the upper-triangular parameters, in parameter order.
-const UPPER_ENTRIES: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-
-/// Corrected score (Stefanski 1989; Nakamura 1990): solve `Jᵀr − Σ E[r∇r] = 0` by Gauss–Newton
-/// from the least-squares solution `start`. The least-squares root is biased at second order
-/// in the noise, and on partial coverage that bias is amplified along the poorly determined
-/// direction; the corrected root is not. `None` when the iteration does not settle.
-fn solve_corrected_score(
-    problem: &NormProblem,
-    start: &DVector<f64>,
-    noise_var: &[f64],
-) -> Option<DVector<f64>> {
-    let mut p = start.clone();
-    for _ in 0..30 {
-        let j = problem.jacobian(&p);
-        let r = problem.residuals(&p);
-        let score = j.transpose() * &r - score_bias(problem, &p, noise_var);
-        let step = (j.transpose() * &j).cholesky()?.solve(&(-score));
-        if !step.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        p += &step;
-        if step.norm() <= 1e-12 * (p.norm() + 1e-12) {
-            return Some(p);
-        }
-    }
-    None
-}
-
-/// `sol` moved to `params`: residuals, Jacobian, normal matrix and cost there.
-fn re_evaluate(problem: &NormProblem, mut sol: LmSolution, params: DVector<f64>) -> LmSolution {
-    sol.residuals = problem.residuals(&params);
-    sol.jacobian = problem.jacobian(&params);
-    sol.jtj = sol.jacobian.transpose() * &sol.jacobian;
-    sol.cost = sol.residuals.norm_squared();
-    sol.params = params;
-    sol
 }
 
 fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> {
@@ -393,7 +318,13 @@ pub fn refine_lm_detailed(
                 .iter()
                 .map(|sigma| (sigma / s * noise_scale).powi(2))
                 .collect();
-            if let Some(corrected) = solve_corrected_score(&problem, &sol.params, &noise_var) {
+            if let Some(corrected) = solve_corrected_score(
+                &problem,
+                &problem.points,
+                &problem.weights,
+                &sol.params,
+                &noise_var,
+            ) {
                 sol = re_evaluate(&problem, sol, corrected);
             }
         }
