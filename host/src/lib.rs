@@ -3,11 +3,13 @@
 #![forbid(unsafe_code)]
 
 pub mod analysis;
+pub mod compat;
 pub mod coverage;
 pub mod device;
 pub mod export;
 pub mod fit;
 pub mod geomag;
+pub mod history;
 pub mod input_checks;
 pub mod pipeline;
 pub mod recording;
