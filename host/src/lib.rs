@@ -4,6 +4,7 @@
 
 pub mod analysis;
 pub mod compat;
+pub mod coverage;
 pub mod device;
 pub mod export;
 pub mod fit;

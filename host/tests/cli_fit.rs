@@ -292,6 +292,19 @@ fn xsens_recording_in_counts_fits_offsets_near_the_per_axis_reference() {
         accel["loo_rms"].as_f64().expect("loo"),
     );
     assert!(rms < 3.0e-4 && loo < 2.0 * rms, "rms {rms}, loo {loo}");
+    // The solver says why it stopped, and it is one of the convergence tests.
+    let termination = accel["termination"].as_str().expect("termination");
+    assert!(
+        [
+            "exact_fit",
+            "cost_converged",
+            "step_converged",
+            "cost_and_step_converged",
+            "gradient_converged"
+        ]
+        .contains(&termination),
+        "{termination}"
+    );
 }
 
 #[test]

@@ -378,7 +378,7 @@ pub fn fit_rows(
         max_iterations: 300,
         step_tolerance: 1e-9,
         cost_tolerance: 1e-12,
-        initial_lambda: 1e-3,
+        ..LmOptions::default()
     };
     let sol = levenberg_marquardt(&subset, start.clone(), &opts).ok()?;
     if !sol.params.iter().all(|v| v.is_finite()) {

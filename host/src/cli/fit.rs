@@ -117,6 +117,8 @@ fn to_json(result: &SensorOutcome) -> Value {
             "output_unit": result.output_unit,
             "condition_number": fit.condition_number,
             "iterations": fit.iterations,
+            "termination": fit.termination.map(|t| t.name()),
+            "coverage_factor": fit.coverage_factor,
             "verdict": result.verdict(),
             "note": note,
         }),

@@ -12,8 +12,9 @@
 
 use nalgebra::{DMatrix, DVector, Rotation3};
 
-use super::covariance::{normal_covariance, reduced_chi_square};
+use super::covariance::normal_covariance;
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use super::uncertainty::{scaled_covariance, NoiseLevel};
 use super::{Calibration, FitError, Mat3, Vec3};
 
 /// The fitted alignment.
@@ -23,7 +24,8 @@ pub struct Alignment {
     pub rotation: Mat3,
     /// Dip (inclination) of the field below the horizontal, in radians.
     pub dip: f64,
-    /// One-sigma uncertainty of the small rotation about each accelerometer axis, in radians.
+    /// One-sigma uncertainty of the small rotation about each accelerometer axis, in radians
+    /// (NaN for noise-free data, where the noise cannot be estimated).
     pub rotation_std: Vec3,
     /// One-sigma uncertainty of the dip, in radians.
     pub dip_std: f64,
@@ -207,13 +209,16 @@ pub fn fit_alignment(accel: &[Vec3], mag: &[Vec3]) -> Result<Alignment, FitError
     let rotation = (Rotation3::new(Vec3::new(p[0], p[1], p[2])) * base).into_inner();
     // Wrap the dip into [−90°, 90°]: sin is what the data determine.
     let dip = p[3].sin().clamp(-1.0, 1.0).asin();
-    let noise = reduced_chi_square(cost, n, 4).unwrap_or(0.0);
-    let covariance = normal_covariance(&sol.jtj).map(|c| c * noise);
-    if covariance.is_none() {
+    let unit_covariance = normal_covariance(&sol.jtj);
+    if unit_covariance.is_none() {
         return Err(FitError::Underdetermined(
             "the poses do not determine the rotation about every axis; add poses with each face of the board up".into(),
         ));
     }
+    // One policy (`uncertainty`): the angle noise is estimated from the residual; a noise-free
+    // (exact) fit has no estimate, and its σ are NaN rather than a false zero.
+    let covariance =
+        scaled_covariance(unit_covariance, cost, n, 4, NoiseLevel::Unknown).map(|s| s.covariance);
     let sd = |k: usize| {
         covariance
             .as_ref()

@@ -25,6 +25,7 @@ use super::linalg::{
 };
 use super::loo::leave_one_out_rms;
 use super::six_position::six_position_calibration;
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{
     check_distinct, check_finite_poses, check_reference, check_spread, find_faces, MIN_SPREAD_DEG,
 };
@@ -102,6 +103,8 @@ fn fit_chen_unchecked(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
         std,
         condition_number: refined.condition_number,
         iterations: refined.iterations,
+        termination: None,
+        coverage_factor: refined.coverage_factor,
         reference,
     })
 }
@@ -131,6 +134,8 @@ pub struct Refined {
     pub iterations: usize,
     /// Covariance of the 9 unknowns, if a noise estimate exists.
     pub covariance: Option<DMatrix<f64>>,
+    /// `k` such that `±k·σ` is a 95 % interval ([`super::uncertainty`]).
+    pub coverage_factor: f64,
     /// Condition number of the weighted 9-column Jacobian at the solution.
     pub condition_number: f64,
 }
@@ -235,24 +240,21 @@ pub fn refine_norm_model(
     let jw = DMatrix::from_fn(jac.nrows(), 9, |i, j| jac[(i, j)] * weight(i));
     let condition_number = condition_number(&jw);
     let normal = jw.transpose() * &jw;
-    let covariance = if weights.is_some() {
-        inverse_spd(&normal)
-    } else if poses.len() > 9 {
-        let rss: f64 = residual_vector(poses, &cal, reference)
-            .iter()
-            .map(|f| f * f)
-            .sum();
-        let sigma_sq = rss / (poses.len() - 9) as f64;
-        (sigma_sq > 0.0)
-            .then(|| inverse_spd(&normal).map(|m| m * sigma_sq))
-            .flatten()
+    // One policy (`uncertainty`): χ² of the weighted residual, Birge-inflated with known noise.
+    let chi_square = cost(&cal);
+    let level = if weights.is_some() {
+        NoiseLevel::Known
     } else {
-        None
+        NoiseLevel::Unknown
     };
+    let scaled = scaled_covariance(inverse_spd(&normal), chi_square, poses.len(), 9, level);
+    let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
+    let covariance = scaled.map(|s| s.covariance);
     Ok(Refined {
         cal,
         iterations,
         covariance,
+        coverage_factor,
         condition_number,
     })
 }

@@ -11,8 +11,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::covariance::{normal_covariance, reduced_chi_square};
+use super::covariance::normal_covariance;
 use super::linalg::{condition_number, rms};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
 
@@ -170,9 +171,16 @@ fn fit_frosio_unchecked(
     };
     let (r, j) = residuals_and_jacobian(&p, points, reference);
     let chi2 = r.norm_squared();
-    // Noise unknown: the covariance is scaled by the residual variance (reduced chi-square).
-    let covariance = normal_covariance(&(j.transpose() * &j))
-        .map(|c| c * reduced_chi_square(chi2, points.len(), 9).unwrap_or(0.0));
+    // Noise unknown: estimated from the residual by the common policy (`uncertainty`).
+    let scaled = scaled_covariance(
+        normal_covariance(&(j.transpose() * &j)),
+        chi2,
+        points.len(),
+        9,
+        NoiseLevel::Unknown,
+    );
+    let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
+    let covariance = scaled.map(|s| s.covariance);
     let std = covariance.as_ref().map(|c| {
         let s = |k: usize| c[(k, k)].max(0.0).sqrt();
         CalibrationStd {
@@ -195,6 +203,8 @@ fn fit_frosio_unchecked(
         std,
         condition_number: condition_number(&j),
         iterations,
+        termination: None,
+        coverage_factor,
         reference,
     })
 }

@@ -6,6 +6,7 @@
 use nalgebra::DMatrix;
 
 use super::linalg::rms;
+use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
 use super::validate::check_finite_poses;
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Pose, Vec3};
 
@@ -48,6 +49,27 @@ pub fn fit_gyro_bias(poses: &[Pose], scale: f64) -> Result<Fit, FitError> {
         rms(&held_out)
     });
 
+    // One policy (`uncertainty`): per axis, χ² of the pose means about `b` against their
+    // variances; the Birge ratio inflates `1/Σw` when the poses scatter more than their noise
+    // (correlated samples, drift between holds).
+    let scales: Vec<_> = (0..3)
+        .map(|axis| {
+            let chi_square: f64 = poses
+                .iter()
+                .map(|p| (p.mean[axis] - b[axis]).powi(2) / p.var_of_mean()[axis])
+                .sum();
+            noise_scale(chi_square, poses.len(), 1, NoiseLevel::Known)
+        })
+        .collect();
+    let var_b = Vec3::from_fn(|axis, _| {
+        scales[axis].map_or(var_b[axis], |s| var_b[axis] * s.variance_factor)
+    });
+    // One factor for the three axes: the widest, so that every axis's interval holds.
+    let coverage_factor = scales
+        .iter()
+        .flatten()
+        .map(|s| s.coverage_factor)
+        .fold(Z_95, f64::max);
     // Zero variance everywhere means the data carries no noise estimate: report no covariance
     // rather than a covariance of zero.
     let (covariance, std) = if var_b.iter().all(|v| v.is_finite() && *v > 0.0) {
@@ -72,6 +94,8 @@ pub fn fit_gyro_bias(poses: &[Pose], scale: f64) -> Result<Fit, FitError> {
         std,
         condition_number: 1.0,
         iterations: 0,
+        termination: None,
+        coverage_factor,
         reference: 1.0,
     })
 }

@@ -13,12 +13,11 @@
 
 use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion};
 
-use super::covariance::{
-    calibration_std, normal_covariance, param_names, reduced_chi_square, FULL_MATRIX_LAYOUT,
-};
+use super::covariance::{calibration_std, normal_covariance, param_names, FULL_MATRIX_LAYOUT};
 use super::gyro_bias::fit_gyro_bias;
 use super::linalg::{condition_from_normal_matrix, rms};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
 use crate::recording::{Recording, Sensor};
 use crate::still::StillReport;
@@ -160,15 +159,23 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
     let p0 = DVector::from_row_slice(a0.transpose().as_slice());
     let sol = levenberg_marquardt(&problem, p0, &LmOptions::default())
         .map_err(|e| e.into_fit_error("gyroscope scale (Tedaldi)"))?;
-    let n_res = sol.residuals.len();
-    let noise = reduced_chi_square(sol.cost, n_res, 9);
-    let covariance = normal_covariance(&sol.jtj).map(|c| c * noise.unwrap_or(0.0));
-    if covariance.is_none() {
-        return Err(FitError::Underdetermined(
-            "the motions do not turn the board about enough different axes to separate all nine \
-             gyroscope terms; add turns about each of the board's axes (not about the vertical)"
-                .into(),
-        ));
+    let refusal = || lacking_rotation(least_turned_axis(&matrix_from(&sol.params), motions));
+    if !check_observability(&sol.jtj) {
+        return Err(refusal());
+    }
+    // One policy (`uncertainty`): the angle noise is unknown and estimated from the residual;
+    // without scatter to estimate it from (ν = 0 or an exact fit) there is no covariance.
+    let scaled = scaled_covariance(
+        normal_covariance(&sol.jtj),
+        sol.cost,
+        sol.residuals.len(),
+        9,
+        NoiseLevel::Unknown,
+    );
+    let coverage_factor = scaled.as_ref().map_or(Z_95, |s| s.coverage_factor);
+    let covariance = scaled.map(|s| s.covariance);
+    if covariance.as_ref().is_some_and(|c| !check_precision(c)) {
+        return Err(refusal());
     }
     let std = covariance
         .as_ref()
@@ -193,8 +200,56 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
         std,
         condition_number: condition_from_normal_matrix(&sol.jtj),
         iterations: sol.iterations,
+        termination: Some(sol.termination),
+        coverage_factor,
         reference: 1.0,
     })
+}
+
+/// Largest condition number of the equilibrated information matrix accepted: beyond
+/// `1/√ε_mach` the covariance has lost half its digits to round-off, so the worst-determined
+/// combination of entries is fixed by the start, not by the data.
+const MAX_INFORMATION_CONDITION: f64 = 6.7e7;
+
+/// Largest one-sigma uncertainty accepted on an entry of `A` (nominally 1): beyond 0.1 a gain
+/// or cross-axis term is not known to 10 %, i.e. the data do not determine it.
+const MAX_ENTRY_STD: f64 = 0.1;
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// The calibrated axis about which the motions turn the least: `Σ ∫|(A·ω_raw)_k| dt`.
+fn least_turned_axis(a: &Mat3, motions: &[GyroMotion]) -> &'static str {
+    let mut turned = Vec3::zeros();
+    for m in motions {
+        for w in &m.rates {
+            turned += (a * w).abs() * m.dt;
+        }
+    }
+    AXES[turned.imin()]
+}
+
+fn lacking_rotation(axis: &str) -> FitError {
+    FitError::Underdetermined(format!(
+        "the motions barely turn the board about its gyroscope {axis} axis, so the terms of that \
+         axis are not determined; add turns of at least 90° about {axis} (not about the vertical)"
+    ))
+}
+
+/// Refuse a nearly unobservable direction: condition number of the equilibrated information.
+fn check_observability(jtj: &DMatrix<f64>) -> bool {
+    let d: Vec<f64> = (0..9).map(|i| jtj[(i, i)].max(0.0).sqrt()).collect();
+    if d.iter().any(|v| *v == 0.0 || !v.is_finite()) {
+        return false;
+    }
+    let scaled = DMatrix::from_fn(9, 9, |i, j| jtj[(i, j)] / (d[i] * d[j]));
+    let eig = scaled.symmetric_eigenvalues();
+    let (min, max) = (eig.min(), eig.max());
+    min > 0.0 && max / min <= MAX_INFORMATION_CONDITION
+}
+
+/// Refuse when an entry's uncertainty shows the motions do not determine it.
+fn check_precision(cov: &DMatrix<f64>) -> bool {
+    (0..9).all(|i| cov[(i, i)].max(0.0).sqrt() <= MAX_ENTRY_STD)
 }
 
 /// Still time (seconds) kept on each side of a motion: the hold boundaries come from windowed

@@ -1,10 +1,17 @@
-//! A small Levenberg–Marquardt solver for nonlinear least squares `min Σ rᵢ(p)²`.
+//! A Levenberg–Marquardt solver for nonlinear least squares `min Σ rᵢ(p)²`, with MINPACK's
+//! stopping rules and a typed reason for stopping.
 //!
 //! Marquardt's variant (K. Levenberg 1944, D. W. Marquardt 1963): the damped normal equations
 //! `(JᵀJ + λ·D) δ = −Jᵀr` with `D = diag(JᵀJ)` (scale invariance), and the λ update of
 //! H. B. Nielsen (1999), a trust-region rule driven by the gain ratio ρ = actual / predicted
-//! reduction. No geodesic acceleration. Used by every iterative fit in this module
-//! (norm model, frame alignment, gyroscope scale).
+//! reduction. Termination follows MINPACK's `lmder` (Moré, Garbow & Hillstrom, "User guide for
+//! MINPACK-1", 1980, §2.3): `ftol` on both the actual and the predicted relative reduction of the
+//! cost, `xtol` on the step relative to the parameters, `gtol` on the cosine of the angle between
+//! the residual and each Jacobian column, and a budget of residual evaluations. Two deviations,
+//! both stricter: the `xtol` and the predicted-reduction tests are made on the Gauss–Newton step
+//! (λ = 0), so a step made tiny by heavy damping is not mistaken for convergence; and λ growing past 10¹⁶ without any test
+//! being met (MINPACK's info 6–8 territory when the tolerances are sane) is a failure.
+//! Used by every iterative fit (norm model, frame alignment, gyroscope scale, effect analysis).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -23,15 +30,19 @@ pub trait LeastSquaresProblem {
     }
 }
 
-/// Stopping rules and the starting damping.
+/// Stopping rules and the starting damping (MINPACK's `ftol`, `xtol`, `gtol`, `maxfev`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LmOptions {
-    /// Maximum number of trial steps (accepted or rejected).
+    /// Maximum number of residual evaluations (trial steps, accepted or rejected).
     pub max_iterations: usize,
-    /// Stop when an accepted step satisfies `|δ| ≤ step_tolerance·(|p| + step_tolerance)`.
+    /// `xtol`: converged when the Gauss–Newton step satisfies `|δ| ≤ xtol·(|p| + xtol)`.
     pub step_tolerance: f64,
-    /// Stop when an accepted step reduces the cost by less than `cost_tolerance·cost`.
+    /// `ftol`: converged when both the actual reduction of the cost and the reduction the
+    /// Gauss–Newton step predicts are at most `ftol·cost`.
     pub cost_tolerance: f64,
+    /// `gtol`: converged when `|Jⱼᵀr| ≤ gtol·|Jⱼ|·|r|` for every column `j` (the residual is
+    /// orthogonal to the Jacobian's columns to this cosine).
+    pub gradient_tolerance: f64,
     /// Initial λ relative to the diagonal of `JᵀJ`; 0 gives a pure Gauss–Newton first step.
     pub initial_lambda: f64,
 }
@@ -41,8 +52,65 @@ impl Default for LmOptions {
         Self {
             max_iterations: 200,
             step_tolerance: 1e-10,
-            cost_tolerance: 1e-14,
+            cost_tolerance: 1e-12,
+            gradient_tolerance: 1e-10,
             initial_lambda: 1e-3,
+        }
+    }
+}
+
+/// Why the solver stopped (MINPACK's `info`, with the failures split by cause).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Termination {
+    /// The residual is zero to working precision: its norm fell below `ε_mach` times its norm
+    /// at the start (zero-residual problems with a singular Jacobian converge only linearly,
+    /// and no relative test would ever hold).
+    ExactFit,
+    /// Actual and predicted relative cost reductions both at most `ftol` (MINPACK info 1).
+    CostConverged,
+    /// The Gauss–Newton step is at most `xtol` relative to the parameters (info 2).
+    StepConverged,
+    /// Both of the above (info 3).
+    CostAndStepConverged,
+    /// The residual is orthogonal to every Jacobian column to within `gtol` (info 4).
+    GradientConverged,
+    /// The evaluation budget ran out while the cost was still falling (info 5). A failure.
+    EvaluationBudget,
+    /// No step lowered the cost although no convergence test held, until λ passed 10¹⁶: the
+    /// Jacobian does not describe the residual (a kink, or round-off far above the tolerances).
+    /// A failure.
+    DampingOverflow,
+    /// The damped normal matrix could not be factorised for any λ. A failure.
+    SingularSystem,
+    /// A residual or Jacobian entry became NaN or infinite. A failure.
+    NonFinite,
+}
+
+impl Termination {
+    /// `true` for the reasons that mean a minimum was reached.
+    pub fn is_converged(self) -> bool {
+        matches!(
+            self,
+            Termination::ExactFit
+                | Termination::CostConverged
+                | Termination::StepConverged
+                | Termination::CostAndStepConverged
+                | Termination::GradientConverged
+        )
+    }
+
+    /// Stable snake-case name used in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Termination::ExactFit => "exact_fit",
+            Termination::CostConverged => "cost_converged",
+            Termination::StepConverged => "step_converged",
+            Termination::CostAndStepConverged => "cost_and_step_converged",
+            Termination::GradientConverged => "gradient_converged",
+            Termination::EvaluationBudget => "evaluation_budget",
+            Termination::DampingOverflow => "damping_overflow",
+            Termination::SingularSystem => "singular_system",
+            Termination::NonFinite => "non_finite",
         }
     }
 }
@@ -58,26 +126,38 @@ pub struct LmSolution {
     pub jtj: DMatrix<f64>,
     /// Cost `Σ rᵢ²` at the minimum.
     pub cost: f64,
-    /// Trial steps used.
+    /// Residual evaluations used.
     pub iterations: usize,
+    /// Which convergence test was met (always one with [`Termination::is_converged`]).
+    pub termination: Termination,
 }
 
 /// Why the solver stopped without a solution.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LmFailure {
-    /// Trial steps used.
+    /// Residual evaluations used.
     pub iterations: usize,
+    /// The reason (never one with [`Termination::is_converged`]).
+    pub termination: Termination,
     /// What went wrong, as a phrase.
     pub detail: String,
 }
 
 impl LmFailure {
+    fn new(iterations: usize, termination: Termination, detail: impl Into<String>) -> Self {
+        Self {
+            iterations,
+            termination,
+            detail: detail.into(),
+        }
+    }
+
     /// The failure as a [`FitError::NotConverged`](super::FitError::NotConverged) of `method`.
     pub fn into_fit_error(self, method: &'static str) -> super::FitError {
         super::FitError::NotConverged {
             method,
             iterations: self.iterations,
-            detail: self.detail,
+            detail: format!("{}: {}", self.termination.name(), self.detail),
         }
     }
 }
@@ -86,10 +166,36 @@ fn sum_of_squares(r: &DVector<f64>) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
 
+/// Largest cosine between the residual and a Jacobian column (MINPACK's `gnorm`); columns
+/// without sensitivity are skipped, as in MINPACK.
+fn gradient_cosine(jtj: &DMatrix<f64>, grad: &DVector<f64>, cost: f64) -> f64 {
+    let rnorm = cost.sqrt();
+    // |Jⱼ|² is the diagonal of JᵀJ, so the test needs no Jacobian.
+    (0..jtj.ncols())
+        .filter_map(|j| {
+            let cn = jtj[(j, j)].max(0.0).sqrt();
+            (cn > 0.0).then(|| grad[j].abs() / (cn * rnorm))
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Solve `(JᵀJ + λ·D) δ = −g` with Marquardt's scaling floored so that parameters without
+/// sensitivity stay bounded; `None` when the damped matrix is not positive definite.
+fn damped_step(jtj: &DMatrix<f64>, grad: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
+    let scale = jtj.diagonal().max().max(f64::MIN_POSITIVE);
+    let mut damped = jtj.clone();
+    for i in 0..jtj.nrows() {
+        damped[(i, i)] += lambda * jtj[(i, i)].max(1e-12 * scale);
+    }
+    let step = damped.cholesky()?.solve(&(-grad));
+    step.iter().all(|v| v.is_finite()).then_some(step)
+}
+
 /// Minimise `Σ rᵢ(p)²` from `start`.
 ///
-/// Returns [`LmFailure`] when the start is not finite, when the iteration budget runs out, or
-/// when the damped system cannot be solved for any λ.
+/// Returns a solution only when a convergence test held ([`Termination::is_converged`]);
+/// otherwise an [`LmFailure`] naming the reason (non-finite start, evaluation budget, damping
+/// overflow, singular system).
 pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
     problem: &P,
     start: DVector<f64>,
@@ -99,97 +205,138 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
     let mut r = problem.residuals(&p);
     let mut cost = sum_of_squares(&r);
     if !cost.is_finite() || p.iter().any(|v| !v.is_finite()) {
-        return Err(LmFailure {
-            iterations: 0,
-            detail: "the residual at the starting point is not finite".into(),
-        });
+        return Err(LmFailure::new(
+            0,
+            Termination::NonFinite,
+            "the residual at the starting point is not finite",
+        ));
     }
-    let n = p.len();
+    let zero_cost = f64::EPSILON * f64::EPSILON * cost;
     let (mut jtj, mut grad) = problem.normal_equations(&p, &r);
     let mut lambda = opts.initial_lambda;
     let mut nu = 2.0;
-    let mut iterations = 0;
+    let mut evaluations = 0;
     let mut need_jacobian = false;
-    while iterations < opts.max_iterations {
+    loop {
         if need_jacobian {
             (jtj, grad) = problem.normal_equations(&p, &r);
             need_jacobian = false;
         }
         if !jtj.iter().all(|v| v.is_finite()) || !grad.iter().all(|v| v.is_finite()) {
-            return Err(LmFailure {
-                iterations,
-                detail: "the Jacobian became non-finite".into(),
-            });
+            return Err(LmFailure::new(
+                evaluations,
+                Termination::NonFinite,
+                "the Jacobian became non-finite",
+            ));
         }
-        // A zero gradient is an exact stationary point; nothing further to do.
-        let scale = jtj.diagonal().max().max(f64::MIN_POSITIVE);
-        if grad.amax() <= 1e-15 * scale.sqrt() * cost.sqrt().max(f64::MIN_POSITIVE) || cost == 0.0 {
-            return Ok(finish(problem, p, r, cost, iterations));
+        if cost <= zero_cost {
+            return Ok(finish(
+                problem,
+                p,
+                r,
+                cost,
+                evaluations,
+                Termination::ExactFit,
+            ));
         }
-        iterations += 1;
-        let mut damped = jtj.clone();
-        for i in 0..n {
-            // Marquardt scaling, floored so that parameters with no sensitivity stay bounded.
-            let d = jtj[(i, i)].max(1e-12 * scale);
-            damped[(i, i)] += lambda * d;
+        if gradient_cosine(&jtj, &grad, cost) <= opts.gradient_tolerance {
+            return Ok(finish(
+                problem,
+                p,
+                r,
+                cost,
+                evaluations,
+                Termination::GradientConverged,
+            ));
         }
-        let step = match damped.cholesky() {
-            Some(ch) => ch.solve(&(-&grad)),
-            None => {
-                lambda = if lambda == 0.0 { 1e-3 } else { lambda * nu };
-                nu *= 2.0;
-                if lambda > 1e20 {
-                    return Err(LmFailure {
-                        iterations,
-                        detail: "the normal matrix is singular for every damping".into(),
-                    });
-                }
-                continue;
+        if evaluations >= opts.max_iterations {
+            return Err(LmFailure::new(
+                evaluations,
+                Termination::EvaluationBudget,
+                format!(
+                    "the cost was still falling after {} evaluations (cost {cost:.3e})",
+                    opts.max_iterations
+                ),
+            ));
+        }
+        let Some(step) = damped_step(&jtj, &grad, lambda) else {
+            lambda = if lambda == 0.0 { 1e-3 } else { lambda * nu };
+            nu *= 2.0;
+            if lambda > 1e20 {
+                return Err(LmFailure::new(
+                    evaluations,
+                    Termination::SingularSystem,
+                    "the normal matrix is singular for every damping",
+                ));
             }
+            continue;
         };
-        if step.norm() <= opts.step_tolerance * (p.norm() + opts.step_tolerance) {
-            // The model step is below the resolution asked for: converged.
-            return Ok(finish(problem, p, r, cost, iterations));
-        }
+        // Both tests are made on the Gauss–Newton step (λ = 0), the best the linear model can
+        // do: a step that is short only because λ is large is not convergence. Without a
+        // Gauss–Newton step (singular JᵀJ) the damped step stands in when λ ≤ 1.
+        let gauss_newton =
+            damped_step(&jtj, &grad, 0.0).or_else(|| (lambda <= 1.0).then(|| step.clone()));
+        let xtol_bound = opts.step_tolerance * (p.norm() + opts.step_tolerance);
+        let step_converged = gauss_newton
+            .as_ref()
+            .is_some_and(|gn| gn.norm() <= xtol_bound);
+        let best_predicted_rel = gauss_newton
+            .as_ref()
+            .map_or(f64::INFINITY, |gn| -gn.dot(&grad) / cost);
+
         let p_new = &p + &step;
         let r_new = problem.residuals(&p_new);
+        evaluations += 1;
         let cost_new = sum_of_squares(&r_new);
         let predicted = -(2.0 * step.dot(&grad) + step.dot(&(&jtj * &step)));
+        let actual_rel = if cost_new.is_finite() {
+            (cost - cost_new) / cost
+        } else {
+            -1.0
+        };
+        // ftol: neither this step nor any step of the linear model lowers the cost by more
+        // than ftol relative (−gᵀδ_GN is the Gauss–Newton predicted reduction).
+        let cost_converged =
+            actual_rel.abs() <= opts.cost_tolerance && best_predicted_rel <= opts.cost_tolerance;
         let rho = (cost - cost_new) / predicted;
-        if cost_new.is_finite()
+        let accepted = cost_new.is_finite()
+            && r_new.iter().all(|v| v.is_finite())
             && cost_new <= cost
             && predicted > 0.0
             && rho.is_finite()
-            && rho > 0.0
-        {
-            let reduction = cost - cost_new;
-            let small_step = step.norm() <= opts.step_tolerance * (p.norm() + opts.step_tolerance);
+            && rho > 0.0;
+        if accepted {
             p = p_new;
             r = r_new;
             cost = cost_new;
             need_jacobian = true;
             lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
             nu = 2.0;
-            if small_step || reduction <= opts.cost_tolerance * cost {
-                return Ok(finish(problem, p, r, cost, iterations));
-            }
         } else {
             // Rejected: increase damping (shorter, more gradient-like step).
             lambda = if lambda == 0.0 { 1e-3 } else { lambda * nu };
             nu *= 2.0;
-            if lambda > 1e16 {
-                // No step of any length lowers the cost: a minimum to round-off precision.
-                return Ok(finish(problem, p, r, cost, iterations));
-            }
+        }
+        let termination = match (cost_converged, step_converged) {
+            (true, true) => Some(Termination::CostAndStepConverged),
+            (true, false) => Some(Termination::CostConverged),
+            (false, true) => Some(Termination::StepConverged),
+            (false, false) => None,
+        };
+        if let Some(t) = termination {
+            return Ok(finish(problem, p, r, cost, evaluations, t));
+        }
+        if lambda > 1e16 {
+            return Err(LmFailure::new(
+                evaluations,
+                Termination::DampingOverflow,
+                format!(
+                    "no step lowered the cost (cost {cost:.3e}) although the gradient is not \
+                     small; the residual is not smooth there"
+                ),
+            ));
         }
     }
-    Err(LmFailure {
-        iterations,
-        detail: format!(
-            "the cost was still falling after {} steps (cost {cost:.3e})",
-            opts.max_iterations
-        ),
-    })
 }
 
 fn finish<P: LeastSquaresProblem + ?Sized>(
@@ -198,6 +345,7 @@ fn finish<P: LeastSquaresProblem + ?Sized>(
     residuals: DVector<f64>,
     cost: f64,
     iterations: usize,
+    termination: Termination,
 ) -> LmSolution {
     let (jtj, _) = problem.normal_equations(&params, &residuals);
     LmSolution {
@@ -206,139 +354,10 @@ fn finish<P: LeastSquaresProblem + ?Sized>(
         jtj,
         cost,
         iterations,
+        termination,
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Rosenbrock's valley as residuals: r = (10(y − x²), 1 − x); minimum at (1, 1).
-    struct Rosenbrock;
-    impl LeastSquaresProblem for Rosenbrock {
-        fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
-            DVector::from_vec(vec![10.0 * (p[1] - p[0] * p[0]), 1.0 - p[0]])
-        }
-        fn jacobian(&self, p: &DVector<f64>) -> DMatrix<f64> {
-            DMatrix::from_row_slice(2, 2, &[-20.0 * p[0], 10.0, -1.0, 0.0])
-        }
-    }
-
-    #[test]
-    fn rosenbrock_reaches_the_valley_floor_from_the_classic_start() {
-        let sol = levenberg_marquardt(
-            &Rosenbrock,
-            DVector::from_vec(vec![-1.2, 1.0]),
-            &LmOptions::default(),
-        )
-        .expect("Rosenbrock converges");
-        // Zero-residual problem: the minimum is exact up to the step tolerance.
-        assert!((sol.params[0] - 1.0).abs() < 1e-8, "x = {}", sol.params[0]);
-        assert!((sol.params[1] - 1.0).abs() < 1e-8, "y = {}", sol.params[1]);
-        assert!(sol.cost < 1e-20);
-    }
-
-    /// Straight-line fit r_i = a + b·t_i − y_i: linear, so Gauss–Newton is exact in one step.
-    struct Line {
-        t: Vec<f64>,
-        y: Vec<f64>,
-    }
-    impl LeastSquaresProblem for Line {
-        fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
-            DVector::from_iterator(
-                self.t.len(),
-                self.t.iter().zip(&self.y).map(|(t, y)| p[0] + p[1] * t - y),
-            )
-        }
-        fn jacobian(&self, _p: &DVector<f64>) -> DMatrix<f64> {
-            DMatrix::from_fn(self.t.len(), 2, |i, j| if j == 0 { 1.0 } else { self.t[i] })
-        }
-    }
-
-    #[test]
-    fn linear_problem_is_solved_by_the_first_undamped_step() {
-        let t: Vec<f64> = (0..5).map(f64::from).collect();
-        // y = 2 + 3t with residual pattern (+1, −1, 0, −1, +1) orthogonal to [1, t]: LS answer is (2, 3).
-        let bumps = [1.0, -1.0, 0.0, -1.0, 1.0];
-        let y = t
-            .iter()
-            .zip(bumps)
-            .map(|(t, e)| 2.0 + 3.0 * t + e)
-            .collect();
-        let opts = LmOptions {
-            initial_lambda: 0.0,
-            ..LmOptions::default()
-        };
-        let sol = levenberg_marquardt(&Line { t, y }, DVector::from_vec(vec![-50.0, 40.0]), &opts)
-            .unwrap();
-        // The first step lands on the minimum (to round-off); the second only confirms it.
-        assert!(sol.iterations <= 2, "iterations = {}", sol.iterations);
-        assert!((sol.params[0] - 2.0).abs() < 1e-10 && (sol.params[1] - 3.0).abs() < 1e-10);
-        assert!((sol.cost - 4.0).abs() < 1e-10, "cost = {}", sol.cost);
-    }
-
-    /// y = a·exp(−k·t) + c sampled without noise.
-    struct Decay {
-        t: Vec<f64>,
-        y: Vec<f64>,
-    }
-    impl LeastSquaresProblem for Decay {
-        fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
-            DVector::from_iterator(
-                self.t.len(),
-                self.t
-                    .iter()
-                    .zip(&self.y)
-                    .map(|(t, y)| p[0] * (-p[1] * t).exp() + p[2] - y),
-            )
-        }
-        fn jacobian(&self, p: &DVector<f64>) -> DMatrix<f64> {
-            DMatrix::from_fn(self.t.len(), 3, |i, j| {
-                let e = (-p[1] * self.t[i]).exp();
-                match j {
-                    0 => e,
-                    1 => -p[0] * self.t[i] * e,
-                    _ => 1.0,
-                }
-            })
-        }
-    }
-
-    #[test]
-    fn exponential_decay_parameters_are_recovered_exactly_from_clean_data() {
-        let t: Vec<f64> = (0..40).map(|i| f64::from(i) * 0.1).collect();
-        let y = t.iter().map(|t| 5.0 * (-1.3 * t).exp() + 0.7).collect();
-        let sol = levenberg_marquardt(
-            &Decay { t, y },
-            DVector::from_vec(vec![1.0, 0.1, 0.0]),
-            &LmOptions::default(),
-        )
-        .unwrap();
-        // Noise-free data: only round-off and the step tolerance limit the answer.
-        assert!((sol.params[0] - 5.0).abs() < 1e-7, "a = {}", sol.params[0]);
-        assert!((sol.params[1] - 1.3).abs() < 1e-7, "k = {}", sol.params[1]);
-        assert!((sol.params[2] - 0.7).abs() < 1e-7, "c = {}", sol.params[2]);
-    }
-
-    #[test]
-    fn a_non_finite_start_is_refused_not_iterated() {
-        let err = levenberg_marquardt(
-            &Rosenbrock,
-            DVector::from_vec(vec![f64::NAN, 1.0]),
-            &LmOptions::default(),
-        )
-        .unwrap_err();
-        assert_eq!(err.iterations, 0);
-    }
-
-    #[test]
-    fn an_exhausted_budget_is_reported_as_not_converged() {
-        let opts = LmOptions {
-            max_iterations: 2,
-            ..LmOptions::default()
-        };
-        let err = levenberg_marquardt(&Rosenbrock, DVector::from_vec(vec![-1.2, 1.0]), &opts)
-            .unwrap_err();
-        assert_eq!(err.iterations, 2);
-    }
-}
+#[path = "lm_tests.rs"]
+mod tests;

@@ -18,6 +18,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::covariance::{calibration_std, param_names, UPPER_TRIANGULAR_LAYOUT};
 use super::linalg::{least_squares, rms};
+use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
 use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
 use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
 
@@ -135,9 +136,12 @@ fn fit_merayo_unchecked(
 
     // Covariance: residual variance of the linear fit, propagated through ellipsoid_params.
     let fit_residual = &design * &theta - DVector::from_element(n, 1.0);
-    let sigma2 = fit_residual.norm_squared() / (n - 9) as f64;
+    // Noise unknown: estimated from the residual by the common policy (`uncertainty`).
+    let scale = noise_scale(fit_residual.norm_squared(), n, 9, NoiseLevel::Unknown);
+    let coverage_factor = scale.map_or(Z_95, |s| s.coverage_factor);
+    let sigma2 = scale.map(|s| s.variance_factor);
     let covariance = (design.transpose() * &design).cholesky().and_then(|c| {
-        let cov_theta = c.inverse() * sigma2;
+        let cov_theta = c.inverse() * sigma2?;
         let mut g = DMatrix::zeros(9, 9);
         for k in 0..9 {
             let h = 1e-6 * theta[k].abs().max(1e-3);
@@ -171,6 +175,8 @@ fn fit_merayo_unchecked(
         std,
         condition_number: ls.condition_number,
         iterations: 0,
+        termination: None,
+        coverage_factor,
         reference,
     })
 }

@@ -74,6 +74,8 @@ pub fn fit_minmax(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
         std,
         condition_number: 1.0,
         iterations: 0,
+        termination: None,
+        coverage_factor: crate::fit::uncertainty::Z_95,
         reference,
     })
 }

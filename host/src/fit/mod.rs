@@ -9,6 +9,7 @@
 pub mod alignment;
 pub mod axis_aligned;
 pub mod chen;
+pub(crate) mod corrected_score;
 pub mod covariance;
 pub mod frosio;
 pub mod gyro_bias;
@@ -22,6 +23,7 @@ pub mod merayo;
 pub mod minmax;
 pub mod norm_lm;
 pub mod six_position;
+pub mod uncertainty;
 pub mod validate;
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
@@ -110,6 +112,14 @@ pub struct Fit {
     pub condition_number: f64,
     /// Iterations used (0 for closed-form methods).
     pub iterations: usize,
+    /// Why the iterative solver stopped (`None` for closed-form methods and for the methods
+    /// with their own Gauss–Newton loop). Always a convergence reason: a solver that stopped
+    /// for any other reason makes the fit fail with [`FitError::NotConverged`].
+    pub termination: Option<lm::Termination>,
+    /// `k` such that `±k·σ` (from `std`) is a 95 % interval: 1.96 with known noise that the
+    /// residuals agree with, Student's t when the noise scale was estimated (see
+    /// [`uncertainty`]).
+    pub coverage_factor: f64,
     /// Reference magnitude the fit was normalised to (g, field strength, or 1).
     pub reference: f64,
 }
@@ -139,6 +149,8 @@ impl Fit {
             std: None,
             condition_number,
             iterations: 0,
+            termination: None,
+            coverage_factor: crate::fit::uncertainty::Z_95,
             reference,
         }
     }

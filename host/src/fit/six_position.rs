@@ -10,6 +10,7 @@ use nalgebra::DMatrix;
 
 use super::linalg::{least_squares, rms, std_from_covariance};
 use super::loo::leave_one_out_rms_indexed;
+use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
 use super::validate::{
     check_finite_poses, check_reference, check_spread, face_of, median_centre, FACE_TOLERANCE_DEG,
     MIN_SPREAD_DEG,
@@ -50,7 +51,10 @@ pub fn fit_six_position(
         solve(rest, &rest_dirs, reference).map(|s| s.cal)
     });
 
-    let covariance = covariance(poses, &dirs, &solved, reference);
+    let (covariance, coverage_factor) = match covariance(poses, &dirs, &solved, reference) {
+        Some((cov, k)) => (Some(cov), k),
+        None => (None, Z_95),
+    };
     let std = covariance.as_ref().map(|cov| {
         let s = std_from_covariance(cov);
         CalibrationStd {
@@ -70,6 +74,8 @@ pub fn fit_six_position(
         std,
         condition_number: solved.condition_number,
         iterations: 0,
+        termination: None,
+        coverage_factor,
         reference,
     })
 }
@@ -207,34 +213,53 @@ fn solve(poses: &[Pose], dirs: &[Vec3], reference: f64) -> Result<Solved, FitErr
 }
 
 /// Linear LS covariance of `(A, b)` (see [`fit_six_position`]); `None` if no noise estimate exists.
-fn covariance(poses: &[Pose], dirs: &[Vec3], s: &Solved, reference: f64) -> Option<DMatrix<f64>> {
+/// The covariance and its 95 % coverage factor ([`super::uncertainty`]).
+fn covariance(
+    poses: &[Pose],
+    dirs: &[Vec3],
+    s: &Solved,
+    reference: f64,
+) -> Option<(DMatrix<f64>, f64)> {
     let n = poses.len();
     let a = s.cal.a;
-    let mut sigma_sq = [0.0; 3];
-    for (j, sj) in sigma_sq.iter_mut().enumerate() {
-        // Noise of output j in pose i: Σ_k A_jk² var(mean_ik); averaged over poses.
-        *sj = poses
-            .iter()
-            .map(|p| {
-                (0..3)
-                    .map(|k| a[(j, k)].powi(2) * p.var_of_mean()[k])
-                    .sum::<f64>()
-            })
+    // Per output axis: the noise of output j in pose i is Σ_k A_jk² var(mean_ik). The variance
+    // factor follows the common policy (`uncertainty`): χ² against that noise, Birge-inflated;
+    // without reported variances the noise is estimated from the residual.
+    let noise_of = |p: &Pose, j: usize| -> f64 {
+        (0..3)
+            .map(|k| a[(j, k)].powi(2) * p.var_of_mean()[k])
             .sum::<f64>()
-            / n as f64;
-    }
-    if sigma_sq.iter().all(|v| *v <= 0.0) {
-        if n <= 4 {
-            return None;
-        }
-        for (j, sj) in sigma_sq.iter_mut().enumerate() {
+    };
+    let known = poses.iter().all(|p| (0..3).all(|j| noise_of(p, j) > 0.0));
+    let mut sigma_sq = [0.0; 3];
+    let mut coverage_factor = Z_95;
+    for (j, sj) in sigma_sq.iter_mut().enumerate() {
+        let residual = |p: &Pose, u: &Vec3| s.cal.apply(&p.mean)[j] - u[j] * reference;
+        let (chi_square, level) = if known {
+            let chi: f64 = poses
+                .iter()
+                .zip(dirs)
+                .map(|(p, u)| residual(p, u).powi(2) / noise_of(p, j))
+                .sum();
+            (chi, NoiseLevel::Known)
+        } else {
             let rss: f64 = poses
                 .iter()
                 .zip(dirs)
-                .map(|(p, u)| (s.cal.apply(&p.mean)[j] - u[j] * reference).powi(2))
+                .map(|(p, u)| residual(p, u).powi(2))
                 .sum();
-            *sj = rss / (n - 4) as f64;
-        }
+            (rss, NoiseLevel::Unknown)
+        };
+        let scale = noise_scale(chi_square, n, 4, level)?;
+        coverage_factor = coverage_factor.max(scale.coverage_factor);
+        let factor = scale.variance_factor;
+        // Known noise: the unit covariance carries the mean pose noise; unknown: unit weights.
+        let unit = if known {
+            poses.iter().map(|p| noise_of(p, j)).sum::<f64>() / n as f64
+        } else {
+            1.0
+        };
+        *sj = unit * factor;
     }
     let xtx = s.design.transpose() * &s.design;
     let xtx_inv = xtx.try_inverse()?;
@@ -265,5 +290,7 @@ fn covariance(poses: &[Pose], dirs: &[Vec3], s: &Solved, reference: f64) -> Opti
         }
     }
     let cov = &jac * cov_theta * jac.transpose();
-    cov.iter().all(|v| v.is_finite()).then_some(cov)
+    cov.iter()
+        .all(|v| v.is_finite())
+        .then_some((cov, coverage_factor))
 }

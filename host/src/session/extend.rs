@@ -46,6 +46,9 @@ fn observation(pose: &CapturedPose, sensor: fn(&PoseStats) -> ([f32; 3], [f32; 3
         mean: Vec3::from(mean.map(f64::from)),
         sigma_mean,
         n,
+        // The board reports a hold's mean and variance, not its autocorrelation, so the
+        // effective sample size is unknown here: n_eff = n, and correlated samples show up as
+        // excess scatter between holds, which the fits' Birge ratio absorbs (`fit::uncertainty`).
         n_eff: n as f64,
         noise_correlation: 0.0,
         temp_c: Some(f64::from(pose.stats.temp_mean_c)),

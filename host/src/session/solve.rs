@@ -451,6 +451,8 @@ mod tests {
             std: None,
             condition_number: 1.0,
             iterations: 0,
+            termination: None,
+            coverage_factor: crate::fit::uncertainty::Z_95,
             reference: 9.8,
         };
         let got = max_norm_sigma(&fit).expect("a covariance");
