@@ -11,5 +11,6 @@ pub mod input_checks;
 pub mod recording;
 pub mod report;
 pub mod session;
+pub mod stats;
 pub mod still;
 pub mod synthetic;

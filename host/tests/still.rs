@@ -2,7 +2,8 @@
 
 use imucal::fit::Vec3;
 use imucal::recording::{LabelKind, Labels, Recording, Units};
-use imucal::still::{chi2_quantile_per_dof, find_still, StillError, StillOptions};
+use imucal::stats::distributions::chi2_quantile_per_dof;
+use imucal::still::{find_still, StillError, StillOptions};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 

@@ -23,16 +23,17 @@ pub mod crossval;
 pub mod dataset;
 pub mod effects;
 pub mod extended_fit;
-pub mod noise;
 pub mod report;
 
 use imucal_protocol::{BiasTemperature, Nonlinearity, SensorCalibration};
 
+use crate::fit::coverage::sphere_start;
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::li::{fit_li, LiOptions};
-use crate::fit::norm_lm::{fit_accel_lm, fit_mag_lm, sphere_start};
+use crate::fit::norm_lm::{fit_accel_lm, fit_mag_lm};
 use crate::fit::{Calibration, FitError, Pose, Vec3};
 use crate::recording::{Recording, Sensor};
+use crate::stats::chi_square::ChiSquareTest;
 use crate::still::StillReport;
 use crossval::{extend_start, held_out, Comparison, HeldOut};
 use dataset::Observation;
@@ -41,7 +42,6 @@ use extended_fit::{
     base_calibration, fit_rows, physical_factor, physical_residual, start_params, BaseKind,
     ExtendedFit, Problem,
 };
-use noise::ChiSquareTest;
 
 /// Above this |ρ| between pose temperature and pose time, temperature and time effects are
 /// reported as confounded instead of choosing one.

@@ -237,7 +237,7 @@ fn gyro_scale_fit(
 ) -> Result<Fit, FitError> {
     let accel_poses = still.poses(Sensor::Accel);
     let (accel, _) = methods::default_accel_fit(&accel_poses, gravity, still.directions.len());
-    imucal::fit::gyro_scale::fit_gyro_scale_recording(recording, still, &accel?.cal, scale)
+    imucal::still::motions::fit_gyro_scale_recording(recording, still, &accel?.cal, scale)
 }
 
 /// Rotate the magnetometer fit into the accelerometer frame from the still holds that have

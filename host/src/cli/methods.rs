@@ -3,8 +3,8 @@
 //! means), magnetometer methods take samples over many orientations, the gyroscope takes the
 //! still poses. Shared by the command line and the real-data example.
 
+use imucal::fit::coverage::{measure_coverage, EllipsoidModel, MAX_RELATIVE_SIGMA};
 use imucal::fit::norm_lm::{refine_lm, NormLmOptions, NormObservations};
-use imucal::fit::validate::{measure_coverage, EllipsoidModel, MAX_RELATIVE_SIGMA};
 use imucal::fit::{self, Fit, FitError, Method, Pose, Vec3};
 
 /// Methods offered for the accelerometer, the default first.
