@@ -13,4 +13,5 @@ pub mod report;
 pub mod session;
 pub mod stats;
 pub mod still;
+#[cfg(feature = "synthetic")]
 pub mod synthetic;

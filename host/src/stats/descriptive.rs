@@ -40,6 +40,7 @@ pub fn percentile(values: &mut [f64], p: f64) -> f64 {
     let rank = ((values.len() - 1) as f64 * p).round() as usize;
     values[rank.min(values.len() - 1)]
 }
+
 /// Median of a list: the middle value, or the mean of the two middle values for an even count
 /// (0 when empty).
 pub fn median(values: &mut [f64]) -> f64 {
@@ -90,6 +91,7 @@ pub fn window_variances(x: &[Vec3], w: usize) -> Vec<Vec3> {
         })
         .collect()
 }
+
 /// Smallest positive step between consecutive samples on each axis (the quantisation step
 /// for integer or fixed-point data), used as a floor for the noise estimate.
 pub fn quantisation_step(x: &[Vec3]) -> Vec3 {

@@ -50,12 +50,14 @@ pub fn normal_quantile(p: f64) -> f64 {
             / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
     }
 }
+
 /// Quantile of `χ²(ν)/ν` by the Wilson–Hilferty cube approximation (good to ~1% for ν ≥ 10).
 pub fn chi2_quantile_per_dof(p: f64, dof: f64) -> f64 {
     let c = 2.0 / (9.0 * dof);
     let z = normal_quantile(p);
     (1.0 - c + z * c.sqrt()).max(0.0).powi(3)
 }
+
 /// `ln Γ(x)` for `x > 0` (Lanczos, g = 7, n = 9; relative error below 1e-13).
 fn ln_gamma(x: f64) -> f64 {
     const COEF: [f64; 9] = [
@@ -82,6 +84,7 @@ fn ln_gamma(x: f64) -> f64 {
         .fold(COEF[0], |acc, (i, c)| acc + c / (x + i as f64));
     0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + sum.ln()
 }
+
 /// Regularised upper incomplete gamma `Q(a, x)` (series for `x < a + 1`, Lentz continued
 /// fraction otherwise; Numerical Recipes §6.2).
 fn gamma_q(a: f64, x: f64) -> f64 {
@@ -135,6 +138,7 @@ fn gamma_q(a: f64, x: f64) -> f64 {
         (ln_pre.exp() * h).clamp(0.0, 1.0)
     }
 }
+
 /// Upper-tail probability of the chi-square distribution, `P(χ²(dof) ≥ x)`.
 pub fn chi2_upper_tail(x: f64, dof: f64) -> f64 {
     if !(x.is_finite() && dof > 0.0) {
@@ -146,10 +150,12 @@ pub fn chi2_upper_tail(x: f64, dof: f64) -> f64 {
     }
     gamma_q(dof / 2.0, x / 2.0)
 }
+
 /// Upper-tail probability of the standard normal distribution.
 pub fn normal_upper_tail(z: f64) -> f64 {
     0.5 * erfc(z / std::f64::consts::SQRT_2)
 }
+
 /// Complementary error function via `Q(1/2, x²)`.
 fn erfc(x: f64) -> f64 {
     if x >= 0.0 {

@@ -1,4 +1,18 @@
 //! The windowed stillness test (module comment of [`super`]) and the runs of still rows it gives.
+//!
+//! **Absolute bound.** The χ² test is relative: it compares each window with the quietest
+//! stretch of the same recording. When a recording has no still stretch at all (a board turned
+//! by hand throughout), the quietest windows are slow motion, the "noise" estimate is that
+//! motion, and slow turns pass as holds. So a window is also judged against physics: a board at
+//! rest does not rotate, and its gyroscope reading then varies only by the sensor's noise.
+//! MEMS gyroscopes specify a rate noise density of at most about 0.03 °/s/√Hz (consumer parts:
+//! MPU-6050 0.005, LSM9DS1 and BMI160 about 0.007–0.008, L3GD20 0.03), so over the widest output
+//! bandwidth they offer (≈ 1 kHz, noise bandwidth ≈ 1.6 kHz) one sample's standard deviation
+//! stays below `0.03·√1600 ≈ 1.2 °/s`; [`MAX_STILL_GYRO_STD_DPS`] rounds that up to 1.5 °/s
+//! per axis. A window whose gyroscope varies more is moving, whatever the rest of the recording
+//! looks like. The test uses the within-window variation, not the mean, so a constant bias
+//! (MEMS parts are specified to several °/s) can never fail it. It needs the gyroscope's unit;
+//! for raw counts it is not applied ([`StillReport::rate_bound_applied`] says which).
 
 use super::holds::interval;
 use super::intervals::{NoiseFloor, StillReport};
@@ -8,6 +22,10 @@ use crate::recording::{LabelKind, Recording, Sensor};
 use crate::stats::descriptive::{mean, percentile, quantisation_step, window_variances};
 use crate::stats::distributions::chi2_quantile_per_dof;
 use crate::stats::threshold::otsu;
+
+/// Largest per-axis standard deviation of a gyroscope's samples, in °/s, that a board at rest
+/// can show (sensor noise only; see the module comment for the datasheet reasoning).
+pub const MAX_STILL_GYRO_STD_DPS: f64 = 1.5;
 
 /// Rows `[start, end)` between breaks: a time step longer than [`BREAK_S`], or a change of
 /// `segment` label together with a step longer than three sample periods (separate recordings
@@ -34,6 +52,7 @@ fn sections(recording: &Recording, rate: f64) -> Vec<(usize, usize)> {
     }
     out
 }
+
 /// A gap in the time stamps longer than this (seconds) is a break in the recording.
 pub const BREAK_S: f64 = 1.0;
 
@@ -104,7 +123,13 @@ pub(super) fn detect(
         .iter()
         .map(|&(a, b)| vec![0.0; (b - a + 1).saturating_sub(w)])
         .collect();
-    for (_, x) in &streams {
+    // Per section, per window: whether the gyroscope varies more than rest allows.
+    let mut turning: Vec<Vec<bool>> = ratio.iter().map(|r| vec![false; r.len()]).collect();
+    let rate_limit = recording
+        .units
+        .to_si(Sensor::Gyro)
+        .map(|to_rad_s| MAX_STILL_GYRO_STD_DPS.to_radians() / to_rad_s);
+    for (sensor, x) in &streams {
         let per_section: Vec<Vec<Vec3>> = sections
             .iter()
             .map(|&(a, b)| window_variances(&x[a..b], w))
@@ -131,6 +156,13 @@ pub(super) fn detect(
             for (v, r) in vars.iter().zip(out.iter_mut()) {
                 let stat: f64 = (0..3).map(|k| v[k] / (sigma[k] * sigma[k])).sum();
                 *r = r.max(stat / chi2_threshold);
+            }
+        }
+        if let (Sensor::Gyro, Some(limit)) = (sensor, rate_limit) {
+            for (vars, out) in per_section.iter().zip(turning.iter_mut()) {
+                for (v, t) in vars.iter().zip(out.iter_mut()) {
+                    *t = v.iter().any(|var| *var > limit * limit);
+                }
             }
         }
         sigmas.push(sigma);
@@ -161,7 +193,7 @@ pub(super) fn detect(
         .collect();
 
     let mut runs: Vec<(usize, usize)> = Vec::new();
-    for (&(a, b), section_ratio) in sections.iter().zip(&ratio) {
+    for ((&(a, b), section_ratio), section_turning) in sections.iter().zip(&ratio).zip(&turning) {
         let len = b - a;
         if section_ratio.is_empty() {
             continue;
@@ -172,7 +204,8 @@ pub(super) fn detect(
         let mut run_start: Option<usize> = None;
         for i in 0..len {
             let s = i.saturating_sub(half).min(windows - 1);
-            match (section_ratio[s] <= margin, run_start) {
+            let still = section_ratio[s] <= margin && !section_turning[s];
+            match (still, run_start) {
                 (true, None) => run_start = Some(i),
                 (false, Some(r)) => {
                     runs.push((a + r, a + i));
@@ -222,8 +255,10 @@ pub(super) fn detect(
         noise,
         window: w,
         from_pose_column: false,
+        rate_bound_applied: rate_limit.is_some() && recording.gyro.is_some(),
     })
 }
+
 /// The label carried by more than half of the rows, if any.
 fn majority_label(rows: &[Option<usize>]) -> Option<usize> {
     let mut counts: Vec<usize> = Vec::new();

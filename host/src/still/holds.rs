@@ -36,8 +36,10 @@ pub(super) fn from_pose_column(recording: &Recording) -> StillReport {
         noise: Vec::new(),
         window: 0,
         from_pose_column: true,
+        rate_bound_applied: false,
     }
 }
+
 /// Mean, per-axis sample variance and count of the selected samples.
 fn pose_of<'a>(
     samples: impl Iterator<Item = &'a Vec3> + Clone,

@@ -102,6 +102,10 @@ pub struct StillReport {
     pub window: usize,
     /// True when holds were taken from a `pose` column rather than detected.
     pub from_pose_column: bool,
+    /// Whether windows were also held to the absolute gyroscope bound of rest
+    /// ([`super::MAX_STILL_GYRO_STD_DPS`]); false for a gyroscope in counts, without a
+    /// gyroscope, or for holds from a `pose` column.
+    pub rate_bound_applied: bool,
 }
 
 impl StillReport {

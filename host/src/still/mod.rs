@@ -31,7 +31,7 @@ mod options;
 use crate::recording::{LabelKind, Recording};
 
 use detect::detect;
-pub use detect::BREAK_S;
+pub use detect::{BREAK_S, MAX_STILL_GYRO_STD_DPS};
 use holds::from_pose_column;
 pub use intervals::{NoiseFloor, StillInterval, StillReport, TempStats};
 pub use options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
