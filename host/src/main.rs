@@ -18,14 +18,14 @@ fn main() -> ExitCode {
     // `output_failure`, never with a panic message; any other panic keeps the default report.
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        if output_error_kind(info.payload()).is_none() {
+        if output_error(info.payload()).is_none() {
             default_hook(info);
         }
     }));
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(cli))) {
         Ok(code) => code,
-        Err(payload) => match output_error_kind(payload.as_ref()) {
-            Some(kind) => output_failure(kind),
+        Err(payload) => match output_error(payload.as_ref()) {
+            Some(error) => output_failure(&error),
             None => std::panic::resume_unwind(payload),
         },
     }
@@ -44,12 +44,11 @@ fn run(cli: Cli) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            if let Some(kind) = error
+            if let Some(io) = error
                 .downcast_ref::<std::io::Error>()
-                .map(std::io::Error::kind)
-                .filter(|k| *k == ErrorKind::BrokenPipe)
+                .filter(|e| e.kind() == ErrorKind::BrokenPipe)
             {
-                return output_failure(kind);
+                return output_failure(io);
             }
             eprintln!("imucal: {error:#}");
             ExitCode::FAILURE
@@ -59,11 +58,10 @@ fn run(cli: Cli) -> ExitCode {
 
 /// A reader that went away wanted no more output: exit quietly with success, as `cat` and
 /// `grep` do under `head`. Any other failure to write (a full disk) is an error with a sentence.
-fn output_failure(kind: ErrorKind) -> ExitCode {
-    if kind == ErrorKind::BrokenPipe {
+fn output_failure(error: &std::io::Error) -> ExitCode {
+    if error.kind() == ErrorKind::BrokenPipe {
         return ExitCode::SUCCESS;
     }
-    let error = std::io::Error::from(kind);
     // Standard error may be the same full disk; nothing more can be done then.
     let _ = std::io::Write::write_all(
         &mut std::io::stderr(),
@@ -75,9 +73,9 @@ fn output_failure(kind: ErrorKind) -> ExitCode {
     ExitCode::FAILURE
 }
 
-/// The kind of the I/O error behind a `print!` panic (`"failed printing to stdout: … (os error
-/// N)"`), read from the OS error number; `None` for any other panic.
-fn output_error_kind(payload: &(dyn Any + Send)) -> Option<ErrorKind> {
+/// The I/O error behind a `print!` panic (`"failed printing to stdout: … (os error N)"`),
+/// rebuilt from the OS error number; `None` for any other panic.
+fn output_error(payload: &(dyn Any + Send)) -> Option<std::io::Error> {
     let message = payload
         .downcast_ref::<String>()
         .map(String::as_str)
@@ -89,5 +87,5 @@ fn output_error_kind(payload: &(dyn Any + Send)) -> Option<ErrorKind> {
         .strip_suffix(')')?
         .parse::<i32>()
         .ok()?;
-    Some(std::io::Error::from_raw_os_error(code).kind())
+    Some(std::io::Error::from_raw_os_error(code))
 }
