@@ -7,6 +7,7 @@
 use nalgebra::DMatrix;
 
 use super::{FitError, Pose, Vec3};
+use crate::stats::descriptive::median;
 
 /// Names of the six faces, in the order `+X, −X, +Y, −Y, +Z, −Z`.
 pub const FACE_NAMES: [&str; 6] = ["+X", "−X", "+Y", "−Y", "+Z", "−Z"];
@@ -62,18 +63,7 @@ pub fn check_reference(reference: f64) -> Result<(), FitError> {
 /// read near zero on any one axis, so the median sits near the offset even when a face is
 /// missing (where the min/max midpoint would be pulled half a reference towards the present face).
 pub fn median_centre(points: &[Vec3]) -> Vec3 {
-    let mut centre = Vec3::zeros();
-    for axis in 0..3 {
-        let mut values: Vec<f64> = points.iter().map(|p| p[axis]).collect();
-        values.sort_by(f64::total_cmp);
-        let n = values.len();
-        centre[axis] = match n {
-            0 => 0.0,
-            _ if n % 2 == 1 => values[n / 2],
-            _ => 0.5 * (values[n / 2 - 1] + values[n / 2]),
-        };
-    }
-    centre
+    Vec3::from_fn(|axis, _| median(&mut points.iter().map(|p| p[axis]).collect::<Vec<_>>()))
 }
 
 /// Which face (index into [`FACE_NAMES`]) a direction points along, if within `tolerance_deg`.

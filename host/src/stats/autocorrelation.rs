@@ -9,7 +9,7 @@
 //! autocorrelation `−(1 − ρ)/2`, while motion much slower than the sample rate contributes little
 //! to them. The white-noise variance is then `E[Δx²]/(2(1 − ρ))`, also from the differences.
 
-use crate::fit::Vec3;
+use super::Vec3;
 
 /// Largest lag-1 autocorrelation of the noise accepted; beyond it the AR(1) correction
 /// (factor `(1 + ρ)/(1 − ρ)³` on the variance of the mean) is itself too uncertain.

@@ -2,7 +2,7 @@
 //! median and median absolute deviation, moving-window variances, and the quantisation step of
 //! integer data.
 
-use crate::fit::Vec3;
+use super::Vec3;
 
 /// Per-axis mean of `x` (zero for no samples).
 pub fn mean(x: &[Vec3]) -> Vec3 {
