@@ -1,5 +1,5 @@
 //! Still-interval detection: finds the static holds in a recording that has no `pose` column,
-//! and turns each hold into per-sensor [`Pose`] statistics.
+//! and turns each hold into per-sensor [`crate::fit::Pose`] statistics.
 //!
 //! Method (the windowed-variance stillness test of `ARCHITECTURE.md`, firmware "Stillness",
 //! done offline): for every window of `W` samples the per-axis sample variance `v_k` is
@@ -13,13 +13,16 @@
 //! The margin is chosen from the data by Otsu's method (maximum between-class variance of the
 //! histogram of `log S`, which is bimodal: still versus moving), kept within
 //! [`MIN_MARGIN`, `MAX_MARGIN`]; it can also be fixed. Accelerometer and gyroscope must both
-//! pass. Windows never cross a break in the time stamps or a change of `segment` label at a
+//! pass, and a gyroscope in known units must also vary by no more than a board at rest can
+//! ([`MAX_STILL_GYRO_STD_DPS`], reasoning in `detect`): the relative test alone would accept the
+//! quietest stretch of a recording that never rests. Windows never cross a break in the time stamps or a change of `segment` label at a
 //! break. Runs of still windows are merged across short blips, kept when they last long
 //! enough, and their gravity directions are clustered by angle.
 //!
-//! Files: `detect` (the windowed test and the runs it gives), `holds` (per-sensor statistics of
-//! a hold), `directions` (clustering of gravity directions), `motions` (the gyroscope rotations
-//! between consecutive holds, for the gyroscope-scale fit).
+//! Files: `options` (settings, errors), `intervals` (what is found), `detect` (the windowed test
+//! and the runs it gives), `holds` (per-sensor statistics of a hold), `directions` (clustering of
+//! gravity directions), `motions` (the gyroscope rotations between consecutive holds, for the
+//! gyroscope-scale fit).
 
 mod detect;
 pub mod directions;

@@ -13,6 +13,7 @@ use super::{deadline_after, request_name, DeviceClient};
 use crate::device::DeviceError;
 
 impl<L: Read + Write> DeviceClient<L> {
+    /// The next request's sequence id.
     pub(super) fn take_seq(&mut self) -> u16 {
         let seq = self.next_seq;
         self.next_seq = self.next_seq.wrapping_add(1);
