@@ -134,8 +134,11 @@ fn noise_estimate_recovers_the_white_noise_sigma() {
 #[test]
 fn holds_shorter_than_the_minimum_are_dropped() {
     let (rec, _) = six_face_recording(3, 0.8);
-    let report = find_still(&rec, &StillOptions::default()).expect("detection runs");
-    assert!(report.intervals.is_empty(), "{}", report.summary());
+    let result = find_still(&rec, &StillOptions::default());
+    assert!(
+        matches!(result, Err(StillError::NeverAtRest { .. })),
+        "{result:?}"
+    );
 }
 
 #[test]

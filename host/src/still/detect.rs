@@ -27,6 +27,12 @@ use crate::stats::threshold::otsu;
 /// can show (sensor noise only; see the module comment for the datasheet reasoning).
 pub const MAX_STILL_GYRO_STD_DPS: f64 = 1.5;
 
+/// A gyroscope whose quietest window varies by more than this (°/s) is not in the declared unit:
+/// a board turned by hand for calibration moves at tens of °/s, never at this rate in every
+/// half-second of a recording, while raw counts read as rad/s give hundreds. The rest bound is
+/// then not applied, and the unit checks downstream name the unit.
+pub const IMPLAUSIBLE_QUIETEST_GYRO_DPS: f64 = 100.0;
+
 /// Rows `[start, end)` between breaks: a time step longer than [`BREAK_S`], or a change of
 /// `segment` label together with a step longer than three sample periods (separate recordings
 /// joined in one file). A label change without a break (phases of one continuous recording) is
@@ -125,6 +131,8 @@ pub(super) fn detect(
         .collect();
     // Per section, per window: whether the gyroscope varies more than rest allows.
     let mut turning: Vec<Vec<bool>> = ratio.iter().map(|r| vec![false; r.len()]).collect();
+    // Smallest over the windows of the largest per-axis gyroscope variance (file units).
+    let mut quietest_gyro_var = f64::INFINITY;
     let rate_limit = recording
         .units
         .to_si(Sensor::Gyro)
@@ -162,6 +170,7 @@ pub(super) fn detect(
             for (vars, out) in per_section.iter().zip(turning.iter_mut()) {
                 for (v, t) in vars.iter().zip(out.iter_mut()) {
                     *t = v.iter().any(|var| *var > limit * limit);
+                    quietest_gyro_var = quietest_gyro_var.min(v.max());
                 }
             }
         }
@@ -191,6 +200,19 @@ pub(super) fn detect(
             margin,
         })
         .collect();
+
+    let to_dps = |var: f64| {
+        recording
+            .units
+            .to_si(Sensor::Gyro)
+            .map_or(f64::NAN, |to_rad_s| (var.sqrt() * to_rad_s).to_degrees())
+    };
+    let unit_implausible = to_dps(quietest_gyro_var) > IMPLAUSIBLE_QUIETEST_GYRO_DPS;
+    if unit_implausible {
+        for t in turning.iter_mut().flatten() {
+            *t = false;
+        }
+    }
 
     let mut runs: Vec<(usize, usize)> = Vec::new();
     for ((&(a, b), section_ratio), section_turning) in sections.iter().zip(&ratio).zip(&turning) {
@@ -240,7 +262,12 @@ pub(super) fn detect(
     }
 
     let labels = recording.labels.as_ref();
-    let intervals = merged
+    let relative_found_rest = ratio
+        .iter()
+        .flatten()
+        .zip(turning.iter().flatten())
+        .any(|(r, t)| *r <= margin && *t);
+    let intervals: Vec<_> = merged
         .into_iter()
         .filter(|&(a, b)| recording.time[b - 1] - recording.time[a] >= options.min_hold_s)
         .map(|(a, b)| {
@@ -249,13 +276,21 @@ pub(super) fn detect(
             interval(recording, &rows, a, b, label)
         })
         .collect();
+    if intervals.is_empty() && relative_found_rest && quietest_gyro_var.is_finite() {
+        return Err(StillError::NeverAtRest {
+            path: source,
+            quietest_dps: to_dps(quietest_gyro_var),
+            unit: recording.units.symbol(Sensor::Gyro),
+            bound_dps: MAX_STILL_GYRO_STD_DPS,
+        });
+    }
     Ok(StillReport {
         intervals,
         directions: Vec::new(),
         noise,
         window: w,
         from_pose_column: false,
-        rate_bound_applied: rate_limit.is_some() && recording.gyro.is_some(),
+        rate_bound_applied: rate_limit.is_some() && recording.gyro.is_some() && !unit_implausible,
     })
 }
 

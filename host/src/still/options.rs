@@ -51,6 +51,19 @@ pub enum StillError {
     /// Times are row numbers, so windows in seconds cannot be formed.
     #[error("`{0}` has no `t_s` column and no sample rate was given; still detection works in seconds, so pass the rate (e.g. `--rate 100`)")]
     NoRate(String),
+    /// The relative test found still stretches, but in every one the gyroscope varies by more
+    /// than a board at rest can ([`super::MAX_STILL_GYRO_STD_DPS`]).
+    #[error("the gyroscope of `{path}` never rests: even in its quietest window it varies by {quietest_dps:.1} °/s (reading the data as {unit}), more than the {bound_dps} °/s of sensor noise a board at rest shows; either the board moved throughout (hold it still for 2–3 s in each orientation) or the gyroscope is not in {unit} (pass --gyro-unit dps or counts as the data are)")]
+    NeverAtRest {
+        /// The recording.
+        path: String,
+        /// Largest per-axis standard deviation of the gyroscope in its quietest window, °/s.
+        quietest_dps: f64,
+        /// The declared gyroscope unit.
+        unit: &'static str,
+        /// The rest bound, °/s.
+        bound_dps: f64,
+    },
     /// An option is out of range.
     #[error("still-detection option {name} = {value} is out of range ({expected})")]
     BadOption {
