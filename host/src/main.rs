@@ -40,6 +40,8 @@ fn run(cli: Cli) -> ExitCode {
         Command::Device(command) => cli::device::run(&command),
         Command::Report(args) => cli::report::run(&args),
         Command::Export(args) => cli::export::run(&args),
+        Command::History(args) => cli::history::run(&args),
+        Command::Fleet(args) => cli::fleet::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
