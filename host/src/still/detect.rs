@@ -262,11 +262,15 @@ pub(super) fn detect(
     }
 
     let labels = recording.labels.as_ref();
-    let relative_found_rest = ratio
-        .iter()
-        .flatten()
-        .zip(turning.iter().flatten())
-        .any(|(r, t)| *r <= margin && *t);
+    // Rest by the relative test only where the rest bound failed, nowhere where both passed.
+    let passes = |accept_turning: bool| {
+        ratio
+            .iter()
+            .flatten()
+            .zip(turning.iter().flatten())
+            .any(|(r, t)| *r <= margin && *t == accept_turning)
+    };
+    let relative_found_rest = passes(true) && !passes(false);
     let intervals: Vec<_> = merged
         .into_iter()
         .filter(|&(a, b)| recording.time[b - 1] - recording.time[a] >= options.min_hold_s)
