@@ -15,5 +15,7 @@ pub mod pipeline;
 pub mod recording;
 pub mod report;
 pub mod session;
+pub mod stats;
 pub mod still;
+#[cfg(feature = "synthetic")]
 pub mod synthetic;

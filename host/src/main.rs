@@ -3,12 +3,35 @@
 
 mod cli;
 
+use std::any::Any;
+use std::io::ErrorKind;
+use std::process::ExitCode;
+
 use clap::Parser;
 
 use cli::args::{Cli, Command};
 
-fn main() -> std::process::ExitCode {
+fn main() -> ExitCode {
     let cli = Cli::parse();
+    // `print!` panics when standard output fails: a reader that closed the pipe
+    // (`imucal ports | head -0`) or a full disk. Such a failure ends the command as described in
+    // `output_failure`, never with a panic message; any other panic keeps the default report.
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if output_error(info.payload()).is_none() {
+            default_hook(info);
+        }
+    }));
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(cli))) {
+        Ok(code) => code,
+        Err(payload) => match output_error(payload.as_ref()) {
+            Some(error) => output_failure(&error),
+            None => std::panic::resume_unwind(payload),
+        },
+    }
+}
+
+fn run(cli: Cli) -> ExitCode {
     let result = match cli.command {
         Command::Fit(args) => cli::fit::run(&args),
         Command::Calibrate(args) => cli::calibrate::run(&args),
@@ -21,10 +44,50 @@ fn main() -> std::process::ExitCode {
         Command::Fleet(args) => cli::fleet::run(&args),
     };
     match result {
-        Ok(()) => std::process::ExitCode::SUCCESS,
+        Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
+            if let Some(io) = error
+                .downcast_ref::<std::io::Error>()
+                .filter(|e| e.kind() == ErrorKind::BrokenPipe)
+            {
+                return output_failure(io);
+            }
             eprintln!("imucal: {error:#}");
-            std::process::ExitCode::FAILURE
+            ExitCode::FAILURE
         }
     }
+}
+
+/// A reader that went away wanted no more output: exit quietly with success, as `cat` and
+/// `grep` do under `head`. Any other failure to write (a full disk) is an error with a sentence.
+fn output_failure(error: &std::io::Error) -> ExitCode {
+    if error.kind() == ErrorKind::BrokenPipe {
+        return ExitCode::SUCCESS;
+    }
+    // Standard error may be the same full disk; nothing more can be done then.
+    let _ = std::io::Write::write_all(
+        &mut std::io::stderr(),
+        format!(
+            "imucal: cannot write the output ({error}); free space where standard output goes, or redirect it elsewhere\n"
+        )
+        .as_bytes(),
+    );
+    ExitCode::FAILURE
+}
+
+/// The I/O error behind a `print!` panic (`"failed printing to stdout: … (os error N)"`),
+/// rebuilt from the OS error number; `None` for any other panic.
+fn output_error(payload: &(dyn Any + Send)) -> Option<std::io::Error> {
+    let message = payload
+        .downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| payload.downcast_ref::<&str>().copied())?;
+    let detail = message.strip_prefix("failed printing to stdout: ")?;
+    let code = detail
+        .rsplit_once("(os error ")?
+        .1
+        .strip_suffix(')')?
+        .parse::<i32>()
+        .ok()?;
+    Some(std::io::Error::from_raw_os_error(code))
 }

@@ -2,6 +2,9 @@
 //! pose sets (six faces, the twelve positions of seed 003, random directions, half sphere) and
 //! magnetometer sample clouds (full sphere or a partial cap).
 //!
+//! Compiled only with the `synthetic` feature: the library never needs it at run time; the
+//! tests, examples and benches enable it through their dev-dependency on this crate.
+//!
 //! A raw reading is generated from a true calibrated vector `y` as `x = A_true⁻¹·y + b_true + e`
 //! with white noise `e ~ N(0, σ²)` per axis, so that the true calibration in the library's
 //! convention `y = A·(x − b)` is exactly `(A_true, b_true)`.

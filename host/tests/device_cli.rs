@@ -127,3 +127,67 @@ fn an_absent_port_fails_with_exit_code_1_and_a_sentence() {
         "imucal: no such port /dev/ttyIMUCAL-absent; run `imucal ports` to list the serial ports"
     );
 }
+
+/// Runs `imucal args…`, killing it after `limit`; `None` when it had to be killed.
+fn imucal_within(args: &[&str], limit: std::time::Duration) -> Option<Output> {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the imucal binary runs");
+    let start = std::time::Instant::now();
+    while start.elapsed() < limit {
+        if let Ok(Some(_)) = child.try_wait() {
+            return child.wait_with_output().ok();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    None
+}
+
+#[test]
+fn info_and_flash_return_while_another_program_reads_the_port() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    // A second reader on the same port, as `cat $PORT &` would be: it takes whatever bytes it
+    // can, so the client's poll may report data that is gone by the time it reads.
+    let mut thief = std::fs::File::open(&fake.path).expect("the pty opens a second time");
+    std::thread::spawn(move || {
+        use std::io::Read;
+        let mut buf = [0u8; 256];
+        while matches!(thief.read(&mut buf), Ok(n) if n > 0) {}
+    });
+    let path = temp_file("contested.json");
+    std::fs::write(
+        &path,
+        ParamsFile::from(&CalibrationSet::identity()).to_json(),
+    )
+    .expect("temp dir writable");
+    // Connect tries (5) and request tries (3) at 0.5 s reply timeouts, plus 3 s flash timeouts,
+    // bound a run at well under 30 s; a run still going after 60 s is hanging.
+    let limit = std::time::Duration::from_secs(60);
+    let info = imucal_within(&["info", "--port", &fake.path], limit);
+    let flash = imucal_within(
+        &[
+            "flash",
+            path.to_str().expect("utf-8 path"),
+            "--port",
+            &fake.path,
+        ],
+        limit,
+    );
+    let _ = std::fs::remove_file(&path);
+    for (command, out) in [("info", info), ("flash", flash)] {
+        let out = out.unwrap_or_else(|| panic!("`imucal {command}` hung with a second reader"));
+        // Either outcome is fine (the other reader may take every reply); a failure says why.
+        if !out.status.success() {
+            assert!(
+                !text(&out.stderr).trim().is_empty(),
+                "{command}: silent failure"
+            );
+        }
+    }
+}

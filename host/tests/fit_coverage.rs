@@ -1,4 +1,4 @@
-//! The coverage rule of the norm-model fits (`fit::validate::check_coverage`): data that cannot
+//! The coverage rule of the norm-model fits (`fit::coverage::check_coverage`): data that cannot
 //! determine the ellipsoid are refused by every method with a sentence naming what is missing,
 //! and well-covered data still fit.
 

@@ -22,7 +22,7 @@
 
 use super::effects::EffectKind;
 use super::extended_fit::{fit_rows, ExtendedFit, Problem};
-use super::noise::normal_upper_tail;
+use crate::stats::distributions::normal_upper_tail;
 use nalgebra::DVector;
 
 /// Largest number of folds.

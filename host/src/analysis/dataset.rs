@@ -4,7 +4,7 @@
 //! temperature, its mid time, and the specific force measured at the same time.
 //!
 //! Standard error of a mean: the within-pose variance `s²` divided by an *effective* sample
-//! size. Samples of real sensors are not independent (digital low-pass filters, slow wander), so
+//! size ([`crate::stats::autocorrelation::run_stats`]). Samples of real sensors are not independent (digital low-pass filters, slow wander), so
 //! `n_eff = n·(1 − ρ)/(1 + ρ)` from the lag-1 autocorrelation `ρ` of the noise (the AR(1) result,
 //! e.g. Bartlett 1946; von Storch & Zwiers, *Statistical Analysis in Climate Research*, §6.6).
 //! Slow deterministic motion inside a hold (a hand's sway) would make `ρ` of the raw samples
@@ -16,11 +16,8 @@
 
 use crate::fit::{Pose, Vec3};
 use crate::recording::{LabelKind, Recording, Sensor};
+use crate::stats::autocorrelation::run_stats;
 use crate::still::StillReport;
-
-/// Largest lag-1 autocorrelation of the noise accepted; beyond it the AR(1) correction
-/// (factor `(1 + ρ)/(1 − ρ)³` on the variance of the mean) is itself too uncertain.
-const MAX_NOISE_CORRELATION: f64 = 0.9;
 
 /// One observation: a still pose or a short window of samples.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,68 +40,6 @@ pub struct Observation {
     pub accel_mean: Option<Vec3>,
     /// Label from the recording, if any.
     pub label: Option<i64>,
-}
-
-/// Mean, standard error and noise statistics of a run of samples.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RunStats {
-    /// Mean per axis.
-    pub mean: Vec3,
-    /// Standard error of the mean per axis.
-    pub sigma_mean: Vec3,
-    /// Effective sample size (mean over axes).
-    pub n_eff: f64,
-    /// Lag-1 autocorrelation of the noise (mean over axes).
-    pub rho: f64,
-}
-
-/// Statistics of `samples` as described in the module comment; `None` for fewer than 4 samples
-/// (too few to estimate a correlation) or non-finite data.
-pub fn run_stats(samples: &[Vec3]) -> Option<RunStats> {
-    let n = samples.len();
-    if n < 4 || samples.iter().any(|s| s.iter().any(|v| !v.is_finite())) {
-        return None;
-    }
-    let nf = n as f64;
-    let mean = samples.iter().sum::<Vec3>() / nf;
-    let mut sigma_mean = Vec3::zeros();
-    let mut rho_sum = 0.0;
-    let mut n_eff_sum = 0.0;
-    for k in 0..3 {
-        let d: Vec<f64> = samples.windows(2).map(|w| w[1][k] - w[0][k]).collect();
-        let d_mean = d.iter().sum::<f64>() / d.len() as f64;
-        let d_var = d.iter().map(|v| (v - d_mean).powi(2)).sum::<f64>() / d.len() as f64;
-        let d_cov = d
-            .windows(2)
-            .map(|w| (w[0] - d_mean) * (w[1] - d_mean))
-            .sum::<f64>()
-            / d.len() as f64;
-        let r_d = if d_var > 0.0 { d_cov / d_var } else { -0.5 };
-        let rho = (1.0 + 2.0 * r_d).clamp(0.0, MAX_NOISE_CORRELATION);
-        let white_var = d_var / (2.0 * (1.0 - rho));
-        let n_eff = (nf * (1.0 - rho) / (1.0 + rho)).max(1.0);
-        // A quantised, noise-free axis has zero variance; keep a floor of one quantum²/12 so that
-        // weights stay finite (the step is the smallest non-zero difference).
-        let step = d
-            .iter()
-            .map(|v| v.abs())
-            .filter(|v| *v > 0.0)
-            .fold(f64::INFINITY, f64::min);
-        let quantum_var = if step.is_finite() {
-            step * step / 12.0
-        } else {
-            0.0
-        };
-        sigma_mean[k] = (white_var.max(quantum_var) / n_eff).sqrt();
-        rho_sum += rho;
-        n_eff_sum += n_eff;
-    }
-    Some(RunStats {
-        mean,
-        sigma_mean,
-        n_eff: n_eff_sum / 3.0,
-        rho: rho_sum / 3.0,
-    })
 }
 
 fn mean_of(values: &[f64]) -> Option<f64> {

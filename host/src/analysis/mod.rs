@@ -23,7 +23,6 @@ pub mod crossval;
 pub mod dataset;
 pub mod effects;
 pub mod extended_fit;
-pub mod noise;
 pub mod report;
 pub mod result;
 pub mod selection;

@@ -18,8 +18,8 @@ use plotters::prelude::*;
 use serde_json::{json, Map, Value};
 
 use super::effects::EffectKind;
-use super::noise::ChiSquareTest;
 use super::{EffectResult, EffectStatus, RecordingAnalysis, SensorAnalysis};
+use crate::stats::chi_square::ChiSquareTest;
 
 /// Why a report could not be written.
 #[derive(Debug, thiserror::Error)]

@@ -7,7 +7,7 @@ use imucal_protocol::{BiasTemperature, Nonlinearity, SensorCalibration};
 use super::dataset::Observation;
 use super::effects::EffectKind;
 use super::extended_fit::{physical_factor, ExtendedFit, Problem};
-use super::noise::ChiSquareTest;
+use crate::stats::chi_square::ChiSquareTest;
 use crate::fit::{Calibration, FitError};
 use crate::recording::Sensor;
 

@@ -9,7 +9,7 @@ use super::extended_fit::{
     base_calibration, fit_rows, physical_factor, physical_residual, start_params, BaseKind,
     ExtendedFit, Problem,
 };
-use super::noise::ChiSquareTest;
+use crate::stats::chi_square::ChiSquareTest;
 use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, SensorAnalysis};
 use crate::fit::{Calibration, Vec3};
 use crate::recording::Sensor;

@@ -8,7 +8,8 @@ use super::result::{AnalysisError, AnalysisOptions, RecordingAnalysis, SensorAna
 use super::selection::{analyse_observations, SensorSetup};
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::li::{fit_li, LiOptions};
-use crate::fit::norm_lm::{fit_mag_lm, sphere_start};
+use crate::fit::coverage::sphere_start;
+use crate::fit::norm_lm::fit_mag_lm;
 use crate::fit::{Calibration, Vec3};
 use crate::pipeline::chain::default_accel_chain;
 use crate::recording::{Recording, Sensor};

@@ -140,7 +140,14 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         eprintln!("imucal: warning: {warning}");
     }
     let Some(still) = &checked.still else {
-        bail!("no still intervals were found, so there is nothing to analyse");
+        let why = [
+            imucal::recording::Sensor::Accel,
+            imucal::recording::Sensor::Gyro,
+        ]
+        .into_iter()
+        .find_map(|s| checked.refusal(s))
+        .unwrap_or("no still intervals were found");
+        bail!("{why}; there is nothing to analyse");
     };
     let recording = &checked.recording;
     let (gyro_scale, gyro_unit) = gyro_unit_scale(recording, references.gyro_scale);

@@ -58,6 +58,18 @@ fn from_recording(
             input.unit_refusal_sentences().join("; ")
         );
     }
+    if input.still.is_none() && input.mag_points.is_empty() {
+        // Nothing left to report on: say why the holds were refused.
+        if let Some(why) = [
+            imucal::recording::Sensor::Accel,
+            imucal::recording::Sensor::Gyro,
+        ]
+        .into_iter()
+        .find_map(|s| input.refusal(s))
+        {
+            bail!("{why}; no report was written");
+        }
+    }
     bar.inc(1);
     bar.set_message("fitting");
     let calibration = calibrate(

@@ -14,7 +14,8 @@ pub mod params_json;
 mod ports;
 mod samples;
 
-pub use client::{ClientOptions, DeviceClient, EventHandler, LinkStats, PoseProgress, PoseRequest};
+pub use client::capture::{PoseProgress, PoseRequest};
+pub use client::{ClientOptions, DeviceClient, EventHandler, LinkStats};
 pub use error::DeviceError;
 pub use params_json::{ParamsFile, ParamsFileError, PARAMS_FILE_FORMAT};
 pub use ports::{

@@ -266,16 +266,38 @@ pub fn choose_port_with_reason(ports: &[PortInfo]) -> Result<(&PortInfo, String)
 
 /// Opens `path` as the raw link to a board, exclusively, with [`READ_POLL`] as read timeout.
 ///
+/// On Unix the descriptor is made non-blocking: a `read` after a poll that said "ready" could
+/// otherwise wait forever when another program reading the same port (`cat /dev/ttyACM0`) took
+/// the bytes in between; non-blocking, it returns `WouldBlock` and the client's deadlines hold.
 /// DTR is raised where the port supports it (some USB boards only send while it is set); on a
 /// pseudo-terminal that call fails and is ignored.
 pub fn open_port(path: &str) -> Result<Box<dyn SerialPort>, DeviceError> {
-    let mut port = serialport::new(path, BAUD_RATE)
-        .timeout(READ_POLL)
-        .open()
-        .map_err(|e| open_error(path, e))?;
+    let builder = serialport::new(path, BAUD_RATE).timeout(READ_POLL);
+    #[cfg(unix)]
+    let mut port = {
+        let port = builder.open_native().map_err(|e| open_error(path, e))?;
+        never_block(&port).map_err(|cause| DeviceError::Open {
+            port: path.to_string(),
+            detail: format!("cannot make the port non-blocking: {cause}"),
+        })?;
+        Box::new(port) as Box<dyn SerialPort>
+    };
+    #[cfg(not(unix))]
+    let mut port = builder.open().map_err(|e| open_error(path, e))?;
     // Modem lines do not exist on a pty (ENOTTY); never fatal.
     let _ = port.write_data_terminal_ready(true);
     Ok(port)
+}
+
+/// Sets `O_NONBLOCK` on the port's descriptor (see [`open_port`]).
+#[cfg(unix)]
+fn never_block(port: &serialport::TTYPort) -> std::io::Result<()> {
+    use nix::fcntl::{fcntl, FcntlArg, OFlag};
+    use std::os::fd::AsRawFd;
+    let fd = port.as_raw_fd();
+    let flags = OFlag::from_bits_truncate(fcntl(fd, FcntlArg::F_GETFL)?);
+    fcntl(fd, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK))?;
+    Ok(())
 }
 
 /// Maps serialport's open error to a sentence for the user.

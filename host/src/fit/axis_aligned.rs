@@ -15,17 +15,16 @@ use std::cmp::Ordering;
 
 use nalgebra::DMatrix;
 
+use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
+use super::li::li_start;
 use super::linalg::{inverse_spd, least_squares, RANK_TOLERANCE};
 use super::loo::held_out_rms;
-use super::validate::{
-    check_finite_points, check_finite_poses, check_reference, guard_fit, CoverageHint,
-    EllipsoidModel,
-};
+use super::validate::{check_finite_points, check_finite_poses, check_reference};
 use super::{Calibration, Fit, FitError, Mat3, Method, Pose, Vec3};
 
 /// Fit an axis-aligned ellipsoid to `points` and return the calibration mapping it onto the sphere
 /// of radius `reference`. Needs at least six points that are not all on one plane.
-/// The coverage rule of [`super::validate`] (6 unknowns) is applied before returning.
+/// The coverage rule of [`super::coverage`] (6 unknowns) is applied before returning.
 pub fn fit_axis_aligned(points: &[Vec3], reference: f64) -> Result<Fit, FitError> {
     guard_fit(
         fit_axis_aligned_unchecked(points, reference),
@@ -34,7 +33,7 @@ pub fn fit_axis_aligned(points: &[Vec3], reference: f64) -> Result<Fit, FitError
         reference,
         EllipsoidModel::AxisAligned,
         CoverageHint::Either,
-        None,
+        || li_start(points, reference),
     )
 }
 

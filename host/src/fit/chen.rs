@@ -20,6 +20,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
+use super::li::li_start;
 use super::linalg::{
     condition_number, inverse_spd, least_squares, rms, std_from_covariance, upper_triangular_gauge,
 };
@@ -44,7 +46,7 @@ const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 
 /// `A11 A12 A13 A22 A23 A33 b1 b2 b3`, from the inverse of the noise-weighted Gauss–Newton normal
 /// matrix (or `σ̂²(JᵀJ)⁻¹` from the residuals when the poses report no variance).
 ///
-/// The coverage rule of [`super::validate`] is applied before returning.
+/// The coverage rule of [`super::coverage`] is applied before returning.
 pub fn fit_chen(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
     let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
     let noise: Vec<f64> = poses
@@ -52,14 +54,18 @@ pub fn fit_chen(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
         .map(|p| (p.var_of_mean().sum() / 3.0).max(0.0).sqrt())
         .collect();
     let start = chen_coarse(poses, reference).ok();
-    super::validate::guard_fit(
+    guard_fit(
         fit_chen_unchecked(poses, reference),
         &means,
         Some(&noise),
         reference,
-        super::validate::EllipsoidModel::General,
-        super::validate::CoverageHint::Poses,
-        start.as_ref(),
+        EllipsoidModel::General,
+        CoverageHint::Poses,
+        || {
+            start
+                .filter(Calibration::is_finite)
+                .or_else(|| li_start(&means, reference))
+        },
     )
 }
 

@@ -12,9 +12,10 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::covariance::normal_covariance;
+use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
+use super::li::li_start;
 use super::linalg::{condition_number, rms};
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
-use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
 
 /// Options of [`fit_frosio`].
@@ -80,7 +81,7 @@ fn residuals_and_jacobian(
 
 /// Fit `A` (symmetric) and `b` to readings that should all have norm `reference`.
 ///
-/// The coverage rule of [`super::validate`] is applied before returning, and replaces a failure
+/// The coverage rule of [`super::coverage`] is applied before returning, and replaces a failure
 /// to converge when the data cannot determine the parameters.
 pub fn fit_frosio(points: &[Vec3], reference: f64, opts: &FrosioOptions) -> Result<Fit, FitError> {
     guard_fit(
@@ -90,7 +91,7 @@ pub fn fit_frosio(points: &[Vec3], reference: f64, opts: &FrosioOptions) -> Resu
         reference,
         EllipsoidModel::General,
         CoverageHint::Either,
-        None,
+        || li_start(points, reference),
     )
 }
 

@@ -32,11 +32,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
 use super::li_moments::Moments;
 use super::linalg::{singular_values, sqrt_spd, RANK_TOLERANCE};
-use super::validate::{
-    check_finite_points, check_reference, guard_fit, CoverageHint, EllipsoidModel,
-};
+use super::validate::{check_finite_points, check_reference};
 use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
 
 /// Largest accepted design condition number: the eigenproblem works on `S = DᵀD`, whose condition
@@ -58,7 +57,7 @@ pub struct LiOptions {
 /// normalised design matrix: the fit is its (near-)null vector, whose sensitivity to noise is set
 /// by the gap to the next singular value. Above [`MAX_CONDITION`] the fit is refused.
 ///
-/// Before returning, the coverage rule of [`super::validate`] is applied: a cloud that cannot
+/// Before returning, the coverage rule of [`super::coverage`] is applied: a cloud that cannot
 /// determine the ellipsoid (one plane, a few clusters) is refused with what to add.
 pub fn fit_li(points: &[Vec3], reference: f64, opts: LiOptions) -> Result<Fit, FitError> {
     guard_fit(
@@ -68,8 +67,22 @@ pub fn fit_li(points: &[Vec3], reference: f64, opts: LiOptions) -> Result<Fit, F
         reference,
         EllipsoidModel::General,
         CoverageHint::Either,
-        None,
+        || li_start(points, reference),
     )
+}
+
+/// Li's ellipsoid about the sample mean, without the coverage rule: the lens through which the
+/// coverage of a failed fit is judged. `None` when even this fit fails.
+pub(crate) fn li_start(points: &[Vec3], reference: f64) -> Option<Calibration> {
+    fit_li_unchecked(
+        points,
+        reference,
+        LiOptions {
+            subtract_mean: true,
+        },
+    )
+    .ok()
+    .map(|f| f.cal)
 }
 
 /// [`fit_li`] without the coverage rule (used to judge the coverage of failed fits).

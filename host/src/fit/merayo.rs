@@ -17,9 +17,10 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::covariance::{calibration_std, param_names, UPPER_TRIANGULAR_LAYOUT};
+use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
+use super::li::li_start;
 use super::linalg::{least_squares, rms};
 use super::uncertainty::{noise_scale, NoiseLevel, Z_95};
-use super::validate::{guard_fit, CoverageHint, EllipsoidModel};
 use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
 
 /// Coefficients `(M, u)` in centred, scaled units → upper-triangular entries of `A` and `b`
@@ -53,7 +54,7 @@ fn ellipsoid_params(theta: &DVector<f64>) -> Option<DVector<f64>> {
 /// Fit `A` (upper-triangular) and `b` to readings whose calibrated norm is `reference`.
 ///
 /// `subtract_mean`: centre the data on their mean before the linear fit (seed 000 Table 2, "Po").
-/// The coverage rule of [`super::validate`] is applied before returning.
+/// The coverage rule of [`super::coverage`] is applied before returning.
 pub fn fit_merayo(points: &[Vec3], reference: f64, subtract_mean: bool) -> Result<Fit, FitError> {
     guard_fit(
         fit_merayo_unchecked(points, reference, subtract_mean),
@@ -62,7 +63,7 @@ pub fn fit_merayo(points: &[Vec3], reference: f64, subtract_mean: bool) -> Resul
         reference,
         EllipsoidModel::General,
         CoverageHint::Either,
-        None,
+        || li_start(points, reference),
     )
 }
 

@@ -11,6 +11,7 @@ pub mod axis_aligned;
 pub mod chen;
 pub(crate) mod corrected_score;
 pub mod covariance;
+pub mod coverage;
 pub mod frosio;
 pub mod gyro_bias;
 pub mod gyro_scale;
@@ -69,6 +70,11 @@ impl Calibration {
             a: Mat3::identity(),
             b: Vec3::zeros(),
         }
+    }
+
+    /// Whether every entry of `A` and `b` is finite.
+    pub fn is_finite(&self) -> bool {
+        self.a.iter().chain(self.b.iter()).all(|v| v.is_finite())
     }
 
     /// Apply the calibration to one reading.

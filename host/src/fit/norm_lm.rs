@@ -29,15 +29,15 @@ use super::corrected_score::{re_evaluate, solve_corrected_score, upper_from_para
 use super::covariance::{
     calibration_std, normal_covariance, param_names, reduced_chi_square, UPPER_TRIANGULAR_LAYOUT,
 };
+use super::coverage::{guard_fit, sphere_start, CoverageHint, EllipsoidModel};
+use super::li::li_start;
 use super::li::{fit_li, LiOptions};
 use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::leave_one_out_rms;
 use super::six_position::fit_six_position;
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
-use super::validate::{
-    check_finite_points, check_finite_poses, guard_fit, CoverageHint, EllipsoidModel,
-};
+use super::validate::{check_finite_points, check_finite_poses};
 use super::{Calibration, Fit, FitError, Mat3, Method, Pose, Vec3};
 
 /// Points on the (distorted) sphere and the noise of each point's norm.
@@ -456,27 +456,6 @@ pub fn refine_lm_detailed(
     })
 }
 
-/// The sphere around the mean of `points` with their RMS radius: the start of last resort.
-pub fn sphere_start(points: &[Vec3], reference: f64) -> Calibration {
-    let n = points.len().max(1) as f64;
-    let mean = points.iter().sum::<Vec3>() / n;
-    let radius = (points
-        .iter()
-        .map(|p| (p - mean).norm_squared())
-        .sum::<f64>()
-        / n)
-        .sqrt();
-    let gain = if radius > 0.0 {
-        reference / radius
-    } else {
-        1.0
-    };
-    Calibration {
-        a: Mat3::identity() * gain,
-        b: mean,
-    }
-}
-
 /// Accelerometer start: six-position (seed 000 eq. 11–15), else Li's ellipsoid (seed 000
 /// eq. 17–29) on the pose means, else Chen's coarse model (seed 003), else the sphere.
 fn accel_start(poses: &[Pose], reference: f64) -> Calibration {
@@ -507,7 +486,7 @@ fn pose_mean_noise(poses: &[Pose]) -> Vec<f64> {
         .collect()
 }
 
-/// Apply the coverage rule of [`super::validate`] to a norm-model outcome (judging a failed fit
+/// Apply the coverage rule of [`super::coverage`] to a norm-model outcome (judging a failed fit
 /// by its start).
 fn guard_outcome(
     outcome: Result<NormLmOutcome, FitError>,
@@ -528,7 +507,12 @@ fn guard_outcome(
         reference,
         EllipsoidModel::General,
         hint,
-        start,
+        || {
+            start
+                .copied()
+                .filter(Calibration::is_finite)
+                .or_else(|| li_start(points, reference))
+        },
     )
     .map(|fit| NormLmOutcome {
         fit,

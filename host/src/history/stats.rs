@@ -2,7 +2,7 @@
 //! Student's t distribution for outlier thresholds that follow from a stated false-alarm rate. The t CDF is the regularised incomplete beta function
 //! (Abramowitz & Stegun 26.7.1), evaluated by its continued fraction (modified Lentz).
 
-use crate::analysis::noise::ln_gamma;
+use crate::stats::distributions::ln_gamma;
 
 /// Median of `values` (reordered); `None` when empty.
 pub fn median(values: &mut [f64]) -> Option<f64> {

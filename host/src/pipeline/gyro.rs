@@ -29,12 +29,7 @@ pub fn fit_gyroscope(
     match method {
         Method::GyroScale => {
             let accel = default_accel_chain(&still.poses(Sensor::Accel), gravity)?;
-            crate::fit::gyro_scale::fit_gyro_scale_recording(
-                recording,
-                still,
-                &accel.fit.cal,
-                scale,
-            )
+            crate::still::motions::fit_gyro_scale_recording(recording, still, &accel.fit.cal, scale)
         }
         m => fit_gyro(m, &still.poses(Sensor::Gyro), scale),
     }

@@ -1,0 +1,143 @@
+//! Descriptive statistics of samples: mean and unbiased variance, nearest-rank percentiles,
+//! median and median absolute deviation, moving-window variances, and the quantisation step of
+//! integer data.
+
+use super::Vec3;
+
+/// Per-axis mean of `x` (zero for no samples).
+pub fn mean(x: &[Vec3]) -> Vec3 {
+    x.iter().sum::<Vec3>() / x.len().max(1) as f64
+}
+
+/// Mean `x̄ = Σxᵢ/n` and unbiased per-axis variance `s² = Σ(xᵢ − x̄)²/(n − 1)` (zero for one
+/// sample) of the samples, with their count; `None` for no samples. Two passes, so large
+/// offsets do not cancel digits.
+pub fn mean_variance<'a>(
+    samples: impl Iterator<Item = &'a Vec3> + Clone,
+) -> Option<(Vec3, Vec3, usize)> {
+    let n = samples.clone().count();
+    if n == 0 {
+        return None;
+    }
+    let m = samples.clone().sum::<Vec3>() / n as f64;
+    let var = if n > 1 {
+        samples
+            .map(|x| (x - m).component_mul(&(x - m)))
+            .sum::<Vec3>()
+            / (n - 1) as f64
+    } else {
+        Vec3::zeros()
+    };
+    Some((m, var, n))
+}
+
+/// Value at fraction `p` of a list (nearest rank).
+pub fn percentile(values: &mut [f64], p: f64) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    let rank = ((values.len() - 1) as f64 * p).round() as usize;
+    values[rank.min(values.len() - 1)]
+}
+
+/// Median of a list: the middle value, or the mean of the two middle values for an even count
+/// (0 when empty).
+pub fn median(values: &mut [f64]) -> f64 {
+    let n = values.len();
+    if n == 0 {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
+
+/// Median absolute deviation scaled to a standard deviation, `1.4826·median|xᵢ − median(x)|`
+/// (consistent for Gaussian data: `1/Φ⁻¹(3/4) = 1.4826`; Rousseeuw & Croux 1993). Unlike the
+/// sample standard deviation, up to half of the values can be outliers without moving it.
+pub fn mad_sigma(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    let centre = median(&mut sorted);
+    let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
+    1.482_6 * median(&mut deviations)
+}
+
+/// Per-window variance of each axis for windows starting at `0..=n−w` (two-pass per window
+/// via prefix sums of values centred on the global mean, which keeps large raw offsets from
+/// cancelling digits).
+pub fn window_variances(x: &[Vec3], w: usize) -> Vec<Vec3> {
+    let n = x.len();
+    if n < w || w < 2 {
+        return Vec::new();
+    }
+    let mean = x.iter().sum::<Vec3>() / n as f64;
+    let mut s1 = vec![Vec3::zeros(); n + 1];
+    let mut s2 = vec![Vec3::zeros(); n + 1];
+    for (i, v) in x.iter().enumerate() {
+        let d = v - mean;
+        s1[i + 1] = s1[i] + d;
+        s2[i + 1] = s2[i] + d.component_mul(&d);
+    }
+    let wf = w as f64;
+    (0..=n - w)
+        .map(|s| {
+            let sum = s1[s + w] - s1[s];
+            let sq = s2[s + w] - s2[s];
+            (sq - sum.component_mul(&sum) / wf).map(|v| (v / (wf - 1.0)).max(0.0))
+        })
+        .collect()
+}
+
+/// Smallest positive step between consecutive samples on each axis (the quantisation step
+/// for integer or fixed-point data), used as a floor for the noise estimate.
+pub fn quantisation_step(x: &[Vec3]) -> Vec3 {
+    let mut step = Vec3::repeat(f64::INFINITY);
+    for w in x.windows(2) {
+        for k in 0..3 {
+            let d = (w[1][k] - w[0][k]).abs();
+            if d > 0.0 && d < step[k] {
+                step[k] = d;
+            }
+        }
+    }
+    step.map(|s| if s.is_finite() { s } else { 0.0 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn window_variances_equal_the_direct_unbiased_variance() {
+        // A large offset must not cost digits: 1e6 + {0, 1, 2, 3}, variance 5/3 exactly.
+        let x: Vec<Vec3> = (0..6).map(|i| Vec3::repeat(1e6 + (i % 4) as f64)).collect();
+        let v = window_variances(&x, 4);
+        assert_eq!(v.len(), 3);
+        assert!((v[0].x - 5.0 / 3.0).abs() < 1e-9);
+        let direct = mean_variance(x[1..5].iter()).map(|(_, var, _)| var.x);
+        assert!((v[1].x - direct.unwrap_or(f64::NAN)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn median_and_mad_ignore_a_gross_outlier() {
+        let mut values = vec![1.0, 2.0, 3.0, 4.0, 1e5];
+        assert_eq!(median(&mut values), 3.0);
+        // |x − 3| = {2, 1, 0, 1, ~1e5}: median 1, so σ = 1.4826.
+        assert!((mad_sigma(&[1.0, 2.0, 3.0, 4.0, 1e5]) - 1.4826).abs() < 1e-12);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
+    }
+
+    #[test]
+    fn quantisation_step_is_the_smallest_nonzero_change() {
+        let x = [
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(3.0, 0.5, 1.0),
+            Vec3::new(5.0, 0.0, 1.0),
+        ];
+        assert_eq!(quantisation_step(&x), Vec3::new(2.0, 0.5, 0.0));
+    }
+}

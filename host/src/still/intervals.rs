@@ -1,0 +1,176 @@
+//! What the detector finds: the holds, their per-sensor statistics, and the noise floors used.
+
+use super::directions::cluster_directions;
+use crate::fit::{Pose, Vec3};
+use crate::recording::{LabelKind, Recording, Sensor};
+
+/// Die-temperature statistics over one interval, in °C.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TempStats {
+    /// Mean temperature.
+    pub mean: f64,
+    /// Lowest temperature.
+    pub min: f64,
+    /// Highest temperature.
+    pub max: f64,
+}
+
+/// One static hold.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StillInterval {
+    /// First row (main stream) of the hold.
+    pub start: usize,
+    /// One past the last row.
+    pub end: usize,
+    /// Time of the first row, s.
+    pub t_start: f64,
+    /// Time of the last row, s.
+    pub t_end: f64,
+    /// Label from a `pose` or `segment` column, if any.
+    pub label: Option<i64>,
+    /// Accelerometer statistics, if the recording has one.
+    pub accel: Option<Pose>,
+    /// Gyroscope statistics, if the recording has one.
+    pub gyro: Option<Pose>,
+    /// Magnetometer statistics of the samples within `[t_start, t_end]`, if any.
+    pub mag: Option<Pose>,
+    /// Temperature statistics, if the recording has a temperature column.
+    pub temp: Option<TempStats>,
+    /// Index into [`StillReport::directions`] of this hold's gravity direction.
+    pub direction: Option<usize>,
+}
+
+impl StillInterval {
+    /// Rows of the main stream that belong to this hold: every row of `start..end`, or, for a
+    /// hold from a `pose` column, only the rows carrying its label.
+    pub fn rows(&self, recording: &Recording) -> Vec<usize> {
+        let labels = recording
+            .labels
+            .as_ref()
+            .filter(|l| l.kind == LabelKind::Pose);
+        let label_index = labels.and_then(|l| {
+            let first = l.per_row.get(self.start).copied().flatten()?;
+            Some((l, first))
+        });
+        (self.start..self.end.min(recording.len()))
+            .filter(|&row| match label_index {
+                Some((l, index)) => l.per_row.get(row).copied().flatten() == Some(index),
+                None => true,
+            })
+            .collect()
+    }
+
+    /// Duration in seconds.
+    pub fn duration(&self) -> f64 {
+        self.t_end - self.t_start
+    }
+
+    /// The pose of one sensor.
+    pub fn pose(&self, sensor: Sensor) -> Option<&Pose> {
+        match sensor {
+            Sensor::Accel => self.accel.as_ref(),
+            Sensor::Gyro => self.gyro.as_ref(),
+            Sensor::Mag => self.mag.as_ref(),
+        }
+    }
+}
+
+/// Estimated white-noise level of one sensor and the stillness threshold derived from it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseFloor {
+    /// Sensor the estimate belongs to.
+    pub sensor: Sensor,
+    /// Per-axis noise standard deviation of single samples, in the file's units.
+    pub sigma: Vec3,
+    /// Threshold on `S = Σ v_k/σ_k²` (3 when the window variance equals the noise exactly).
+    pub threshold: f64,
+    /// Margin over the pure χ² quantile contained in `threshold`.
+    pub margin: f64,
+}
+
+/// What the detector found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StillReport {
+    /// Holds in time order.
+    pub intervals: Vec<StillInterval>,
+    /// Distinct gravity directions (unit vectors, bias-centred), clustered at
+    /// [`StillOptions::direction_angle_deg`].
+    pub directions: Vec<Vec3>,
+    /// Noise estimates and thresholds used (empty when holds came from a `pose` column).
+    pub noise: Vec<NoiseFloor>,
+    /// Window length in samples.
+    pub window: usize,
+    /// True when holds were taken from a `pose` column rather than detected.
+    pub from_pose_column: bool,
+    /// Whether windows were also held to the absolute gyroscope bound of rest
+    /// ([`super::MAX_STILL_GYRO_STD_DPS`]); false for a gyroscope in counts, without a
+    /// gyroscope, or for holds from a `pose` column.
+    pub rate_bound_applied: bool,
+}
+
+impl StillReport {
+    /// One-line human summary.
+    pub fn summary(&self) -> String {
+        // Start from +0 so that an empty report prints "0.0 s", not "-0.0 s".
+        let total: f64 = 0.0
+            + self
+                .intervals
+                .iter()
+                .map(StillInterval::duration)
+                .sum::<f64>();
+        let how = if self.from_pose_column {
+            "from the pose column"
+        } else {
+            "detected"
+        };
+        format!(
+            "{} still intervals {how} ({total:.1} s in total), {} distinct gravity directions",
+            self.intervals.len(),
+            self.directions.len()
+        )
+    }
+
+    /// Drop the intervals for which `exclude` is true and cluster the gravity directions of the
+    /// rest again (direction indices refer to the kept intervals only).
+    pub fn retain_intervals(
+        &mut self,
+        recording: &Recording,
+        direction_angle_deg: f64,
+        mut exclude: impl FnMut(usize, &StillInterval) -> bool,
+    ) {
+        let mut index = 0;
+        self.intervals.retain(|interval| {
+            let drop = exclude(index, interval);
+            index += 1;
+            !drop
+        });
+        for interval in &mut self.intervals {
+            interval.direction = None;
+        }
+        self.cluster_directions(recording, direction_angle_deg);
+    }
+
+    /// Cluster the holds' gravity directions (see [`cluster_directions`]) and record each
+    /// hold's direction.
+    pub(super) fn cluster_directions(&mut self, recording: &Recording, angle_deg: f64) {
+        let means: Vec<Option<Vec3>> = self
+            .intervals
+            .iter()
+            .map(|i| i.accel.as_ref().map(|p| p.mean))
+            .collect();
+        let counts = recording.units.is_counts(Sensor::Accel);
+        let (members, directions) = cluster_directions(&means, counts, angle_deg);
+        for (interval, direction) in self.intervals.iter_mut().zip(members) {
+            interval.direction = direction;
+        }
+        self.directions = directions;
+    }
+
+    /// Poses of one sensor, one per interval that has that sensor.
+    pub fn poses(&self, sensor: Sensor) -> Vec<Pose> {
+        self.intervals
+            .iter()
+            .filter_map(|i| i.pose(sensor).cloned())
+            .collect()
+    }
+}
