@@ -7,7 +7,8 @@
 //!    (`twelve`) from the seed. The first position is held, without a time limit, until the host
 //!    first asks for a pose. From then on each position is held until the firmware has sent a
 //!    `PoseStats` reply during that hold and the host has shown its next prompt (it starts the
-//!    stream again; without that the person moves on [`NO_PROMPT_MOVE_ON_S`] after the capture),
+//!    stream again; without that the person moves on [`NO_PROMPT_MOVE_ON_S`] after the capture)
+//!    and a reaction time [`REACTION_S`] has passed,
 //!    or for at most `max_hold_s` (counted from the later of the hold's start and the first
 //!    request), then the person turns to the next one. A person does not know the order the tool
 //!    will prompt in; the host accepts poses in any order. The turns between positions tilt the
@@ -42,6 +43,9 @@ const OPEN_HOLD_S: f64 = 1.0e9;
 
 /// A person who sees no new prompt after a capture moves on after this long, s.
 pub const NO_PROMPT_MOVE_ON_S: f64 = 1.0;
+
+/// Time from seeing a prompt to starting to move, s (a simple visual reaction time).
+pub const REACTION_S: f64 = 0.25;
 
 /// Body-frame field directions are remembered when they differ by more than this from the last
 /// one remembered, degrees (a tenth of the angle that counts as seen).
@@ -156,6 +160,8 @@ pub struct Person {
     hold_captures_at_start: Option<u64>,
     /// When this hold's pose was captured, s, and the `StartStream` count then.
     captured: Option<(f64, u64)>,
+    /// When the person starts to move after seeing the next prompt, s.
+    moving_at_s: Option<f64>,
     first_prompt_s: Option<f64>,
 }
 
@@ -225,6 +231,7 @@ impl Person {
             segment_end_s: OPEN_HOLD_S,
             hold_captures_at_start: None,
             captured: None,
+            moving_at_s: None,
             first_prompt_s: None,
         };
         if hold_count > 0 {
@@ -255,9 +262,13 @@ impl Person {
             if self.captured.is_none() && prompts.poses_captured > at_start {
                 self.captured = Some((t_s, prompts.stream_starts));
             }
-            let prompted_on = self.captured.is_some_and(|(at_s, starts)| {
+            let prompted = self.captured.is_some_and(|(at_s, starts)| {
                 prompts.stream_starts > starts || t_s - at_s >= NO_PROMPT_MOVE_ON_S
             });
+            if prompted && self.moving_at_s.is_none() {
+                self.moving_at_s = Some(t_s + REACTION_S);
+            }
+            let prompted_on = self.moving_at_s.is_some_and(|at| t_s >= at);
             let timed_out = self
                 .first_prompt_s
                 .is_some_and(|first| t_s - first.max(self.segment_start_s) >= self.max_hold_s);
@@ -326,6 +337,7 @@ impl Person {
         self.segment_end_s = start_s + OPEN_HOLD_S;
         self.hold_captures_at_start = Some(captures);
         self.captured = None;
+        self.moving_at_s = None;
         Ok(())
     }
 

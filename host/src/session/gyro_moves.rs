@@ -5,8 +5,9 @@
 //! ends are still (the stream starts as the previous capture ends, and stops once the board has
 //! been still for the settle time), and give the gravity direction at the move's first and last
 //! sample. Each end averages the calibrated accelerometer over its still stretch, every sample
-//! first turned into the frame of the end sample with the integrated gyroscope (`R₀←ⱼ·aⱼ`), so
-//! the hand's sway within the stretch does not blur the direction the integration starts from.
+//! first turned with the integrated gyroscope into the frame of the stretch's sample next to the
+//! turn (`Rₛ←ⱼ·aⱼ`), so the hand's sway within the stretch does not blur the direction the
+//! integration starts from, and only the turn itself is integrated.
 //!
 //! How much each body axis was tilted (turned about an axis perpendicular to gravity) tells the
 //! person which turn is still missing: a turn about the vertical leaves gravity unchanged and
@@ -22,9 +23,9 @@ use crate::fit::{Calibration, Mat3, Vec3};
 pub const MIN_MOVES_FOR_ADVICE: usize = 4;
 
 /// Longest still stretch at either end of a move averaged for its gravity direction, s: long
-/// enough to average the accelerometer's noise (≈60 samples at 119 Hz), short enough to stay
+/// enough to average the accelerometer's noise (≈95 samples at 119 Hz), short enough to stay
 /// within the hold.
-const EDGE_MAX_S: f64 = 0.5;
+const EDGE_MAX_S: f64 = 0.8;
 
 /// Fewest samples in an end's still stretch for the move to be used.
 const EDGE_MIN_SAMPLES: usize = 5;
@@ -85,22 +86,29 @@ pub fn motion_of(
     let edge = ((EDGE_MAX_S / dt).round() as usize).max(EDGE_MIN_SAMPLES);
     let head = still_run(rates.iter().copied(), still_rate, edge);
     let tail = still_run(rates.iter().rev().copied(), still_rate, edge);
-    if head < EDGE_MIN_SAMPLES || tail < EDGE_MIN_SAMPLES || head + tail > rates.len() {
+    if head < EDGE_MIN_SAMPLES || tail < EDGE_MIN_SAMPLES || head + tail >= rates.len() {
         return None;
     }
+    // Gravity is referred to the last sample of the still head and the first of the still
+    // tail, and only the turn between them is integrated: the bias error then acts over the
+    // turn alone.
     let to_first = prefix_rotations(a, &rates, dt);
     let gravity = |j: usize| accel.apply(&Vec3::from(samples[j].accel));
-    let last = rates.len() - 1;
-    let to_last = to_first[last].inverse();
-    let before = (0..head).map(|j| to_first[j] * gravity(j)).sum::<Vec3>() / head as f64;
-    let after = (last + 1 - tail..=last)
-        .map(|j| to_last * to_first[j] * gravity(j))
+    let (start, end) = (head - 1, rates.len() - tail);
+    let at_start = to_first[start].inverse();
+    let at_end = to_first[end].inverse();
+    let before = (0..head)
+        .map(|j| at_start * to_first[j] * gravity(j))
+        .sum::<Vec3>()
+        / head as f64;
+    let after = (end..rates.len())
+        .map(|j| at_end * to_first[j] * gravity(j))
         .sum::<Vec3>()
         / tail as f64;
     Some(GyroMotion {
         gravity_before: before,
         gravity_after: after,
-        rates,
+        rates: rates.get(start..=end)?.to_vec(),
         dt,
     })
 }

@@ -98,7 +98,7 @@ impl Default for SessionOptions {
             mag_timeout: Duration::from_secs(180),
             mag_max_fit_samples: 3000,
             rest_settle_s: 1.0,
-            rest_measure_s: 2.0,
+            rest_measure_s: 3.0,
             rest_timeout: Duration::from_secs(120),
             read_timeout: Duration::from_secs(3),
         }
