@@ -256,9 +256,10 @@ fn tumble_waypoints(count: usize, field: &EarthField) -> Vec<UnitQuaternion<f64>
         .collect()
 }
 
-/// A body-frame field direction counts as shown when one within this angle was, degrees: half
-/// the ≈45° spacing of the 26 direction regions a host's coverage guidance names.
-pub const SEEN_ANGLE_DEG: f64 = 20.0;
+/// A body-frame field direction counts as shown when one within this angle was, degrees: about
+/// a quarter of the ≈45° spacing of the 26 direction regions a host's coverage guidance names,
+/// so that a region only grazed by a turn still gets its own visit.
+pub const SEEN_ANGLE_DEG: f64 = 12.0;
 
 /// The 26 body-frame directions of a cube's faces, edges and corners (unit).
 fn cube_directions() -> Vec<Vector3<f64>> {
@@ -327,7 +328,7 @@ mod fill_in_tests {
         // Only +Z and its neighbourhood seen so far.
         let seen = vec![Vector3::z()];
         let plan = fill_in_tumble(&[], &seen, &field, &UnitQuaternion::identity());
-        // 26 cube directions, of which +Z itself (0°) is seen and none other within 20°.
+        // 26 cube directions, of which +Z itself (0°) is seen and none other within 12°.
         assert_eq!(plan.len(), 25);
         for d in cube_directions().iter().filter(|d| d.z < 0.99) {
             let shown = plan
