@@ -4,11 +4,9 @@
 //! `cargo run --release -p imucal --example real_data_table -- [DIR]`; DIR defaults to
 //! `/work/shared/data/real` if present, else the repository's `data/real`.
 
-#[path = "../src/cli/methods.rs"]
-#[allow(dead_code)]
-mod methods;
-
 use std::path::{Path, PathBuf};
+
+use imucal::pipeline::methods;
 
 use imucal::fit::{Fit, FitError, Method};
 use imucal::recording::{AccelUnit, GyroUnit, LoadOptions, MagUnit, Recording, Sensor, Units};

@@ -8,6 +8,7 @@ pub mod export;
 pub mod fit;
 pub mod geomag;
 pub mod input_checks;
+pub mod pipeline;
 pub mod recording;
 pub mod report;
 pub mod session;

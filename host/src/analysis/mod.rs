@@ -30,8 +30,9 @@ use imucal_protocol::{BiasTemperature, Nonlinearity, SensorCalibration};
 
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::li::{fit_li, LiOptions};
-use crate::fit::norm_lm::{fit_accel_lm, fit_mag_lm, sphere_start};
+use crate::fit::norm_lm::{fit_mag_lm, sphere_start};
 use crate::fit::{Calibration, FitError, Pose, Vec3};
+use crate::pipeline::chain::default_accel_chain;
 use crate::recording::{Recording, Sensor};
 use crate::still::StillReport;
 use crossval::{extend_start, held_out, Comparison, HeldOut};
@@ -65,6 +66,9 @@ pub enum AnalysisError {
         /// Number needed.
         needed: usize,
     },
+    /// The input checks refused the sensor (the sentence names cause and fix).
+    #[error("{0}")]
+    Refused(String),
     /// The base fit failed.
     #[error("the base {sensor} fit failed: {source}")]
     BaseFit {
@@ -89,6 +93,8 @@ pub struct AnalysisOptions {
     pub field_ut: Option<f64>,
     /// Gyroscope data unit to rad/s.
     pub gyro_scale: f64,
+    /// Whether `gyro_scale` is known; without it the gyroscope is analysed in counts.
+    pub gyro_scale_known: bool,
     /// Magnetometer window length (samples) when it has too few still poses.
     pub mag_window: usize,
     /// Largest number of magnetometer windows.
@@ -101,6 +107,7 @@ impl Default for AnalysisOptions {
             gravity: crate::recording::STANDARD_GRAVITY,
             field_ut: None,
             gyro_scale: 1.0,
+            gyro_scale_known: true,
             mag_window: 20,
             max_mag_windows: 300,
         }
@@ -159,6 +166,9 @@ pub struct SensorAnalysis {
     pub sensor: Sensor,
     /// Name of the base model (the `fit` default method).
     pub base_model: String,
+    /// Unit of the residuals and the noise floor: `relative` (to the reference magnitude) for
+    /// the accelerometer and magnetometer, `rad/s` or `counts` for the gyroscope.
+    pub residual_unit: &'static str,
     /// Observations used.
     pub observations: Vec<Observation>,
     /// RMS residual expected from noise alone (units of `rms_*`).
@@ -659,6 +669,10 @@ pub fn analyse_observations(
     Ok(SensorAnalysis {
         sensor,
         base_model: base_model.to_string(),
+        residual_unit: match base {
+            BaseKind::Norm { .. } => "relative",
+            BaseKind::Rest { .. } => "rad/s",
+        },
         noise_floor,
         test_before,
         test_after,
@@ -723,9 +737,10 @@ pub fn analyse_sensor(
             if obs.len() < 10 {
                 return Err(too_few("still poses", obs.len(), 10));
             }
-            // The `fit` default; when its solver gives up, the generic one here restarts from the sphere.
-            let start = match fit_accel_lm(&to_poses(&obs), options.gravity) {
-                Ok(fit) => fit,
+            // The default chain's model starts the extended fit; when every model of the chain
+            // refuses, the generic solver here restarts from the sphere.
+            let start = match default_accel_chain(&to_poses(&obs), options.gravity) {
+                Ok(choice) => choice.fit.cal,
                 Err(source) => {
                     let means: Vec<Vec3> = obs.iter().map(|o| o.mean).collect();
                     let sphere = sphere_start(&means, options.gravity);
@@ -752,7 +767,7 @@ pub fn analyse_sensor(
                 base: BaseKind::Norm {
                     reference: options.gravity,
                 },
-                start: start.cal,
+                start,
                 force: None,
                 gravity: options.gravity,
                 unit,
@@ -791,7 +806,12 @@ pub fn analyse_sensor(
                 gravity: options.gravity,
                 unit,
             };
-            analyse_observations(setup, obs)
+            analyse_observations(setup, obs).map(|mut a| {
+                if !options.gyro_scale_known {
+                    a.residual_unit = "counts";
+                }
+                a
+            })
         }
         Sensor::Mag => {
             // Still poses only when they cover enough orientations for the ellipsoid (nine

@@ -129,11 +129,7 @@ pub fn to_json(analysis: &RecordingAnalysis) -> Value {
 }
 
 fn rms_unit(a: &SensorAnalysis) -> &'static str {
-    if a.sensor == crate::recording::Sensor::Gyro {
-        "rad/s"
-    } else {
-        "relative"
-    }
+    a.residual_unit
 }
 
 /// Human-readable summary.

@@ -7,53 +7,19 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use clap::Args;
-use imucal::analysis::{analyse_recording, report, AnalysisOptions};
+use imucal::analysis::{analyse_recording, report, AnalysisError, AnalysisOptions};
 use imucal::device::ParamsFile;
-use imucal::recording::Sensor;
+use imucal::geomag::local_field_today;
+use imucal::pipeline::check_input;
+use imucal::pipeline::gyro::gyro_unit_scale;
 use imucal::session::{analyse_poses, extend_set, load_poses};
-use imucal::still::find_still;
 
-use super::args::InputArgs;
-
-/// Arguments of `imucal analyze`.
-#[derive(Debug, Args)]
-pub struct AnalyzeArgs {
-    /// How to read the recording (a recording file or a session directory's recording).
-    #[command(flatten)]
-    pub input: InputArgs,
-    /// Local gravity in m/s².
-    #[arg(long, default_value_t = imucal::recording::STANDARD_GRAVITY)]
-    pub gravity: f64,
-    /// Local field magnitude in µT (without it the magnetometer is normalised to 1).
-    #[arg(long)]
-    pub field_ut: Option<f64>,
-    /// Where the data was recorded (latitude, longitude in degrees, optional altitude in m): the
-    /// World Magnetic Model's field there today is the reference unless --field-ut is given.
-    #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
-    pub location: Option<imucal::geomag::Location>,
-    /// Gyroscope scale in rad/s per count, for `--gyro-unit counts`.
-    #[arg(long)]
-    pub gyro_scale: Option<f64>,
-    /// Print the JSON document instead of text.
-    #[arg(long)]
-    pub json: bool,
-    /// Write analysis.json, analysis.txt and SVG plots of each accepted effect into this directory.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
-    /// Session directories only: write the session's parameter set (params-base.json, else
-    /// params.json) with the accepted effects added as extended terms to this file.
-    ///
-    /// Example: imucal analyze imucal-session-1700000000 --write-params extended.json
-    ///          imucal flash extended.json
-    #[arg(long, verbatim_doc_comment)]
-    pub write_params: Option<PathBuf>,
-}
+use super::args::{AnalyzeArgs, InputArgs};
 
 /// Analyse a session directory from its poses; optionally write the extended set.
 fn run_session_dir(args: &AnalyzeArgs, dir: &std::path::Path) -> anyhow::Result<()> {
     let poses = load_poses(&dir.join("poses.json"))?;
-    let analysis = analyse_poses(&poses, args.gravity);
+    let analysis = analyse_poses(&poses, args.reference.gravity);
     let output = if args.json {
         format!(
             "{}\n",
@@ -140,22 +106,7 @@ fn resolve_input(path: &std::path::Path) -> anyhow::Result<PathBuf> {
 
 /// Run the command.
 pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
-    if !(args.gravity.is_finite() && args.gravity > 0.0) {
-        bail!(
-            "--gravity {} is not a positive number of m/s²",
-            args.gravity
-        );
-    }
-    if let Some(h) = args.field_ut {
-        if !(h.is_finite() && h > 0.0) {
-            bail!("--field-ut {h} is not a positive field magnitude");
-        }
-    }
-    if let Some(s) = args.gyro_scale {
-        if !(s.is_finite() && s > 0.0) {
-            bail!("--gyro-scale {s} is not a positive number of rad/s per count");
-        }
-    }
+    let references = super::references(&args.reference)?;
     if is_pose_session(&args.input.recording) {
         return run_session_dir(args, &args.input.recording);
     }
@@ -166,37 +117,54 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
             args.input.recording.display()
         );
     }
-    let mut input_path = args.input.recording.clone();
-    input_path = resolve_input(&input_path)?;
-    let recording = {
-        let input = InputArgs {
-            recording: input_path,
-            ..clone_input(&args.input)
-        };
-        super::load(&input)?
+    let input = InputArgs {
+        recording: resolve_input(&args.input.recording)?,
+        ..args.input.clone()
     };
-    let still = find_still(&recording, &super::still_options(&args.input))
-        .context("still intervals could not be found")?;
-    let gyro_scale = match (recording.units.to_si(Sensor::Gyro), args.gyro_scale) {
-        (Some(s), _) => s,
-        (None, Some(s)) => s,
-        (None, None) => 1.0,
+    let recording = super::load(&input)?;
+    let sensors = recording.sensors();
+    // The same checks as `imucal fit`: a unit mix-up or unusable holds refuse the analysis.
+    let checked = check_input(
+        recording,
+        &sensors,
+        &super::input_options(&args.input, &args.reference),
+        references.field_ut,
+    );
+    if !checked.unit_refusals.is_empty() {
+        bail!(
+            "the recording was refused: {}",
+            checked.unit_refusal_sentences().join("; ")
+        );
+    }
+    for warning in &checked.warnings {
+        eprintln!("imucal: warning: {warning}");
+    }
+    let Some(still) = &checked.still else {
+        bail!("no still intervals were found, so there is nothing to analyse");
     };
+    let recording = &checked.recording;
+    let (gyro_scale, gyro_unit) = gyro_unit_scale(recording, references.gyro_scale);
     let options = AnalysisOptions {
-        gravity: args.gravity,
-        field_ut: match (args.field_ut, &args.location) {
+        gravity: references.gravity_mps2,
+        field_ut: match (references.field_ut, &args.reference.location) {
             (Some(h), _) => Some(h),
             (None, Some(location)) => Some(
-                imucal::geomag::local_field_today(location)
+                local_field_today(location)
                     .context("the field at --location could not be modelled")?
                     .total_ut,
             ),
             (None, None) => None,
         },
         gyro_scale,
+        gyro_scale_known: gyro_unit == "rad/s",
         ..AnalysisOptions::default()
     };
-    let analysis = analyse_recording(&recording, &still, &options);
+    let mut analysis = analyse_recording(recording, still, &options);
+    for (sensor, result) in &mut analysis.sensors {
+        if let Some(reason) = checked.refusal(*sensor) {
+            *result = Err(AnalysisError::Refused(reason.to_string()));
+        }
+    }
     let output = if args.json {
         format!(
             "{}\n",
@@ -226,24 +194,4 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         bail!("no sensor could be analysed (see the messages above)");
     }
     Ok(())
-}
-
-fn clone_input(i: &InputArgs) -> InputArgs {
-    InputArgs {
-        recording: i.recording.clone(),
-        accel_unit: i.accel_unit,
-        gyro_unit: i.gyro_unit,
-        mag_unit: i.mag_unit,
-        rate: i.rate,
-        mag_file: i.mag_file.clone(),
-        no_mag_sibling: i.no_mag_sibling,
-        format: i.format,
-        columns: i.columns.clone(),
-        gyro_file: i.gyro_file.clone(),
-        imutk_time_unit: i.imutk_time_unit,
-        window: i.window,
-        min_hold: i.min_hold,
-        still_margin: i.still_margin,
-        direction_angle: i.direction_angle,
-    }
 }

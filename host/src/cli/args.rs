@@ -29,7 +29,7 @@ pub enum Command {
     )]
     Still(StillArgs),
     /// Analyse the residual of the fitted models: noise floor, candidate effects, held-out error.
-    Analyze(super::analyze::AnalyzeArgs),
+    Analyze(AnalyzeArgs),
     /// Board commands: ports, info, flash, stream, record.
     #[command(flatten)]
     Device(super::device::DeviceCommand),
@@ -39,8 +39,8 @@ pub enum Command {
     )]
     Calibrate(super::calibrate::CalibrateArgs),
     /// Write an HTML report (plots, parameters, verdict) of a session directory or a recording.
-    #[command(after_help = super::report::EXAMPLES)]
-    Report(super::report::ReportArgs),
+    #[command(after_help = REPORT_EXAMPLES)]
+    Report(ReportArgs),
     /// Export a parameter file as a C header, a Rust module or versioned JSON for other firmware.
     #[command(after_help = super::export::EXAMPLES)]
     Export(super::export::ExportArgs),
@@ -119,7 +119,7 @@ pub enum TimeUnitArg {
 }
 
 /// How to read a recording (shared by every command).
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct InputArgs {
     /// Recording file (CSV with a header, or IMU-TK accelerometer text file).
     pub recording: PathBuf,
@@ -168,24 +168,14 @@ pub struct InputArgs {
     pub direction_angle: f64,
 }
 
-/// Arguments of `imucal fit`.
+/// Reference values and fitting input shared by every command that fits a recording.
 #[derive(Debug, Args)]
-pub struct FitArgs {
-    /// How to read the recording.
-    #[command(flatten)]
-    pub input: InputArgs,
-    /// Which sensor to fit.
-    #[arg(long, value_enum, default_value = "all")]
-    pub sensor: SensorChoice,
-    /// Fitting method (default: `lm` for accelerometer and magnetometer, `gyro-bias` for the
-    /// gyroscope). One of: gyro-bias, minmax, axis-aligned, six-position, chen, li, lm, frosio, merayo.
-    #[arg(long)]
-    pub method: Option<String>,
+pub struct ReferenceArgs {
     /// Local gravity in m/s²; accelerometer output is in m/s².
     #[arg(long, default_value_t = imucal::recording::STANDARD_GRAVITY)]
     pub gravity: f64,
-    /// Local field magnitude; magnetometer output is in its unit (µT). Without it the
-    /// magnetometer output is normalised to 1.
+    /// Local field magnitude; magnetometer output is in its unit (µT). Without it (and without
+    /// --location) the magnetometer output is normalised to 1.
     #[arg(long)]
     pub field_ut: Option<f64>,
     /// Where the recording was made, `LAT,LON[,ALT_M]` (degrees, metres): the World Magnetic
@@ -199,9 +189,76 @@ pub struct FitArgs {
     /// Magnetometer fits use at most this many samples, evenly thinned (0 = all).
     #[arg(long, default_value_t = 2000)]
     pub max_mag_samples: usize,
+}
+
+/// Arguments of `imucal fit`.
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// How to read the recording.
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Reference values.
+    #[command(flatten)]
+    pub reference: ReferenceArgs,
+    /// Which sensor to fit.
+    #[arg(long, value_enum, default_value = "all")]
+    pub sensor: SensorChoice,
+    /// Fitting method (default: the accelerometer model chosen by held-out error, `lm` for the
+    /// magnetometer, `gyro-bias` for the gyroscope). One of: gyro-bias, gyro-scale, minmax,
+    /// axis-aligned, six-position, chen, li, lm, frosio, merayo.
+    #[arg(long)]
+    pub method: Option<String>,
     /// Print a JSON object keyed by sensor instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Also write the versioned parameter file (as `imucal calibrate` does) for `imucal export`
+    /// and `imucal flash`; sensors not fitted are listed in it with the reason.
+    #[arg(long, value_name = "FILE")]
+    pub params_out: Option<PathBuf>,
+}
+
+/// Examples shown by `imucal report --help`.
+pub const REPORT_EXAMPLES: &str = "Examples:\n  \
+    imucal report session-2025-11-21/                      (a directory written by `imucal calibrate -o`)\n  \
+    imucal report data/real/sf_mpu6050_hmc5883l_full_sphere.csv --accel-unit g --gyro-unit dps --mag-unit gauss --location 46.05,14.51 -o report/\n  \
+    imucal report motioncal_log.txt --format motioncal --rate 100 -o report/";
+
+/// Arguments of `imucal report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// The recording (or session directory, given as the positional path) and how to read it.
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Reference values.
+    #[command(flatten)]
+    pub reference: ReferenceArgs,
+    /// Directory for `report.html` (default: the session directory, or `<recording>_report`).
+    #[arg(long, short = 'o')]
+    pub out: Option<PathBuf>,
+}
+
+/// Arguments of `imucal analyze`.
+#[derive(Debug, Args)]
+pub struct AnalyzeArgs {
+    /// How to read the recording (a recording file or a session directory's recording).
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// Reference values.
+    #[command(flatten)]
+    pub reference: ReferenceArgs,
+    /// Print the JSON document instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Write analysis.json, analysis.txt and SVG plots of each accepted effect into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Session directories only: write the session's parameter set (params-base.json, else
+    /// params.json) with the accepted effects added as extended terms to this file.
+    ///
+    /// Example: imucal analyze imucal-session-1700000000 --write-params extended.json
+    ///          imucal flash extended.json
+    #[arg(long, verbatim_doc_comment)]
+    pub write_params: Option<PathBuf>,
 }
 
 /// Arguments of `imucal still`.

@@ -245,7 +245,21 @@ fn describe_params(set: &CalibrationSet) -> String {
 
 fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     let shown = args.params.display().to_string();
-    let set = ParamsFile::load(&args.params)?.to_calibration_set(&shown)?;
+    let file = ParamsFile::load(&args.params)?;
+    let counts = file.non_nominal_inputs();
+    if !counts.is_empty() {
+        anyhow::bail!(
+            "`{shown}` calibrates {} from raw data without a known scale, but the board applies \
+             calibrations to m/s², rad/s and µT; refit with the data's unit (--accel-unit, \
+             --gyro-unit, --mag-unit, or --gyro-scale) or use `imucal export` for firmware \
+             that reads raw counts",
+            counts.join(", ")
+        );
+    }
+    for (sensor, why) in &file.not_fitted {
+        eprintln!("imucal: note: `{shown}` has no {sensor} calibration ({why}); the board's {sensor} is set to identity");
+    }
+    let set = file.to_calibration_set(&shown)?;
     let mut client = connect(&args.port)?;
     let status = client.write_params_verified(&set)?;
     println!(

@@ -42,6 +42,12 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
     let params = ParamsFile::load(&args.params)?;
     let shown = args.params.display().to_string();
     let set = params.to_calibration_set(&shown)?;
+    for sensor in params.non_nominal_inputs() {
+        eprintln!("imucal: note: the {sensor} calibration takes raw readings in that unit, not the nominal unit the exported comment states");
+    }
+    for (sensor, why) in &params.not_fitted {
+        eprintln!("imucal: note: `{shown}` has no {sensor} calibration ({why}); it is exported as identity");
+    }
     let name = args
         .params
         .file_name()

@@ -7,15 +7,17 @@ pub mod device;
 pub mod export;
 pub mod fit;
 pub mod import;
-pub mod methods;
 pub mod report;
 pub mod still;
 
 use anyhow::Context;
+use imucal::pipeline::{InputOptions, ReferenceError, References};
 use imucal::recording::{AccelUnit, Format, GyroUnit, LoadOptions, MagUnit, Recording, Units};
 use imucal::still::StillOptions;
 
-use args::{AccelUnitArg, FormatArg, GyroUnitArg, InputArgs, MagUnitArg, TimeUnitArg};
+use args::{
+    AccelUnitArg, FormatArg, GyroUnitArg, InputArgs, MagUnitArg, ReferenceArgs, TimeUnitArg,
+};
 
 /// Read the recording named on the command line.
 pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
@@ -60,6 +62,19 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
         }),
     };
     Recording::load(&input.recording, &options).context("the recording could not be read")
+}
+
+/// How the pipeline forms its input, from the command line.
+pub fn input_options(input: &InputArgs, reference: &ReferenceArgs) -> InputOptions {
+    InputOptions {
+        still: still_options(input),
+        max_mag_samples: reference.max_mag_samples,
+    }
+}
+
+/// The reference values, range-checked.
+pub fn references(reference: &ReferenceArgs) -> Result<References, ReferenceError> {
+    References::checked(reference.gravity, reference.field_ut, reference.gyro_scale)
 }
 
 /// Still-detection settings from the command line.

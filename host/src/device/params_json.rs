@@ -13,9 +13,13 @@
 //!   "residuals": { "accel_rms": 0.01, "gyro_rms": 0.0, "mag_rms": 0.3 } }
 //! ```
 //!
-//! Extended terms are optional (absent or `null`); a sensor left out is identity. Units are
-//! those of the protocol: m/s², rad/s, µT, °C.
+//! Extended terms are optional (absent or `null`); a sensor left out is identity, and
+//! `not_fitted` says why a sensor was left out. A sensor whose data had no known scale carries
+//! `"input_unit": "counts"`: its `A` maps counts, which suits other firmware reading raw counts
+//! but not this board. `provenance` records the tool, source, methods and time. Units are those
+//! of the protocol: m/s², rad/s, µT, °C.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use imucal_protocol::{
@@ -106,11 +110,40 @@ pub struct SensorJson {
     /// Scale non-linearity.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nonlinearity: Option<NonlinearityJson>,
+    /// Unit of the input `x` when it is not the board's nominal unit (only `"counts"`: data
+    /// without a known scale). Absent: m/s², rad/s or µT.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_unit: Option<String>,
 }
 
 impl Default for SensorJson {
     fn default() -> Self {
         Self::from(&SensorCalibration::identity())
+    }
+}
+
+/// Where a calibration came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// The tool and its version, e.g. `imucal 0.3.0`.
+    pub tool: String,
+    /// The recording (path as given) or the board session it was fitted from.
+    pub source: String,
+    /// The board's device id, when the data came from a board that reported one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device_id: Option<String>,
+    /// Fitting method per sensor (`accel`, `gyro`, `mag`).
+    pub methods: BTreeMap<String, String>,
+    /// Unit of each sensor's data as read (`counts` when no scale was known).
+    pub input_units: BTreeMap<String, String>,
+    /// When it was fitted, seconds since the Unix epoch.
+    pub created_unix_s: u64,
+}
+
+impl Provenance {
+    /// This tool's name and version.
+    pub fn tool() -> String {
+        format!("imucal {}", env!("CARGO_PKG_VERSION"))
     }
 }
 
@@ -161,6 +194,12 @@ pub struct ParamsFile {
     /// Fit residuals.
     #[serde(default)]
     pub residuals: ResidualsJson,
+    /// Sensors the file leaves out on purpose, with the reason (they are identity when flashed).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub not_fitted: BTreeMap<String, String>,
+    /// Where the calibration came from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub provenance: Option<Provenance>,
 }
 
 impl From<&SensorCalibration> for SensorJson {
@@ -177,6 +216,7 @@ impl From<&SensorCalibration> for SensorJson {
                 quadratic: n.quadratic.map(f64::from),
                 cubic: n.cubic.map(f64::from),
             }),
+            input_unit: None,
         }
     }
 }
@@ -201,6 +241,8 @@ impl From<&CalibrationSet> for ParamsFile {
                 gyro_rms: f64::from(set.residuals.gyro_rms),
                 mag_rms: f64::from(set.residuals.mag_rms),
             },
+            not_fitted: BTreeMap::new(),
+            provenance: None,
         }
     }
 }
@@ -268,6 +310,18 @@ impl Narrow<'_> {
 }
 
 impl ParamsFile {
+    /// `sensor (unit)` for every sensor whose input is not the board's nominal unit.
+    pub fn non_nominal_inputs(&self) -> Vec<String> {
+        [
+            ("accel", &self.accel),
+            ("gyro", &self.gyro),
+            ("mag", &self.mag),
+        ]
+        .into_iter()
+        .filter_map(|(name, s)| s.input_unit.as_ref().map(|u| format!("{name} ({u})")))
+        .collect()
+    }
+
     /// Parses a parameter file from JSON text; `path` names it in errors.
     pub fn from_json(text: &str, path: &str) -> Result<Self, ParamsFileError> {
         let file: Self = serde_json::from_str(text).map_err(|cause| ParamsFileError::Json {

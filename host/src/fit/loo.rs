@@ -25,23 +25,38 @@ pub fn leave_one_out_rms_indexed(
     reference: f64,
     fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
 ) -> Option<f64> {
+    let errors = leave_one_out_errors(poses, reference, fit)?
+        .into_iter()
+        .collect::<Option<Vec<f64>>>()?;
+    Some((errors.iter().map(|r| r * r).sum::<f64>() / errors.len() as f64).sqrt())
+}
+
+/// The held-out relative norm residual of every pose, in pose order, each predicted by `fit`
+/// on the other poses (`fit` receives the held-out index); `None` for a pose whose refit was
+/// refused or whose residual is not finite. `None` overall when there are fewer than two poses
+/// or the reference is not positive.
+pub fn leave_one_out_errors(
+    poses: &[Pose],
+    reference: f64,
+    fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
+) -> Option<Vec<Option<f64>>> {
     if poses.len() < 2 || reference.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
-    let mut sum_sq = 0.0;
-    for (i, held_out) in poses.iter().enumerate() {
-        let rest: Vec<Pose> = poses
-            .iter()
-            .enumerate()
-            .filter(|&(j, _)| j != i)
-            .map(|(_, p)| p.clone())
-            .collect();
-        let cal = fit(i, &rest).ok()?;
-        let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
-        if !r.is_finite() {
-            return None;
-        }
-        sum_sq += r * r;
-    }
-    Some((sum_sq / poses.len() as f64).sqrt())
+    let errors = poses
+        .iter()
+        .enumerate()
+        .map(|(i, held_out)| {
+            let rest: Vec<Pose> = poses
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, p)| p.clone())
+                .collect();
+            let cal = fit(i, &rest).ok()?;
+            let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
+            r.is_finite().then_some(r)
+        })
+        .collect();
+    Some(errors)
 }

@@ -10,6 +10,7 @@
 //! caller), then rendered with [`render_html`].
 
 pub mod plots;
+pub mod recording;
 
 use std::path::{Path, PathBuf};
 

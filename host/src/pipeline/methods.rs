@@ -1,13 +1,12 @@
 //! Which fitting method applies to which sensor, and how its input is formed from a
 //! recording: accelerometer methods take still-interval poses (point methods take the pose
 //! means), magnetometer methods take samples over many orientations, the gyroscope takes the
-//! still poses. Shared by the command line and the real-data example.
+//! still poses. The default accelerometer method is not one of these but the evidence-based
+//! choice of [`super::chain`].
 
-use imucal::fit::norm_lm::{refine_lm, NormLmOptions, NormObservations};
-use imucal::fit::validate::{measure_coverage, EllipsoidModel, MAX_RELATIVE_SIGMA};
-use imucal::fit::{self, Fit, FitError, Method, Pose, Vec3};
+use crate::fit::{self, Fit, FitError, Method, Pose, Vec3};
 
-/// Methods offered for the accelerometer, the default first.
+/// Methods offered for the accelerometer (`--method`; the default is [`super::chain`]).
 pub const ACCEL_METHODS: [Method; 8] = [
     Method::Lm,
     Method::SixPosition,
@@ -30,7 +29,7 @@ pub const MAG_METHODS: [Method; 6] = [
 ];
 
 /// Methods offered for the gyroscope.
-/// `gyro-scale` needs the whole recording (motions between holds), see `cli/fit.rs`.
+/// `gyro-scale` needs the whole recording (motions between holds), see [`super::gyro`].
 pub const GYRO_METHODS: [Method; 2] = [Method::GyroBias, Method::GyroScale];
 
 /// Every method, for parsing names.
@@ -46,6 +45,36 @@ pub const ALL_METHODS: [Method; 10] = [
     Method::Frosio,
     Method::Merayo,
 ];
+
+/// The methods offered for `sensor`, the default first for the gyroscope and magnetometer.
+pub fn offered(sensor: crate::recording::Sensor) -> &'static [Method] {
+    use crate::recording::Sensor;
+    match sensor {
+        Sensor::Accel => &ACCEL_METHODS,
+        Sensor::Gyro => &GYRO_METHODS,
+        Sensor::Mag => &MAG_METHODS,
+    }
+}
+
+/// The method named `name` if it applies to `sensor`, else a sentence listing the choices.
+pub fn method_for_sensor(name: &str, sensor: crate::recording::Sensor) -> Result<Method, String> {
+    let Some(method) = method_by_name(name) else {
+        let all: Vec<&str> = ALL_METHODS.iter().map(|m| m.name()).collect();
+        return Err(format!(
+            "unknown method `{name}`; choose one of {}",
+            all.join(", ")
+        ));
+    };
+    let offered = offered(sensor);
+    if !offered.contains(&method) {
+        let names: Vec<&str> = offered.iter().map(|m| m.name()).collect();
+        return Err(format!(
+            "method `{name}` does not apply to the {sensor}; for the {sensor} choose one of {}",
+            names.join(", ")
+        ));
+    }
+    Ok(method)
+}
 
 /// Look a method up by its command-line name.
 pub fn method_by_name(name: &str) -> Option<Method> {
@@ -137,89 +166,17 @@ pub fn fit_gyro(method: Method, poses: &[Pose], scale: f64) -> Result<Fit, FitEr
 
 /// `max` points evenly spaced through `points` (all of them when `max` is 0 or larger).
 pub fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
-    if max == 0 || points.len() <= max {
-        return points.to_vec();
+    thin_indices(points.len(), max)
+        .into_iter()
+        .filter_map(|i| points.get(i).copied())
+        .collect()
+}
+
+/// The indices [`thin`] keeps out of `len` items.
+pub fn thin_indices(len: usize, max: usize) -> Vec<usize> {
+    if max == 0 || len <= max {
+        return (0..len).collect();
     }
     // Evenly spaced indices i·len/max keep exactly `max` points spread over the whole recording.
-    (0..max)
-        .filter_map(|i| points.get(i * points.len() / max).copied())
-        .collect()
-}
-
-/// Unknowns of the norm model with the upper-triangular gauge: it needs this many distinct
-/// directions.
-pub const NORM_MODEL_UNKNOWNS: usize = 9;
-
-/// Per-axis one-sigma noise of each pose mean, in data units (for the coverage measure).
-pub fn pose_mean_noise(poses: &[Pose]) -> Vec<f64> {
-    poses
-        .iter()
-        .map(|p| (p.var_of_mean().sum() / 3.0).sqrt())
-        .collect()
-}
-
-/// The default accelerometer fit and, when it is not `lm`, why: the six-position method when
-/// there are fewer distinct directions than the norm model's unknowns, and the axis-aligned
-/// model (6 unknowns) when `lm` is refused because the poses cannot determine the cross-axis
-/// terms.
-pub fn default_accel_fit(
-    poses: &[Pose],
-    gravity: f64,
-    directions: usize,
-) -> (Result<Fit, FitError>, Option<String>) {
-    if directions < NORM_MODEL_UNKNOWNS {
-        return (
-            fit_accel(Method::SixPosition, poses, gravity),
-            Some(format!(
-                "lm needs at least {NORM_MODEL_UNKNOWNS} distinct directions and {directions} were found, so the six-position method was used"
-            )),
-        );
-    }
-    let reason = match fit_accel(Method::Lm, poses, gravity) {
-        Err(FitError::Underdetermined(reason)) => reason,
-        other => return (other, None),
-    };
-    let refusal = FitError::Underdetermined(reason.clone());
-    let Ok(axis_aligned) = fit_accel(Method::AxisAligned, poses, gravity) else {
-        return (Err(refusal), None);
-    };
-    // Judge the general model as lm did, through its own (unchecked) solution where it converges.
-    let observations = NormObservations::from_poses(poses, &axis_aligned.cal.b);
-    let general = refine_lm(
-        &observations,
-        &axis_aligned.cal,
-        gravity,
-        &NormLmOptions::default(),
-    )
-    .map_or(axis_aligned.cal, |f| f.cal);
-    let coverage = measure_coverage(
-        &observations.points,
-        Some(&pose_mean_noise(poses)),
-        &general,
-        gravity,
-        EllipsoidModel::General,
-    );
-    let why = if coverage.max_relative_sigma.is_finite()
-        && coverage.max_relative_sigma > MAX_RELATIVE_SIGMA
-    {
-        format!(
-            "the {} orientations cannot determine the cross-axis terms to {:.1} % (they leave them uncertain by {:.1} %)",
-            coverage.distinct,
-            100.0 * MAX_RELATIVE_SIGMA,
-            100.0 * coverage.max_relative_sigma
-        )
-    } else if !coverage.max_relative_sigma.is_finite() {
-        format!(
-            "the {} orientations cannot determine the cross-axis terms at all",
-            coverage.distinct
-        )
-    } else {
-        format!("lm was refused ({reason})")
-    };
-    (
-        Ok(axis_aligned),
-        Some(format!(
-            "{why}; fitted the axis-aligned model (scales and offsets, 6 unknowns) instead; record more tilted poses for a full fit"
-        )),
-    )
+    (0..max).map(|i| i * len / max).collect()
 }

@@ -1,0 +1,228 @@
+//! Stage 2: checked input → a [`RecordingCalibration`]. Accelerometer and gyroscope fits use
+//! the still-interval poses, the magnetometer its (thinned) samples over many orientations. The
+//! accelerometer's default is the evidence-based [`super::chain`]; the magnetometer is then
+//! rotated into the accelerometer's frame ([`super::align`]). Each sensor is judged on its own:
+//! a refusal of one leaves the others fitted.
+
+use std::collections::BTreeMap;
+
+use crate::fit::{Fit, Method};
+use crate::geomag::{local_field_today, LocalField, Location, RadiusCheck};
+use crate::recording::{Sensor, Units};
+use crate::still::StillReport;
+
+use super::align::align_mag;
+use super::calibration::{pose_noise_floor, RecordingCalibration, SensorOutcome};
+use super::chain::default_accel_chain;
+use super::gyro::{fit_gyroscope, gyro_unit_scale};
+use super::input::CheckedInput;
+use super::methods::{fit_accel, fit_mag};
+use super::references::References;
+use super::PipelineError;
+use crate::device::params_json::Provenance;
+
+/// How to fit.
+#[derive(Debug, Clone, Default)]
+pub struct FitOptions {
+    /// Checked reference values.
+    pub references: Option<References>,
+    /// Where the recording was made: the World Magnetic Model's field there today is the
+    /// magnetometer reference when no field magnitude is given, and checks the fitted radius.
+    pub location: Option<Location>,
+    /// Methods chosen by the user, per sensor; the others use their default.
+    pub methods: Vec<(Sensor, Method)>,
+    /// The board's device id, when known.
+    pub device_id: Option<String>,
+}
+
+impl FitOptions {
+    fn method(&self, sensor: Sensor) -> Option<Method> {
+        self.methods
+            .iter()
+            .find(|(s, _)| *s == sensor)
+            .map(|(_, m)| *m)
+    }
+}
+
+/// Seconds since the Unix epoch now (0 if the clock is before it).
+pub fn now_unix_s() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
+}
+
+/// Fit every sensor of `input` that passed its checks.
+pub fn calibrate(
+    input: &CheckedInput,
+    options: &FitOptions,
+) -> Result<RecordingCalibration, PipelineError> {
+    let references = match options.references {
+        Some(r) => r,
+        None => References::checked(crate::recording::STANDARD_GRAVITY, None, None)?,
+    };
+    let field_model = match (&options.location, input.sensors.contains(&Sensor::Mag)) {
+        (Some(location), true) => Some(
+            local_field_today(location).map_err(|e| PipelineError::FieldModel(e.to_string()))?,
+        ),
+        _ => None,
+    };
+    let field_ut = references.field_ut.or(field_model.map(|m| m.total_ut));
+    let recording = &input.recording;
+    let mut sensors: Vec<SensorOutcome> = input
+        .sensors
+        .iter()
+        .map(|&sensor| {
+            let unit = recording.units.symbol(sensor);
+            match input.refusal(sensor) {
+                Some(reason) => SensorOutcome::without_fit(sensor, unit, reason.to_string()),
+                None => {
+                    let context = SensorContext {
+                        input,
+                        references: &references,
+                        field_ut,
+                        field_model,
+                        method: options.method(sensor),
+                    };
+                    context.fit(sensor)
+                }
+            }
+        })
+        .collect();
+    align_outcomes(&mut sensors, input.still.as_ref());
+
+    let methods = sensors
+        .iter()
+        .filter_map(|s| {
+            let fit = s.fit.as_ref().ok()?;
+            Some((s.sensor.name().to_string(), fit.method.name().to_string()))
+        })
+        .collect();
+    Ok(RecordingCalibration {
+        provenance: Provenance {
+            tool: Provenance::tool(),
+            source: recording.source.display().to_string(),
+            device_id: options.device_id.clone(),
+            methods,
+            input_units: input_units(&recording.units, &input.sensors),
+            created_unix_s: now_unix_s(),
+        },
+        sensors,
+        gravity_mps2: references.gravity_mps2,
+        field_ut,
+        still_summary: input.still.as_ref().map(StillReport::summary),
+        warnings: input.warnings.clone(),
+    })
+}
+
+fn input_units(units: &Units, sensors: &[Sensor]) -> BTreeMap<String, String> {
+    sensors
+        .iter()
+        .map(|s| (s.name().to_string(), units.symbol(*s).to_string()))
+        .collect()
+}
+
+/// What fitting one sensor needs.
+struct SensorContext<'a> {
+    input: &'a CheckedInput,
+    references: &'a References,
+    field_ut: Option<f64>,
+    field_model: Option<LocalField>,
+    method: Option<Method>,
+}
+
+impl SensorContext<'_> {
+    fn fit(&self, sensor: Sensor) -> SensorOutcome {
+        let recording = &self.input.recording;
+        let mut outcome =
+            SensorOutcome::without_fit(sensor, recording.units.symbol(sensor), String::new());
+        outcome.to_nominal = recording.units.to_si(sensor);
+        if sensor == Sensor::Mag {
+            self.fit_mag(&mut outcome);
+            return outcome;
+        }
+        let Some(still) = &self.input.still else {
+            outcome.fit = Err("still intervals are needed for this sensor".to_string());
+            return outcome;
+        };
+        let poses = still.poses(sensor);
+        outcome.n_poses = poses.len();
+        outcome.n_samples = poses.iter().map(|p| p.n).sum();
+        let gravity = self.references.gravity_mps2;
+        let fit = if sensor == Sensor::Accel {
+            outcome.output_unit = "m/s²".to_string();
+            let fit = match self.method {
+                Some(m) => fit_accel(m, &poses, gravity),
+                None => default_accel_chain(&poses, gravity).map(|choice| {
+                    outcome.notes.push(choice.reason.clone());
+                    let fit = choice.fit.clone();
+                    outcome.chain = Some(choice);
+                    fit
+                }),
+            };
+            if let Ok(f) = &fit {
+                outcome.noise_floor = pose_noise_floor(&poses, f);
+            }
+            fit
+        } else {
+            let (scale, unit) = gyro_unit_scale(recording, self.references.gyro_scale);
+            outcome.output_unit = unit.to_string();
+            outcome.to_nominal = (unit == "rad/s").then_some(scale);
+            let method = self.method.unwrap_or(Method::GyroBias);
+            fit_gyroscope(method, recording, still, gravity, scale)
+        };
+        outcome.fit = fit.map_err(|e| e.to_string());
+        outcome
+    }
+
+    fn fit_mag(&self, outcome: &mut SensorOutcome) {
+        let points = &self.input.mag_points;
+        outcome.n_samples = points.len();
+        outcome.output_unit = match self.field_ut {
+            Some(_) => "µT".to_string(),
+            None => "field = 1".to_string(),
+        };
+        outcome.field_model = self.field_model;
+        let method = self.method.unwrap_or(Method::Lm);
+        let fit = fit_mag(method, points, self.field_ut.unwrap_or(1.0));
+        if let (Ok(f), Some(model), Some(to_ut)) = (
+            &fit,
+            &self.field_model,
+            self.input.recording.units.mag.to_si(),
+        ) {
+            // Mean distance of the raw readings from the fitted offset: the sphere's radius.
+            let radius = points.iter().map(|p| (p - f.cal.b).norm()).sum::<f64>()
+                / points.len().max(1) as f64;
+            let check = RadiusCheck::new(radius * to_ut, model);
+            outcome.notes.push(check.sentence());
+            outcome.radius_check = Some(check);
+        }
+        outcome.fit = fit.map_err(|e| e.to_string());
+    }
+}
+
+/// Rotate the magnetometer fit into the accelerometer frame when both were asked for.
+fn align_outcomes(sensors: &mut [SensorOutcome], still: Option<&StillReport>) {
+    let accel: Option<Option<Fit>> = sensors
+        .iter()
+        .find(|r| r.sensor == Sensor::Accel)
+        .map(|r| r.fit.as_ref().ok().cloned());
+    let Some(accel) = accel else {
+        return;
+    };
+    let Some(mag) = sensors.iter_mut().find(|r| r.sensor == Sensor::Mag) else {
+        return;
+    };
+    let Ok(mag_fit) = &mut mag.fit else {
+        return;
+    };
+    let outcome = match (&accel, still) {
+        (Some(accel), Some(still)) => {
+            align_mag(still, &accel.cal, &mag_fit.cal).map_err(|e| e.to_string())
+        }
+        _ => Err("the accelerometer was not fitted".to_string()),
+    };
+    if let Ok(alignment) = &outcome {
+        mag_fit.cal = alignment.apply_to(&mag_fit.cal);
+    }
+    mag.alignment = Some(outcome);
+}

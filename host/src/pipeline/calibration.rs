@@ -1,0 +1,158 @@
+//! What the pipeline produces from a recording: per sensor a fit (or the reason there is none)
+//! with its units and findings, the references used, and the provenance (tool version,
+//! recording, methods, time). The parameter file ([`super::params_file`]) and every command's
+//! output are views of this.
+
+use crate::device::params_json::Provenance;
+use crate::fit::alignment::Alignment;
+use crate::fit::{Fit, Pose};
+use crate::geomag::{LocalField, RadiusCheck};
+use crate::recording::Sensor;
+
+use super::chain::ChainChoice;
+
+/// One sensor's outcome.
+#[derive(Debug, Clone)]
+pub struct SensorOutcome {
+    /// The sensor.
+    pub sensor: Sensor,
+    /// The fit, or the sentence saying why there is none.
+    pub fit: Result<Fit, String>,
+    /// Still poses used (accelerometer, gyroscope).
+    pub n_poses: usize,
+    /// Samples used.
+    pub n_samples: usize,
+    /// Unit of the data (`counts` when no scale is known).
+    pub input_unit: &'static str,
+    /// Unit of the calibrated output (`counts` or `field = 1` when no scale or reference is known).
+    pub output_unit: String,
+    /// Factor from the data's unit to the board's nominal unit (m/s², rad/s, µT), when known.
+    pub to_nominal: Option<f64>,
+    /// Relative residual expected from the pose noise alone.
+    pub noise_floor: Option<f64>,
+    /// Findings worth a line (e.g. which model the default chain chose and why).
+    pub notes: Vec<String>,
+    /// Accelerometer with the default chain: every candidate model and why it was chosen or not.
+    pub chain: Option<ChainChoice>,
+    /// Magnetometer only: the rotation into the accelerometer frame (already applied to the
+    /// fit's `A`), or why there is none.
+    pub alignment: Option<Result<Alignment, String>>,
+    /// Magnetometer only: the modelled field used as reference or for the radius check.
+    pub field_model: Option<LocalField>,
+    /// Magnetometer only: the fitted raw radius against the modelled field.
+    pub radius_check: Option<RadiusCheck>,
+}
+
+impl SensorOutcome {
+    /// A sensor with no fit yet (or refused with `reason`).
+    pub fn without_fit(sensor: Sensor, input_unit: &'static str, reason: String) -> Self {
+        Self {
+            sensor,
+            fit: Err(reason),
+            n_poses: 0,
+            n_samples: 0,
+            input_unit,
+            output_unit: String::new(),
+            to_nominal: None,
+            noise_floor: None,
+            notes: Vec::new(),
+            chain: None,
+            alignment: None,
+            field_model: None,
+            radius_check: None,
+        }
+    }
+
+    /// Whether `A`'s per-entry uncertainties still apply (a rotated `A` carries the rotation's
+    /// uncertainty instead, reported with the alignment).
+    pub fn a_std_applies(&self) -> bool {
+        !matches!(self.alignment, Some(Ok(_)))
+    }
+
+    /// A short judgement of the fit: residual against the noise floor, held-out error against
+    /// fit error. `None` without a fit.
+    pub fn verdict(&self) -> Option<String> {
+        let fit = self.fit.as_ref().ok()?;
+        let mut parts = Vec::new();
+        if let Some(floor) = self.noise_floor.filter(|f| *f > 0.0) {
+            let ratio = fit.rms / floor;
+            if ratio <= 3.0 {
+                parts.push(format!(
+                    "residual is at the noise floor ({ratio:.1}× the pose noise)"
+                ));
+            } else {
+                parts.push(format!(
+                    "residual is {ratio:.0}× the pose noise: the model misses something (temperature, non-linearity, motion during holds)"
+                ));
+            }
+        }
+        if let Some(loo) = fit.loo_rms {
+            if fit.rms > 0.0 && loo > 3.0 * fit.rms {
+                parts.push(format!(
+                    "held-out error is {:.1}× the fit error: more poses are needed",
+                    loo / fit.rms
+                ));
+            } else {
+                parts.push("held-out error agrees with the fit error".to_string());
+            }
+        }
+        if self.sensor == Sensor::Mag {
+            parts.push(format!(
+                "{} samples over the sphere; no noise floor for moving samples",
+                self.n_samples
+            ));
+        }
+        Some(if parts.is_empty() {
+            "fitted".to_string()
+        } else {
+            parts.join("; ")
+        })
+    }
+}
+
+/// Expected relative residual of a norm fit from the pose noise: the standard error of each
+/// pose mean divided by its distance from the offset, as an RMS over the poses.
+pub fn pose_noise_floor(poses: &[Pose], fit: &Fit) -> Option<f64> {
+    let values: Vec<f64> = poses
+        .iter()
+        .map(|p| {
+            let se = (p.var_of_mean().sum() / 3.0).sqrt();
+            se / (p.mean - fit.cal.b).norm()
+        })
+        .filter(|v| v.is_finite())
+        .collect();
+    (!values.is_empty())
+        .then(|| (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt())
+}
+
+/// The calibration of a recording: every requested sensor's outcome and what it rests on.
+#[derive(Debug, Clone)]
+pub struct RecordingCalibration {
+    /// Per sensor, in the order asked for.
+    pub sensors: Vec<SensorOutcome>,
+    /// Local gravity used, m/s².
+    pub gravity_mps2: f64,
+    /// Field magnitude used as the magnetometer's reference, µT (`None`: normalised to 1).
+    pub field_ut: Option<f64>,
+    /// One line on the still intervals found, when any were looked for.
+    pub still_summary: Option<String>,
+    /// Warnings from the input checks.
+    pub warnings: Vec<String>,
+    /// Where it came from.
+    pub provenance: Provenance,
+}
+
+impl RecordingCalibration {
+    /// The outcome of `sensor`, if it was asked for.
+    pub fn sensor(&self, sensor: Sensor) -> Option<&SensorOutcome> {
+        self.sensors.iter().find(|s| s.sensor == sensor)
+    }
+
+    /// `sensor: reason` for every sensor that was not fitted.
+    pub fn failures(&self) -> Vec<String> {
+        self.sensors
+            .iter()
+            .filter_map(|r| r.fit.as_ref().err().map(|e| format!("{}: {e}", r.sensor)))
+            .collect()
+    }
+}

@@ -1,0 +1,41 @@
+//! The gyroscope: bias from the still poses (seed 000 eq. 9) by default, or Tedaldi's scale and
+//! misalignment from the motions between holds (Tedaldi, Pretto & Menegatti 2014), whose gravity
+//! directions come from the default accelerometer chain.
+
+use crate::fit::{Fit, FitError, Method};
+use crate::recording::{Recording, Sensor};
+use crate::still::StillReport;
+
+use super::chain::default_accel_chain;
+use super::methods::fit_gyro;
+
+/// The unit conversion of the gyroscope data to rad/s, and the unit the fit's output is in.
+pub fn gyro_unit_scale(recording: &Recording, gyro_scale: Option<f64>) -> (f64, &'static str) {
+    match (recording.units.to_si(Sensor::Gyro), gyro_scale) {
+        (Some(s), _) | (None, Some(s)) => (s, "rad/s"),
+        (None, None) => (1.0, "counts"),
+    }
+}
+
+/// Fit the gyroscope of `recording` with `method` (bias or scale); `scale` converts its data to
+/// rad/s and `gravity` (m/s²) is the accelerometer's reference for the scale fit.
+pub fn fit_gyroscope(
+    method: Method,
+    recording: &Recording,
+    still: &StillReport,
+    gravity: f64,
+    scale: f64,
+) -> Result<Fit, FitError> {
+    match method {
+        Method::GyroScale => {
+            let accel = default_accel_chain(&still.poses(Sensor::Accel), gravity)?;
+            crate::fit::gyro_scale::fit_gyro_scale_recording(
+                recording,
+                still,
+                &accel.fit.cal,
+                scale,
+            )
+        }
+        m => fit_gyro(m, &still.poses(Sensor::Gyro), scale),
+    }
+}

@@ -1,0 +1,165 @@
+//! Stage 1: a loaded recording → the sensors that may be fitted, their still intervals and the
+//! magnetometer samples, with every input check of [`crate::input_checks`] applied in one place.
+//! Every command that reads a recording (`fit`, `report`, `analyze`) goes through
+//! [`check_input`], so a unit mix-up refused by one is refused by all.
+//!
+//! A refusal concerns only the sensor(s) it names: the others are still fitted.
+
+use crate::fit::Vec3;
+use crate::input_checks;
+use crate::recording::{Recording, Sensor};
+use crate::still::{find_still, StillOptions, StillReport};
+
+use super::methods::thin;
+
+/// How to form the fitting input from a recording.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InputOptions {
+    /// Still-interval detection (its `min_hold_s` and `direction_angle_deg` also drive the checks).
+    pub still: StillOptions,
+    /// Magnetometer fits use at most this many samples, evenly thinned (0 = all).
+    pub max_mag_samples: usize,
+}
+
+impl Default for InputOptions {
+    fn default() -> Self {
+        Self {
+            still: StillOptions::default(),
+            max_mag_samples: 2000,
+        }
+    }
+}
+
+/// The recording with the checks' verdicts.
+#[derive(Debug)]
+pub struct CheckedInput {
+    /// The recording as read.
+    pub recording: Recording,
+    /// The sensors asked for, in order.
+    pub sensors: Vec<Sensor>,
+    /// Still intervals (holds that cannot be used left out), when an inertial sensor was asked
+    /// for and any were found.
+    pub still: Option<StillReport>,
+    /// Magnetometer samples for its fit, evenly thinned.
+    pub mag_points: Vec<Vec3>,
+    /// Sensors refused before fitting, with the sentence saying why and how to fix it.
+    pub refusals: Vec<(Sensor, String)>,
+    /// The refusals that say the declared units (or a stated reference) contradict the data:
+    /// every command refuses the recording for these, not only the sensor.
+    pub unit_refusals: Vec<(Sensor, String)>,
+    /// Findings that cast doubt without refusing.
+    pub warnings: Vec<String>,
+}
+
+impl CheckedInput {
+    /// Why `sensor` was refused, if it was.
+    pub fn refusal(&self, sensor: Sensor) -> Option<&str> {
+        self.refusals
+            .iter()
+            .find(|(s, _)| *s == sensor)
+            .map(|(_, r)| r.as_str())
+    }
+
+    /// The unit refusals as one sentence per sensor, `sensor: reason`.
+    pub fn unit_refusal_sentences(&self) -> Vec<String> {
+        self.unit_refusals
+            .iter()
+            .map(|(s, r)| format!("{s}: {r}"))
+            .collect()
+    }
+}
+
+/// Run every input check on `sensors` of `recording`. `stated_field_ut` is a field magnitude
+/// the user stated (a modelled one is not checked against the data here: it is compared with
+/// the fitted radius instead).
+pub fn check_input(
+    recording: Recording,
+    sensors: &[Sensor],
+    options: &InputOptions,
+    stated_field_ut: Option<f64>,
+) -> CheckedInput {
+    let mut refusals: Vec<(Sensor, String)> = Vec::new();
+    let mut unit_refusals: Vec<(Sensor, String)> = Vec::new();
+    let mut warnings = Vec::new();
+    if let (true, Some(accel)) = (sensors.contains(&Sensor::Accel), &recording.accel) {
+        if let Err(e) = input_checks::check_accel_unit(accel, recording.units.accel) {
+            unit_refusals.push((Sensor::Accel, e.to_string()));
+        }
+    }
+    let mut mag_points = Vec::new();
+    if sensors.contains(&Sensor::Mag) {
+        let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
+        mag_points = thin(all, options.max_mag_samples);
+        match input_checks::check_mag_coverage(&mag_points) {
+            Err(e) => refusals.push((Sensor::Mag, e.to_string())),
+            Ok(()) => match input_checks::check_mag_field(
+                &mag_points,
+                recording.units.mag,
+                stated_field_ut,
+            ) {
+                Ok(w) => warnings.extend(w),
+                Err(e) => unit_refusals.push((Sensor::Mag, e.to_string())),
+            },
+        }
+    }
+    let inertial: Vec<Sensor> = sensors
+        .iter()
+        .copied()
+        .filter(|s| *s != Sensor::Mag)
+        .collect();
+    let still = if inertial.is_empty() {
+        None
+    } else {
+        match still_intervals(&recording, &options.still) {
+            Ok((still, w)) => {
+                warnings.extend(w);
+                Some(still)
+            }
+            Err(reason) => {
+                refusals.extend(inertial.iter().map(|s| (*s, reason.clone())));
+                None
+            }
+        }
+    };
+    if let Some(still) = &still {
+        if inertial.contains(&Sensor::Gyro) {
+            if let Err(e) = input_checks::check_gyro_unit(&recording, still) {
+                unit_refusals.push((Sensor::Gyro, e.to_string()));
+            }
+        }
+        if inertial.contains(&Sensor::Accel)
+            && !unit_refusals.iter().any(|(s, _)| *s == Sensor::Accel)
+        {
+            if let Err(e) = input_checks::check_accel_poses(still) {
+                refusals.push((Sensor::Accel, e.to_string()));
+            }
+        }
+    }
+    // A unit refusal is the first reason given for its sensor.
+    refusals.retain(|(s, _)| !unit_refusals.iter().any(|(u, _)| u == s));
+    refusals.splice(0..0, unit_refusals.iter().cloned());
+    CheckedInput {
+        recording,
+        sensors: sensors.to_vec(),
+        unit_refusals,
+        still,
+        mag_points,
+        refusals,
+        warnings,
+    }
+}
+
+/// Still intervals with the holds that cannot be used left out; refuses when none is found or
+/// none is usable. Returns warnings.
+fn still_intervals(
+    recording: &Recording,
+    options: &StillOptions,
+) -> Result<(StillReport, Vec<String>), String> {
+    let mut still = find_still(recording, options)
+        .map_err(|e| format!("still intervals could not be found: {e}"))?;
+    input_checks::require_still(recording, &still, options.min_hold_s)
+        .map_err(|e| e.to_string())?;
+    let warnings = input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
+        .map_err(|e| e.to_string())?;
+    Ok((still, warnings))
+}

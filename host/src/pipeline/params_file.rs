@@ -1,0 +1,92 @@
+//! A [`RecordingCalibration`] as the versioned parameter file (`docs/PARAMS_FORMAT.md`), the
+//! same file `calibrate` writes and `export` and `flash` read. Fits are re-expressed for the
+//! board's nominal input units (`y = A·(x − b)` with `x = k·x_file`: `A/k`, `k·b`); a sensor
+//! whose data has no known scale keeps counts and says so (`input_unit`); a sensor without a
+//! usable fit is left out and listed under `not_fitted` with the reason.
+
+use std::collections::BTreeMap;
+
+use crate::device::params_json::{ReferenceJson, ResidualsJson, SensorJson};
+use crate::device::{ParamsFile, PARAMS_FILE_FORMAT};
+use crate::fit::{Fit, Method};
+use crate::recording::Sensor;
+
+use super::calibration::{RecordingCalibration, SensorOutcome};
+
+/// Why a sensor that was asked for is not in the parameter file, or its JSON.
+fn sensor_json(
+    outcome: Option<&SensorOutcome>,
+    calibration: &RecordingCalibration,
+) -> Result<SensorJson, String> {
+    let Some(outcome) = outcome else {
+        return Err("not asked for (see --sensor) or not in the recording".to_string());
+    };
+    let fit = outcome.fit.as_ref().map_err(Clone::clone)?;
+    let to_nominal = outcome.to_nominal;
+    if outcome.sensor == Sensor::Gyro && outcome.output_unit != "rad/s" {
+        return Err(
+            "its output would be in counts, not rad/s; pass --gyro-scale (rad/s per count)"
+                .to_string(),
+        );
+    }
+    if outcome.sensor == Sensor::Mag && calibration.field_ut.is_none() && to_nominal.is_some() {
+        // Normalised output from data in a known unit: the file says field_ut = 1, so the board
+        // would read the field as 1 µT. A reference makes the output µT.
+        return Err(
+            "its output is normalised to 1, not µT; pass --field-ut or --location".to_string(),
+        );
+    }
+    let (a, b, input_unit) = match to_nominal {
+        Some(k) => (fit.cal.a / k, fit.cal.b * k, None),
+        None => (fit.cal.a, fit.cal.b, Some(outcome.input_unit.to_string())),
+    };
+    Ok(SensorJson {
+        a: [0, 1, 2].map(|r| [0, 1, 2].map(|c| a[(r, c)])),
+        b: [b.x, b.y, b.z],
+        input_unit,
+        ..SensorJson::default()
+    })
+}
+
+/// RMS of the fit in output units (norm fits are relative to `reference`).
+fn residual(outcome: Option<&SensorOutcome>, scale: f64) -> f64 {
+    outcome
+        .and_then(|o| o.fit.as_ref().ok())
+        .filter(|f: &&Fit| f.method != Method::GyroScale)
+        .map_or(0.0, |f| f.rms * scale)
+}
+
+/// The parameter file of `calibration`.
+pub fn params_file(calibration: &RecordingCalibration) -> ParamsFile {
+    let mut not_fitted = BTreeMap::new();
+    let mut sensor = |s: Sensor| match sensor_json(calibration.sensor(s), calibration) {
+        Ok(json) => json,
+        Err(reason) => {
+            not_fitted.insert(s.name().to_string(), reason);
+            SensorJson::default()
+        }
+    };
+    let accel = sensor(Sensor::Accel);
+    let gyro = sensor(Sensor::Gyro);
+    let mag = sensor(Sensor::Mag);
+    let field = calibration.field_ut.unwrap_or(1.0);
+    ParamsFile {
+        format: PARAMS_FILE_FORMAT,
+        created_unix_s: calibration.provenance.created_unix_s,
+        accel,
+        gyro,
+        mag,
+        gyro_g_sensitivity: None,
+        reference: ReferenceJson {
+            gravity_mps2: calibration.gravity_mps2,
+            field_ut: field,
+        },
+        residuals: ResidualsJson {
+            accel_rms: residual(calibration.sensor(Sensor::Accel), calibration.gravity_mps2),
+            gyro_rms: residual(calibration.sensor(Sensor::Gyro), 1.0),
+            mag_rms: residual(calibration.sensor(Sensor::Mag), field),
+        },
+        not_fitted,
+        provenance: Some(calibration.provenance.clone()),
+    }
+}

@@ -1,0 +1,274 @@
+//! The paths between commands: `fit --params-out` → `export` / `flash` (to the simulated board),
+//! and the same input checks in `fit`, `report` and `analyze`.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use imucal::device::ParamsFile;
+use imucal_hil_sim::board::PersonSchedule;
+use imucal_hil_sim::serve::{SimOptions, SimServer};
+
+fn imucal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(args)
+        .output()
+        .expect("the imucal binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn real(name: &str) -> String {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/real")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn temp_file(name: &str) -> String {
+    std::env::temp_dir()
+        .join(format!("imucal-cli-pipeline-{}-{name}", std::process::id()))
+        .display()
+        .to_string()
+}
+
+/// Every recording in `data/real` with its unit flags (INDEX.md) and the sensors it can
+/// calibrate (the full-sphere set has only five accelerometer directions).
+const FITTABLE: [(&str, &[&str], &[&str]); 5] = [
+    (
+        "imucal_nilspod_ferraris.csv",
+        &["--gyro-unit", "dps"],
+        &["accel", "gyro"],
+    ),
+    (
+        "imutk_xsens_multipos.csv",
+        &["--accel-unit", "counts", "--gyro-unit", "counts"],
+        &["accel"],
+    ),
+    (
+        "tsi_mpu6050_multipos.csv",
+        &["--accel-unit", "counts", "--gyro-unit", "counts"],
+        &["accel"],
+    ),
+    (
+        "sf_mpu6050_hmc5883l_full_sphere.csv",
+        &[
+            "--accel-unit",
+            "g",
+            "--gyro-unit",
+            "dps",
+            "--mag-unit",
+            "gauss",
+            "--location",
+            "46.05,14.51",
+            "--sensor",
+            "mag",
+        ],
+        &["mag"],
+    ),
+    (
+        "tsm_qmc5883l_mag_rotation.csv",
+        &["--mag-unit", "counts"],
+        &["mag"],
+    ),
+];
+
+/// `fit --params-out` and the parameter file it wrote (which must parse as `flash` reads it).
+fn fit_params(name: &str, flags: &[&str]) -> (String, ParamsFile) {
+    let path = temp_file(&format!("{name}.json"));
+    let recording = real(name);
+    let out = imucal(
+        &[
+            &["fit", recording.as_str()],
+            flags,
+            &["--params-out", &path],
+        ]
+        .concat(),
+    );
+    assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+    let file = ParamsFile::load(path.as_ref()).expect("fit writes a readable parameter file");
+    file.to_calibration_set(&path)
+        .expect("every number fits the board's f32");
+    (path, file)
+}
+
+#[test]
+fn fit_params_out_then_export_c_header_works_for_every_fittable_real_recording() {
+    for (name, flags, fitted) in FITTABLE {
+        let (path, file) = fit_params(name, flags);
+        let provenance = file.provenance.as_ref().expect("provenance is written");
+        for sensor in ["accel", "gyro", "mag"] {
+            // A sensor is either fitted (with its method in the provenance) or listed as not
+            // fitted with a reason; never silently identity.
+            assert_ne!(
+                provenance.methods.contains_key(sensor) && fitted.contains(&sensor),
+                file.not_fitted.contains_key(sensor),
+                "{name}: {sensor}: {:?} / {:?}",
+                provenance.methods,
+                file.not_fitted
+            );
+        }
+        let out = imucal(&["export", &path, "--format", "c-header"]);
+        let header = text(&out.stdout);
+        let _ = std::fs::remove_file(&path);
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        for sensor in fitted {
+            assert!(
+                header.contains(&format!("imucal_{sensor}_A[3][3]")),
+                "{name}"
+            );
+        }
+        let lower = header.to_lowercase();
+        assert!(!lower.contains("nan") && !lower.contains("inf"), "{name}");
+    }
+}
+
+#[test]
+fn the_parameter_file_takes_nominal_units_so_a_degrees_per_second_fit_becomes_rad_per_s() {
+    let (path, file) = fit_params("imucal_nilspod_ferraris.csv", &["--gyro-unit", "dps"]);
+    let _ = std::fs::remove_file(&path);
+    // The gyroscope was read in °/s; the board feeds rad/s, so A is the identity and b the
+    // zero-rate offset in rad/s (|b| of this NilsPod ≈ 0.7 °/s = 0.012 rad/s).
+    for (r, row) in file.gyro.a.iter().enumerate() {
+        for (c, v) in row.iter().enumerate() {
+            let want = if r == c { 1.0 } else { 0.0 };
+            assert!((v - want).abs() < 1e-12, "gyro A[{r}][{c}] = {v}");
+        }
+    }
+    let b = file.gyro.b.map(f64::abs);
+    assert!(
+        b.iter().all(|v| *v < 0.02) && b.iter().any(|v| *v > 1e-3),
+        "{b:?}"
+    );
+    assert_eq!(file.gyro.input_unit, None);
+    assert!(file.not_fitted.contains_key("mag"));
+}
+
+#[test]
+fn a_parameter_file_fitted_from_a_recording_flashes_to_the_simulated_board_and_verifies() {
+    let (path, file) = fit_params("imucal_nilspod_ferraris.csv", &["--gyro-unit", "dps"]);
+    let mut options = SimOptions::new(21);
+    options.schedule = PersonSchedule::Rest;
+    let sim = SimServer::start(options).expect("the simulator starts");
+    let port = sim.port_path().to_string();
+    let out = imucal(&["flash", &path, "--port", &port]);
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("verified"),
+        "{}",
+        text(&out.stdout)
+    );
+    assert!(
+        text(&out.stderr).contains("no mag calibration"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert_eq!(file.accel.input_unit, None);
+}
+
+#[test]
+fn flash_refuses_a_parameter_file_fitted_from_raw_counts() {
+    let (path, file) = fit_params(
+        "tsi_mpu6050_multipos.csv",
+        &["--accel-unit", "counts", "--gyro-unit", "counts"],
+    );
+    assert_eq!(file.accel.input_unit.as_deref(), Some("counts"));
+    // No port is opened: the refusal comes first.
+    let out = imucal(&["flash", &path, "--port", "/nonexistent/port"]);
+    let _ = std::fs::remove_file(&path);
+    assert!(!out.status.success());
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("accel (counts)") && stderr.contains("--accel-unit"),
+        "{stderr}"
+    );
+}
+
+/// One unit mix-up per class: the recording, the wrong flags, and the flag the fix names.
+const MIX_UPS: [(&str, &[&str], &str); 4] = [
+    // Accelerometer in g declared m/s².
+    (
+        "sf_mpu6050_hmc5883l_full_sphere.csv",
+        &["--gyro-unit", "dps", "--mag-unit", "gauss"],
+        "--accel-unit g",
+    ),
+    // Accelerometer in counts declared m/s².
+    (
+        "imutk_xsens_multipos.csv",
+        &["--gyro-unit", "counts"],
+        "--accel-unit counts",
+    ),
+    // Gyroscope in °/s declared rad/s.
+    ("imucal_nilspod_ferraris.csv", &[], "°/s"),
+    // Magnetometer in gauss declared µT.
+    (
+        "sf_mpu6050_hmc5883l_full_sphere.csv",
+        &["--accel-unit", "g", "--gyro-unit", "dps"],
+        "--mag-unit gauss",
+    ),
+];
+
+fn refused_by(command: &str, name: &str, flags: &[&str], fix: &str) {
+    let recording = real(name);
+    let report_dir = temp_file(&format!("{command}-report"));
+    let extra: &[&str] = if command == "report" {
+        &["-o", &report_dir]
+    } else {
+        &[]
+    };
+    let out = imucal(&[&[command, recording.as_str()], flags, extra].concat());
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "{command} {name} {flags:?} exited 0");
+    assert!(stderr.contains(fix), "{command} {name}: {stderr}");
+    assert!(
+        !std::path::Path::new(&report_dir)
+            .join("report.html")
+            .exists(),
+        "{command} wrote a report of refused data"
+    );
+}
+
+#[test]
+fn fit_refuses_every_class_of_unit_mix_up() {
+    for (name, flags, fix) in MIX_UPS {
+        refused_by("fit", name, flags, fix);
+    }
+}
+
+#[test]
+fn report_refuses_every_class_of_unit_mix_up_that_fit_refuses() {
+    for (name, flags, fix) in MIX_UPS {
+        refused_by("report", name, flags, fix);
+    }
+}
+
+#[test]
+fn analyze_refuses_every_class_of_unit_mix_up_that_fit_refuses() {
+    for (name, flags, fix) in MIX_UPS {
+        refused_by("analyze", name, flags, fix);
+    }
+}
+
+#[test]
+fn absurd_reference_values_are_refused_by_every_command_with_a_sentence() {
+    let recording = real("imucal_nilspod_ferraris.csv");
+    for command in ["fit", "report", "analyze"] {
+        let out = imucal(&[
+            command,
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--gravity",
+            "1e300",
+        ]);
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "{command}");
+        assert!(
+            stderr.contains("--gravity 1e300 is outside"),
+            "{command}: {stderr}"
+        );
+    }
+}
