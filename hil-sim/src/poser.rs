@@ -318,27 +318,6 @@ pub fn fill_in_tumble(
     plan
 }
 
-#[cfg(test)]
-mod fill_in_tests {
-    use super::*;
-
-    #[test]
-    fn every_missing_direction_is_shown_by_one_turn_of_the_plan() {
-        let field = Vector3::new(0.5, 0.0, -(3.0_f64.sqrt()) / 2.0);
-        // Only +Z and its neighbourhood seen so far.
-        let seen = vec![Vector3::z()];
-        let plan = fill_in_tumble(&[], &seen, &field, &UnitQuaternion::identity());
-        // 26 cube directions, of which +Z itself (0°) is seen and none other within 12°.
-        assert_eq!(plan.len(), 25);
-        for d in cube_directions().iter().filter(|d| d.z < 0.99) {
-            let shown = plan
-                .iter()
-                .any(|q| (q.inverse() * field).dot(d) > 1.0 - 1e-9);
-            assert!(shown, "{d:?} not shown");
-        }
-    }
-}
-
 /// Build the schedule `kind` with `seed`. `field` orients the tumble so that the field sweeps the
 /// body sphere.
 pub fn build_schedule(
@@ -403,6 +382,27 @@ pub fn build_schedule(
                     period_s,
                 },
             })
+        }
+    }
+}
+
+#[cfg(test)]
+mod fill_in_tests {
+    use super::*;
+
+    #[test]
+    fn every_missing_direction_is_shown_by_one_turn_of_the_plan() {
+        let field = Vector3::new(0.5, 0.0, -(3.0_f64.sqrt()) / 2.0);
+        // Only +Z and its neighbourhood seen so far.
+        let seen = vec![Vector3::z()];
+        let plan = fill_in_tumble(&[], &seen, &field, &UnitQuaternion::identity());
+        // 26 cube directions, of which +Z itself (0°) is seen and none other within 12°.
+        assert_eq!(plan.len(), 25);
+        for d in cube_directions().iter().filter(|d| d.z < 0.99) {
+            let shown = plan
+                .iter()
+                .any(|q| (q.inverse() * field).dot(d) > 1.0 - 1e-9);
+            assert!(shown, "{d:?} not shown");
         }
     }
 }

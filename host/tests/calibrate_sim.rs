@@ -6,8 +6,8 @@
 use std::time::{Duration, Instant};
 
 use imucal::device::DeviceClient;
-use imucal::fit::{Mat3, Vec3};
 use imucal::fit::Calibration;
+use imucal::fit::{Mat3, Vec3};
 use imucal::session::gyro_fit::full_turn_error_deg;
 use imucal::session::{run_session, SessionOptions, SessionOutcome, Unattended};
 use imucal_hil_sim::physics::SensorTruth;
@@ -101,11 +101,20 @@ fn assert_gyro_matches_truth(outcome: &SessionOutcome, truth: &imucal_hil_sim::p
             i + 1,
             gyro.scale_sigma_pct[i]
         );
-        assert!(scale_pct < 0.1, "gyro scale {} off by {scale_pct:.3} %", i + 1);
+        assert!(
+            scale_pct < 0.1,
+            "gyro scale {} off by {scale_pct:.3} %",
+            i + 1
+        );
         assert!(scale_pct <= K_SIGMA * gyro.scale_sigma_pct[i]);
         for j in (0..3).filter(|&j| j != i) {
             let angle = error[(i, j)].abs().to_degrees();
-            assert!(angle < 0.05, "gyro misalignment {}{} {angle:.3}°", i + 1, j + 1);
+            assert!(
+                angle < 0.05,
+                "gyro misalignment {}{} {angle:.3}°",
+                i + 1,
+                j + 1
+            );
             assert!(angle <= K_SIGMA * gyro.misalignment_sigma_deg);
         }
     }
@@ -117,8 +126,15 @@ fn assert_gyro_matches_truth(outcome: &SessionOutcome, truth: &imucal_hil_sim::p
     for axis in 0..3 {
         let before = full_turn_error_deg(&Calibration::identity(), raw, axis, 4.0, 119.0);
         let after = full_turn_error_deg(&outcome.fit.gyro.cal, raw, axis, 4.0, 119.0);
-        eprintln!("360° about axis {}: {before:.2}° before, {after:.3}° after", axis + 1);
-        assert!(after < 0.2, "a full turn about axis {} is off by {after:.3}°", axis + 1);
+        eprintln!(
+            "360° about axis {}: {before:.2}° before, {after:.3}° after",
+            axis + 1
+        );
+        assert!(
+            after < 0.2,
+            "a full turn about axis {} is off by {after:.3}°",
+            axis + 1
+        );
     }
 }
 

@@ -82,8 +82,9 @@ mod tests {
         // σ = 2 mg at 100 Hz against a 2 mg budget: n = (2 / 0.25)² = 64 samples = 0.64 s.
         let sigma = 2.0e-3 * STANDARD_GRAVITY;
         let hold = hold_length(&noisy(51, 100.0, sigma), 0.5, 2.0, Duration::from_secs(3));
-        // The window's σ estimate carries a factor n/(n−1) = 51/50 on the variance.
-        let expected = 0.64 * 51.0 / 50.0;
+        // 51 alternating samples (26 high, 25 low) have the sample variance
+        // σ²·(1 − 1/51²)·51/50.
+        let expected = 0.64 * (1.0 - 1.0 / 51.0_f64.powi(2)) * 51.0 / 50.0;
         assert!((hold.as_secs_f64() - expected).abs() < 1e-6, "{hold:?}");
     }
 

@@ -68,8 +68,11 @@ impl Default for SessionOptions {
     /// Standard gravity, no field given; stillness limits 0.1 m/s² and 0.02 rad/s (a hand-held
     /// board sways by a few tenths of a degree at 0.2–0.5 Hz and trembles at ~10 Hz, which gives
     /// up to ≈0.04 m/s² and ≈0.013 rad/s of standard deviation over half a second on top of the
-    /// sensor noise; a turn between positions is far above both); 1.5 s holds; budgets 2 mg and
-    /// 0.5 %.
+    /// sensor noise; a turn between positions is far above both); holds of at most 1.5 s, ended
+    /// sooner by [`super::hold`]; 0.15 s of stillness seen before a capture (on top of the 0.5 s
+    /// window that judges it); the full-rate stream while watching (the gyroscope's moves);
+    /// 1 s of rest before a 3 s "before" measurement (which also gives the gyroscope's bias
+    /// without a hand on the board); budgets 2 mg, 0.5 %, and 0.1 % / 0.05° for the gyroscope.
     fn default() -> Self {
         Self {
             gravity_mps2: solve::STANDARD_GRAVITY,

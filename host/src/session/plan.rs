@@ -115,14 +115,14 @@ mod tests {
     }
 
     #[test]
-    fn after_plus_z_up_the_opposite_face_is_asked_for_before_a_repeat_neighbour() {
+    fn the_missing_direction_is_asked_for_before_a_repeat_of_a_captured_one() {
         let g = 9.8;
         let twelve = twelve_positions();
-        let captured = vec![pose(&twelve[0], g)];
-        // Candidates: −Z up (separates the Z offset from the Z scale) and +Y+Z at 45°.
-        let needed = vec![&twelve[8], &twelve[1]];
+        // Eleven of the twelve in; the candidates are +Z up again and the missing −X+Z tilt.
+        let captured: Vec<CapturedPose> = twelve[..11].iter().map(|t| pose(t, g)).collect();
+        let needed = vec![&twelve[0], &twelve[11]];
         let next = most_informative(&captured, &needed, g).expect("a candidate");
-        assert_eq!(next.name, twelve[1].name);
+        assert_eq!(next.name, twelve[11].name);
     }
 
     #[test]
