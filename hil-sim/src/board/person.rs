@@ -44,6 +44,9 @@ const OPEN_HOLD_S: f64 = 1.0e9;
 /// A person who sees no new prompt after a capture moves on after this long, s.
 pub const NO_PROMPT_MOVE_ON_S: f64 = 1.0;
 
+/// A stream that ran this long during the tumble and then stopped ends the tumble, s.
+const WATCHED_TUMBLE_S: f64 = 1.0;
+
 /// Time from seeing a prompt to starting to move, s (a simple visual reaction time).
 pub const REACTION_S: f64 = 0.25;
 
@@ -141,8 +144,9 @@ pub struct Person {
     tumble: Vec<UnitQuaternion<f64>>,
     /// The order the tumble goes through, chosen when it begins.
     tumble_plan: Vec<UnitQuaternion<f64>>,
-    /// `StopStream` count when the tumble began; a later stop ends it.
-    tumble_stops_at_start: Option<u64>,
+    /// Since when the host has been streaming during the tumble, s: a stop after a stream of
+    /// at least [`WATCHED_TUMBLE_S`] means it has the directions it needs.
+    tumble_watched_since_s: Option<f64>,
     /// Field direction in the world frame (unit), if there is a field.
     field_world: Option<Vector3<f64>>,
     /// Body-frame field directions shown so far.
@@ -216,7 +220,7 @@ impl Person {
             hold_count,
             tumble: waypoints,
             tumble_plan: Vec::new(),
-            tumble_stops_at_start: None,
+            tumble_watched_since_s: None,
             field_world: field.world_vector_ut().try_normalize(0.0),
             field_seen: Vec::new(),
             rest,
@@ -276,18 +280,21 @@ impl Person {
                 self.end_hold(t_s)?;
             }
         }
-        if let (PersonPhase::Tumble { .. }, Some(stops)) = (self.phase, self.tumble_stops_at_start)
-        {
-            if prompts.stream_stops > stops {
-                // The host has the directions it needs: put the board down from here.
-                let here = self.motion_at(t_s).q_body_to_world;
-                self.turn(here, self.rest, t_s)?;
-                self.phase = PersonPhase::Rest;
-                self.tumble_stops_at_start = None;
+        if let PersonPhase::Tumble { .. } = self.phase {
+            let streaming = prompts.stream_starts > prompts.stream_stops;
+            match (streaming, self.tumble_watched_since_s) {
+                (true, None) => self.tumble_watched_since_s = Some(t_s),
+                (false, Some(since)) if t_s - since >= WATCHED_TUMBLE_S => {
+                    // The host has the directions it needs: put the board down from here.
+                    let here = self.motion_at(t_s).q_body_to_world;
+                    self.turn(here, self.rest, t_s)?;
+                    self.phase = PersonPhase::Rest;
+                    self.tumble_watched_since_s = None;
+                }
+                // A stream stopped at once (the end of the positions) does not count.
+                (false, Some(_)) => self.tumble_watched_since_s = None,
+                _ => {}
             }
-        }
-        if self.phase == PersonPhase::Rest {
-            self.tumble_stops_at_start = None;
         }
         // Segments may be shorter than a sample period; catch up through all that ended.
         while t_s >= self.segment_end_s {
@@ -374,7 +381,7 @@ impl Person {
                         self.phase = PersonPhase::TurnToHold { index: index + 1 };
                     }
                     None => {
-                        self.plan_tumble(&from, prompts.stream_stops);
+                        self.plan_tumble(&from);
                         self.begin_tumble(0, start)?;
                     }
                 }
@@ -394,12 +401,12 @@ impl Person {
     }
 
     /// Choose the tumble's order from `from`: first what the field has not shown yet.
-    fn plan_tumble(&mut self, from: &UnitQuaternion<f64>, stream_stops: u64) {
+    fn plan_tumble(&mut self, from: &UnitQuaternion<f64>) {
         self.tumble_plan = match self.field_world {
             Some(field) => fill_in_tumble(&self.tumble, &self.field_seen, &field, from),
             None => self.tumble.clone(),
         };
-        self.tumble_stops_at_start = Some(stream_stops);
+        self.tumble_watched_since_s = None;
     }
 
     /// Turn to tumble waypoint `index` of the plan, or to rest after the last one.
