@@ -4,6 +4,8 @@
 #![forbid(unsafe_code)]
 
 pub mod apply;
+pub mod bmi270;
+pub mod bmm150;
 pub mod device;
 pub mod imu;
 mod log;

@@ -5,12 +5,15 @@
 //! it); see [`physics`] for the full reading model and [`effects`] for the hidden effects.
 #![forbid(unsafe_code)]
 
+pub mod bmi270_chip;
 pub mod board;
 pub mod effects;
 pub mod error;
 pub mod feed;
 pub mod link_faults;
 pub mod lsm9ds1_chip;
+pub mod motioncal_board;
+pub mod motioncal_serve;
 pub mod physics;
 pub mod poser;
 pub mod recording;

@@ -12,9 +12,10 @@ use clap::{Parser, Subcommand};
 use imucal_hil_sim::effects::EffectRequest;
 use imucal_hil_sim::poser::ScheduleKind;
 use imucal_hil_sim::recording::{simulate_recording, write_csv_file, write_truth_file, SimConfig};
+use imucal_hil_sim::serve::BoardProtocol;
 use imucal_hil_sim::world::TemperatureProfile;
 
-/// A simulated IMU board (LSM9DS1-like accelerometer, gyroscope, magnetometer and thermometer).
+/// A simulated IMU board (LSM9DS1 or BMI270 + BMM150; imucal's firmware or the MotionCal sketch).
 #[derive(Debug, Parser)]
 #[command(
     name = "imucal-hil-sim",
@@ -97,6 +98,9 @@ hold label during static holds and empty while moving.")]
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     let command = cli.command.unwrap_or(Command::Serve(cli.serve));
     match command {
+        Command::Serve(args) if args.protocol == BoardProtocol::Motioncal => {
+            Ok(imucal_hil_sim::motioncal_serve::run_command(&args)?)
+        }
         Command::Serve(args) => Ok(imucal_hil_sim::serve::run_command(&args)?),
         Command::Feed(args) => Ok(imucal_hil_sim::feed::run_command(&args)?),
         Command::Record {

@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use serialport::{SerialPort, TTYPort};
 use thiserror::Error;
 
-use crate::board::{BoardConfig, BoardError, PersonSchedule, SimBoard};
+use crate::board::{BoardConfig, BoardError, PersonSchedule, SensorChip, SimBoard};
 use crate::effects::EffectRequest;
 use crate::error::SimError;
 use crate::link_faults::{FaultStats, FaultyLink, LinkFaults, ParamTamper};
@@ -168,19 +168,7 @@ impl SimServer {
         };
         let board = SimBoard::new(options.board_config())?;
         let truth = board.truth();
-        let (mut master, slave) = TTYPort::pair().map_err(ServeError::Pty)?;
-        close_on_exec(&master)?;
-        close_on_exec(&slave)?;
-        never_block(&master)?;
-        master
-            .set_timeout(Duration::ZERO)
-            .map_err(ServeError::Pty)?;
-        let port_path = slave.name().ok_or_else(|| {
-            ServeError::Pty(serialport::Error::new(
-                serialport::ErrorKind::Unknown,
-                "the pseudo-terminal has no slave path",
-            ))
-        })?;
+        let (master, slave, port_path) = open_pty()?;
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
             vanish: AtomicBool::new(false),
@@ -340,7 +328,26 @@ impl Drop for SimHandle {
     }
 }
 
-fn is_not_ready(error: &std::io::Error) -> bool {
+/// A pseudo-terminal for a simulated board: the master (non-blocking, kept out of child
+/// processes), the slave, and the slave's path for the host to open.
+pub(crate) fn open_pty() -> Result<(TTYPort, TTYPort, String), ServeError> {
+    let (mut master, slave) = TTYPort::pair().map_err(ServeError::Pty)?;
+    close_on_exec(&master)?;
+    close_on_exec(&slave)?;
+    never_block(&master)?;
+    master
+        .set_timeout(Duration::ZERO)
+        .map_err(ServeError::Pty)?;
+    let port_path = slave.name().ok_or_else(|| {
+        ServeError::Pty(serialport::Error::new(
+            serialport::ErrorKind::Unknown,
+            "the pseudo-terminal has no slave path",
+        ))
+    })?;
+    Ok((master, slave, port_path))
+}
+
+pub(crate) fn is_not_ready(error: &std::io::Error) -> bool {
     matches!(
         error.kind(),
         ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
@@ -607,6 +614,25 @@ pub struct ServeArgs {
     /// Speak this protocol major version at Hello (to try a host against another version).
     #[arg(long = "protocol-major")]
     pub protocol_major: Option<u16>,
+    /// What the board runs: imucal's firmware, or Adafruit's MotionCal calibration sketch
+    /// (prints `Raw:`/`Uni:` lines, stores the 68-byte packet; the link-fault options and the
+    /// guided person do not apply to it).
+    #[arg(long, value_enum, default_value = "imucal")]
+    pub protocol: BoardProtocol,
+    /// Sensor chip of a board running imucal's firmware: lsm9ds1 (Nano 33 BLE Sense) or bmi270
+    /// (BMI270 + BMM150, Nano 33 BLE Sense Rev2).
+    #[arg(long, value_enum, default_value = "lsm9ds1")]
+    pub chip: SensorChip,
+}
+
+/// The firmware a served board runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum BoardProtocol {
+    /// imucal's firmware and framed protocol.
+    #[default]
+    Imucal,
+    /// Adafruit's MotionCal calibration sketch.
+    Motioncal,
 }
 
 impl Default for ServeArgs {
@@ -629,6 +655,8 @@ impl Default for ServeArgs {
             delay_rate: 0.05,
             vanish_after_s: None,
             protocol_major: None,
+            protocol: BoardProtocol::Imucal,
+            chip: SensorChip::Lsm9ds1,
         }
     }
 }
@@ -642,6 +670,7 @@ impl ServeArgs {
         options.schedule = self.schedule;
         options.board.max_hold_s = self.max_hold_s;
         options.board.poser.tremor = !self.no_tremor;
+        options.board.sensor = self.chip;
         options.faults = LinkFaults {
             drop_rate: self.drop_rate,
             flip_rate: self.flip_rate,
@@ -662,10 +691,7 @@ impl ServeArgs {
 /// Run the `serve` command: print the port path on stdout (one line, flushed), then serve until
 /// stdin reaches end of file, `--seconds` pass, or the process is interrupted.
 pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
-    let wall_limit = args
-        .seconds
-        .map(|s| crate::error::require_non_negative("--seconds", s).map(Duration::from_secs_f64))
-        .transpose()?;
+    let wall_limit = wall_limit(args)?;
     if let Some(seconds) = args.vanish_after_s {
         crate::error::require_non_negative("--vanish-after-s", seconds)?;
     }
@@ -673,30 +699,13 @@ pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
     if let Some(path) = &args.truth {
         write_truth_file(&handle.truth(), path)?;
     }
-    {
-        let mut stdout = std::io::stdout().lock();
-        writeln!(stdout, "{}", handle.port_path())
-            .and_then(|()| stdout.flush())
-            .map_err(ServeError::Io)?;
-    }
-    let (closed, stdin_closed) = mpsc::channel::<()>();
-    if !args.ignore_stdin {
-        std::thread::spawn(move || {
-            // Whatever is typed is ignored; only the end of input matters.
-            let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
-            let _ = closed.send(());
-        });
-    }
-    let started = Instant::now();
-    while handle.is_running()
-        && stdin_closed.try_recv().is_err()
-        && wall_limit.is_none_or(|limit| started.elapsed() < limit)
-    {
+    announce_port(handle.port_path())?;
+    serve_until_done(args, wall_limit, || {
         for note in handle.take_notes() {
             eprintln!("board: {note}");
         }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+        handle.is_running()
+    });
     for note in handle.take_notes() {
         eprintln!("board: {note}");
     }
@@ -710,4 +719,43 @@ pub fn run_command(args: &ServeArgs) -> Result<(), ServeError> {
         stats.bytes_from_host
     );
     Ok(())
+}
+
+/// Prints the port path (one line, flushed).
+pub(crate) fn announce_port(path: &str) -> Result<(), ServeError> {
+    let mut stdout = std::io::stdout().lock();
+    writeln!(stdout, "{path}")
+        .and_then(|()| stdout.flush())
+        .map_err(ServeError::Io)
+}
+
+/// Waits until `still_running` says no, stdin ends (unless ignored) or `wall_limit` passes.
+pub(crate) fn serve_until_done(
+    args: &ServeArgs,
+    wall_limit: Option<Duration>,
+    mut still_running: impl FnMut() -> bool,
+) {
+    let (closed, stdin_closed) = mpsc::channel::<()>();
+    if !args.ignore_stdin {
+        std::thread::spawn(move || {
+            // Whatever is typed is ignored; only the end of input matters.
+            let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+            let _ = closed.send(());
+        });
+    }
+    let started = Instant::now();
+    while still_running()
+        && stdin_closed.try_recv().is_err()
+        && wall_limit.is_none_or(|limit| started.elapsed() < limit)
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `--seconds` as a duration, refused when negative or not finite.
+pub(crate) fn wall_limit(args: &ServeArgs) -> Result<Option<Duration>, ServeError> {
+    Ok(args
+        .seconds
+        .map(|s| crate::error::require_non_negative("--seconds", s).map(Duration::from_secs_f64))
+        .transpose()?)
 }

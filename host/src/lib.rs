@@ -3,10 +3,12 @@
 #![forbid(unsafe_code)]
 
 pub mod analysis;
+pub mod compat;
 pub mod device;
 pub mod export;
 pub mod fit;
 pub mod geomag;
+pub mod history;
 pub mod input_checks;
 pub mod pipeline;
 pub mod recording;

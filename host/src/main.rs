@@ -17,6 +17,8 @@ fn main() -> std::process::ExitCode {
         Command::Device(command) => cli::device::run(&command),
         Command::Report(args) => cli::report::run(&args),
         Command::Export(args) => cli::export::run(&args),
+        Command::History(args) => cli::history::run(&args),
+        Command::Fleet(args) => cli::fleet::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -10,6 +10,7 @@ use imucal::fit::Calibration;
 use imucal::fit::{Mat3, Vec3};
 use imucal::session::gyro_fit::full_turn_error_deg;
 use imucal::session::{run_session, SessionOptions, SessionOutcome, Unattended};
+use imucal_hil_sim::board::SensorChip;
 use imucal_hil_sim::physics::SensorTruth;
 use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
 use imucal_protocol::StreamKind;
@@ -138,9 +139,10 @@ fn assert_gyro_matches_truth(outcome: &SessionOutcome, truth: &imucal_hil_sim::p
     }
 }
 
-fn run_calibration(seed: u64) -> (SimHandle, DeviceClient, SessionOutcome) {
+fn run_calibration(seed: u64, chip: SensorChip) -> (SimHandle, DeviceClient, SessionOutcome) {
     let mut sim_options = SimOptions::new(seed);
     sim_options.speed = SPEED;
+    sim_options.board.sensor = chip;
     let sim = SimServer::start(sim_options).expect("the simulator starts");
     let truth = sim.truth();
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
@@ -154,13 +156,10 @@ fn run_calibration(seed: u64) -> (SimHandle, DeviceClient, SessionOutcome) {
     (sim, client, outcome)
 }
 
-#[test]
-fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
-    let wall = Instant::now();
-    let (sim, mut client, outcome) = run_calibration(2024);
+/// The session's fit matches the board's truth and meets the product's at-rest targets.
+fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
     let truth = sim.truth();
     let fit = &outcome.fit;
-
     // Twelve positions, each captured once; the verified write.
     assert_eq!(outcome.poses.len(), 12, "{}", outcome.extra_positions_note);
     assert!(outcome.verified && outcome.written);
@@ -183,7 +182,7 @@ fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
         );
     }
 
-    assert_gyro_matches_truth(&outcome, &truth.imu);
+    assert_gyro_matches_truth(outcome, &truth.imu);
 
     // The written magnetometer matrix is in the accelerometer's output frame: with
     // A_acc = Q·R, the true magnetometer correction in that frame is Qᵀ·A_mag.
@@ -210,7 +209,10 @@ fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
     );
 
     // At rest: the targets of the product, and a clear improvement over the raw readings.
-    let after = outcome.after.expect("the calibrated rest measurement");
+    let after = outcome
+        .after
+        .as_ref()
+        .expect("the calibrated rest measurement");
     assert!(
         after.accel_error_mg < 2.0,
         "|a| error {:.3} mg",
@@ -231,6 +233,19 @@ fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
         "gyro at rest {:.4} °/s > {gyro_limit:.4}",
         after.gyro_rate_dps
     );
+}
+
+#[test]
+fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
+    let wall = Instant::now();
+    let (sim, mut client, outcome) = run_calibration(2024, SensorChip::Lsm9ds1);
+
+    assert_calibrated_to_truth(&sim, &outcome);
+    let fit = &outcome.fit;
+    let after = outcome
+        .after
+        .as_ref()
+        .expect("the calibrated rest measurement");
 
     // The set survives a power cycle.
     sim.reboot().expect("the board reboots");
@@ -292,5 +307,19 @@ fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
         outcome.before.mag_error_pct,
         outcome.before.gyro_rate_dps,
         wall.elapsed().as_secs_f64()
+    );
+}
+
+#[test]
+fn an_unattended_session_calibrates_the_simulated_rev2_board_with_bmi270_and_bmm150() {
+    let (sim, _client, outcome) = run_calibration(2025, SensorChip::Bmi270);
+    assert_calibrated_to_truth(&sim, &outcome);
+    let after = outcome
+        .after
+        .as_ref()
+        .expect("the calibrated rest measurement");
+    eprintln!(
+        "BMI270/BMM150 session: {:.1} s simulated; after: |a| {:.3} mg, |m| {:.3} %, gyro {:.4} °/s",
+        outcome.session_seconds, after.accel_error_mg, after.mag_error_pct, after.gyro_rate_dps
     );
 }

@@ -28,7 +28,7 @@ pub fn repo_root() -> PathBuf {
 /// Builds the board's release ELFs with Debian's cargo (the rustup proxy ignores build-std).
 pub fn build() -> Result<Elfs, String> {
     let board = repo_root().join(BOARD_DIR);
-    cargo_build_release(&board)?;
+    cargo_build_release(&board, &[])?;
     let release = board.join("target/thumbv7em-none-eabihf/release");
     let elfs = Elfs {
         firmware: release.join("imucal-qemu"),
@@ -54,6 +54,8 @@ pub struct Board {
     pub dir: &'static str,
     /// Name of the firmware binary.
     pub firmware_bin: &'static str,
+    /// Cargo features of the board crate that select this variant.
+    pub features: &'static [&'static str],
     /// Flash available to the firmware (text + data), bytes.
     pub flash_budget: u64,
     /// Static RAM budget (data + bss), bytes.
@@ -61,15 +63,27 @@ pub struct Board {
 }
 
 /// Hardware boards besides the QEMU one.
-pub const HARDWARE_BOARDS: [Board; 1] = [Board {
-    name: "nano33-ble-sense",
-    dir: "firmware/boards/nano33-ble-sense",
-    firmware_bin: "nano33-ble-sense",
-    // The FLASH region of its memory.x: 0x10000..0xFE000 behind the Arduino bootloader.
-    flash_budget: 0xEE000,
-    // 256 KiB of RAM less 64 KiB kept for the stack, where the firmware core's state lives.
-    ram_budget: 192 * 1024,
-}];
+pub const HARDWARE_BOARDS: [Board; 2] = [
+    Board {
+        name: "nano33-ble-sense",
+        dir: "firmware/boards/nano33-ble-sense",
+        firmware_bin: "nano33-ble-sense",
+        features: &[],
+        // The FLASH region of its memory.x: 0x10000..0xFE000 behind the Arduino bootloader.
+        flash_budget: 0xEE000,
+        // 256 KiB of RAM less 64 KiB kept for the stack, where the firmware core's state lives.
+        ram_budget: 192 * 1024,
+    },
+    // The Rev2 (BMI270 + BMM150): the same board crate with its `rev2` feature.
+    Board {
+        name: "nano33-ble-sense-rev2",
+        dir: "firmware/boards/nano33-ble-sense",
+        firmware_bin: "nano33-ble-sense",
+        features: &["rev2"],
+        flash_budget: 0xEE000,
+        ram_budget: 192 * 1024,
+    },
+];
 
 /// Name of the QEMU board for `--board`.
 pub const QEMU_BOARD: &str = "qemu-mps2-an386";
@@ -96,7 +110,7 @@ pub fn build_board(name: &str) -> Result<PathBuf, String> {
     }
     let board = find_board(name)?;
     let dir = repo_root().join(board.dir);
-    cargo_build_release(&dir)?;
+    cargo_build_release(&dir, board.features)?;
     let elf = dir
         .join("target/thumbv7em-none-eabihf/release")
         .join(board.firmware_bin);
@@ -121,14 +135,18 @@ pub fn size_board(name: &str) -> Result<(), String> {
 }
 
 /// Runs `cargo build --release` in a board directory, so its `.cargo/config.toml` applies.
-fn cargo_build_release(board: &Path) -> Result<(), String> {
+fn cargo_build_release(board: &Path, features: &[&str]) -> Result<(), String> {
     let cargo = Path::new("/usr/bin/cargo");
     if !cargo.exists() {
         return Err("/usr/bin/cargo not found; run scripts/setup-firmware-toolchain.sh".into());
     }
     println!("building release firmware in {}", board.display());
-    let status = Command::new(cargo)
-        .args(["build", "--release"])
+    let mut command = Command::new(cargo);
+    command.args(["build", "--release"]);
+    if !features.is_empty() {
+        command.args(["--features", &features.join(",")]);
+    }
+    let status = command
         .current_dir(board)
         // The outer `cargo xtask` exports its own toolchain settings; the board uses its own.
         .env_remove("RUSTC")

@@ -1,5 +1,5 @@
 //! The simulated board: the world and a person moving the board, the sensor physics with its
-//! hidden effects, an emulated LSM9DS1 read by the real driver, and the real firmware core
+//! hidden effects, an emulated LSM9DS1 or BMI270 + BMM150 read by the real driver, and the real firmware core
 //! ([`imucal_firmware::device::Device`]) with its parameter store on a RAM flash.
 //!
 //! Every sample period, at simulated time `t`: the person reacts to what the firmware sent, the
@@ -9,12 +9,13 @@
 //! simulated time. The flash survives [`SimBoard::reboot`], a power cycle that rebuilds the
 //! firmware from it as a real reset does; a power cut can be scheduled at any flash step.
 
+mod imu;
 mod link;
 mod parts;
 mod person;
 
 use imucal_firmware::device::{Device, DeviceError, DeviceInfo};
-use imucal_firmware::lsm9ds1::{self, Lsm9ds1};
+use imucal_firmware::lsm9ds1;
 use imucal_firmware::store::{ParamStore, StoreError};
 use imucal_protocol::{DeviceId, FirmwareVersion, SensorSet};
 use nalgebra::Vector3;
@@ -22,7 +23,7 @@ use thiserror::Error;
 
 use crate::effects::EffectRequest;
 use crate::error::SimError;
-use crate::lsm9ds1_chip::{Lsm9ds1Chip, NonFinitePhysicalValue};
+use crate::lsm9ds1_chip::NonFinitePhysicalValue;
 use crate::physics::{ImuErrorRanges, ImuPhysics, ImuSample, ImuTruth};
 use crate::poser::{build_schedule, PoserOptions, ScheduleKind};
 use crate::recording::{SimConfig, Truth, WorldTruth};
@@ -30,6 +31,7 @@ use crate::world::{
     EarthField, LocalDisturbance, TemperatureProfile, World, WorldState, STANDARD_GRAVITY_MPS2,
 };
 
+pub use imu::{BoardChip, BoardImu, BoardImuError, SensorChip, SharedBmi270, SIM_BMI270_CONFIG};
 pub use link::{link_pair, DeviceLink, LinkEnd, LinkObservations, TX_BUFFER_LIMIT};
 pub use parts::{
     BoardFlash, SharedChip, SharedFlash, SimClock, FLASH_SECTOR, FLASH_SIZE, FLASH_WORD,
@@ -46,7 +48,7 @@ pub const SIM_FIRMWARE_VERSION: FirmwareVersion = FirmwareVersion {
 };
 
 /// The firmware core as built on the simulated board.
-pub type BoardDevice = Device<Lsm9ds1<SharedChip>, DeviceLink, SharedFlash, SimClock>;
+pub type BoardDevice = Device<BoardImu, DeviceLink, SharedFlash, SimClock>;
 
 /// Why the simulated board could not be built or run.
 #[derive(Debug, Error)]
@@ -54,8 +56,8 @@ pub enum BoardError {
     /// A setting of the world, physics or person is invalid.
     #[error(transparent)]
     Sim(#[from] SimError),
-    /// The real LSM9DS1 driver could not configure the emulated chip.
-    #[error("the LSM9DS1 driver could not configure the emulated chip: {0}")]
+    /// The real driver could not configure the emulated chip.
+    #[error("the driver could not configure the emulated chip: {0}")]
     Driver(String),
     /// The firmware core refused to start.
     #[error("the firmware core did not start: {0}")]
@@ -98,8 +100,10 @@ pub struct BoardConfig {
     pub disturbance: Option<LocalDisturbance>,
     /// Die temperature over time; `None` keeps the person's ambient temperature.
     pub temperature: Option<TemperatureProfile>,
-    /// Configuration the firmware's driver applies to the chip (its rate is the sample rate).
+    /// Configuration the firmware's LSM9DS1 driver applies (its rate is the sample rate).
     pub chip: lsm9ds1::Config,
+    /// Which sensor chip the board carries.
+    pub sensor: SensorChip,
     /// Unique id the board reports.
     pub device_id: u64,
 }
@@ -120,7 +124,16 @@ impl BoardConfig {
             disturbance: None,
             temperature: None,
             chip: lsm9ds1::Config::default(),
+            sensor: SensorChip::Lsm9ds1,
             device_id: 0x5349_4d00_0000_0000 | (seed & 0xFFFF_FFFF),
+        }
+    }
+
+    /// Scales of the configured chip (its rate is the sample rate).
+    pub fn scales(&self) -> imucal_protocol::SensorScales {
+        match self.sensor {
+            SensorChip::Lsm9ds1 => self.chip.scales(),
+            SensorChip::Bmi270 => imucal_firmware::bmi270::scales(),
         }
     }
 }
@@ -131,7 +144,7 @@ pub struct SimBoard {
     world: World,
     physics: ImuPhysics,
     person: Person,
-    chip: SharedChip,
+    chip: BoardChip,
     flash: SharedFlash,
     clock: SimClock,
     link: LinkEnd,
@@ -161,7 +174,7 @@ impl std::fmt::Debug for SimBoard {
 impl SimBoard {
     /// Build the board at simulated time 0 with an erased flash and boot the firmware.
     pub fn new(config: BoardConfig) -> Result<Self, BoardError> {
-        let rate = f64::from(config.chip.scales().sample_rate_hz);
+        let rate = f64::from(config.scales().sample_rate_hz);
         let person = Person::new(
             config.schedule,
             &config.poser,
@@ -207,7 +220,7 @@ impl SimBoard {
             world,
             physics,
             person,
-            chip: SharedChip::new(Lsm9ds1Chip::default()),
+            chip: BoardChip::new(config.sensor),
             flash: SharedFlash::new(),
             clock: SimClock::default(),
             link,
@@ -228,10 +241,10 @@ impl SimBoard {
     /// Power up: a fresh chip configured by the real driver, the store opened from the flash,
     /// and the firmware core built on them.
     fn boot(&mut self, link: DeviceLink) -> Result<(), BoardError> {
-        self.chip.with(|chip| *chip = Lsm9ds1Chip::default());
-        let mut driver = Lsm9ds1::new(self.chip.clone(), self.config.chip);
-        driver
-            .init()
+        self.chip.power_cycle();
+        let driver = self
+            .chip
+            .driver(self.config.chip)
             .map_err(|e| BoardError::Driver(e.to_string()))?;
         self.flash.with(|flash| flash.restore_power());
         let store = ParamStore::new(self.flash.clone(), 0, SLOT_SIZE).map_err(BoardError::Store)?;
@@ -248,7 +261,7 @@ impl SimBoard {
         let device = Device::new(driver, link, store, self.clock.clone(), info)?;
         // The firmware samples every `period_us` from its boot time; keep to the same grid so
         // that each sample is taken exactly when the world was evaluated.
-        let rate = f64::from(self.config.chip.scales().sample_rate_hz);
+        let rate = f64::from(self.config.scales().sample_rate_hz);
         self.period_us = ((1.0e6 / rate) + 0.5) as u64;
         self.next_sample_us = self.clock.get_us();
         self.device = Some(device);
@@ -434,14 +447,12 @@ impl SimBoard {
         let state = self.world_state(t_s);
         let sample = self.physics.sample(&state);
         let v = |x: Vector3<f64>| [x.x, x.y, x.z];
-        self.chip.with(|chip| {
-            chip.set_physical(
-                v(sample.accel.analog),
-                v(sample.gyro.analog),
-                v(sample.mag.analog),
-                state.temp_c,
-            )
-        })?;
+        self.chip.set_physical(
+            v(sample.accel.analog),
+            v(sample.gyro.analog),
+            v(sample.mag.analog),
+            state.temp_c,
+        )?;
         self.clock.set_us(t_us);
         self.samples += 1;
         self.last_sample = Some(sample);

@@ -44,6 +44,16 @@ pub enum Command {
     /// Export a parameter file as a C header, a Rust module or versioned JSON for other firmware.
     #[command(after_help = super::export::EXAMPLES)]
     Export(super::export::ExportArgs),
+    /// Every recorded calibration of a board (or all), with each parameter's change in σ units.
+    #[command(
+        after_help = "Examples:\n  imucal history\n  imucal history 00000000000000000000000000001234 --json\n  imucal history --db postgres://imucal@db.plant/line"
+    )]
+    History(super::history::HistoryArgs),
+    /// Fleet statistics per parameter and the boards far outside the fleet, with likely causes.
+    #[command(
+        after_help = "Examples:\n  imucal fleet\n  imucal fleet --db sqlite:///srv/line/history.sqlite --json"
+    )]
+    Fleet(super::fleet::FleetArgs),
 }
 
 /// Which sensor(s) to fit.
@@ -215,6 +225,13 @@ pub struct FitArgs {
     /// and `imucal flash`; sensors not fitted are listed in it with the reason.
     #[arg(long, value_name = "FILE")]
     pub params_out: Option<PathBuf>,
+    /// With --params-out: the board the recording came from, as the history names it
+    /// (default: the device id in the recording's provenance, else the recording's file name).
+    #[arg(long, value_name = "ID", requires = "params_out")]
+    pub device: Option<String>,
+    /// With --params-out: where to record the fit.
+    #[command(flatten)]
+    pub history: super::history::RecordArgs,
 }
 
 /// Examples shown by `imucal report --help`.
@@ -235,6 +252,10 @@ pub struct ReportArgs {
     /// Directory for `report.html` (default: the session directory, or `<recording>_report`).
     #[arg(long, short = 'o')]
     pub out: Option<PathBuf>,
+    /// History database whose records of the session's board are plotted over time
+    /// (default: `$IMUCAL_DB`, else the default file when it exists).
+    #[arg(long, value_name = "URL")]
+    pub db: Option<String>,
 }
 
 /// Arguments of `imucal analyze`.

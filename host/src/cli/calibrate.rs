@@ -39,6 +39,10 @@ pub struct CalibrateArgs {
     /// Simulator: switch a hidden effect on (repeatable), `[sensor.]name[=size]`.
     #[arg(long = "sim-effect", requires = "sim")]
     pub sim_effects: Vec<String>,
+    /// Simulator: sensor chip, lsm9ds1 (Nano 33 BLE Sense) or bmi270 (BMI270 + BMM150, Rev2).
+    #[arg(long, value_enum, default_value = "lsm9ds1", requires = "sim")]
+    #[cfg(feature = "sim")]
+    pub sim_chip: imucal_hil_sim::board::SensorChip,
     /// Simulator: simulated seconds per wall second.
     #[arg(long, default_value_t = 15.0, requires = "sim")]
     pub speed: f64,
@@ -70,6 +74,9 @@ pub struct CalibrateArgs {
     /// Session directory (default: `imucal-session-<unix time>` here).
     #[arg(long, short = 'o')]
     pub out: Option<PathBuf>,
+    /// Where to record the calibration.
+    #[command(flatten)]
+    pub history: super::history::RecordArgs,
     /// Local gravity, m/s².
     #[arg(long, default_value_t = 9.806_65)]
     pub gravity: f64,
@@ -549,6 +556,7 @@ impl Simulated {
         use imucal_hil_sim::serve::{SimOptions, SimServer};
         let mut options = SimOptions::new(args.sim_seed);
         options.speed = args.speed;
+        options.board.sensor = args.sim_chip;
         options.board.temperature = temperature_profile(&args.sim_temperature)?;
         if args.rounds > 1 {
             options.schedule = imucal_hil_sim::board::PersonSchedule::Rounds(args.rounds);
@@ -691,6 +699,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(sim) = &simulated {
         sim.save_truth(&dir.join("truth.json"))?;
     }
+    // Recorded only once the session directory holds the calibration.
+    let mut record =
+        imucal::history::CalibrationRecord::from_session(&summary(&outcome), &outcome.poses);
+    record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    // A failed write is returned after the summary is printed, so nothing is hidden.
+    let recorded = super::history::record(&args.history, record);
     let closed = if args.analyze {
         Some(close_the_loop(
             &mut client,
@@ -743,7 +757,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             dir.join("params.json").display()
         );
     }
-    Ok(())
+    recorded
 }
 
 #[cfg(all(test, feature = "sim"))]

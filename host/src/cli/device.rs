@@ -58,6 +58,9 @@ pub struct FlashArgs {
     /// Which port to use.
     #[command(flatten)]
     pub port: PortArgs,
+    /// Where to record the flash.
+    #[command(flatten)]
+    pub history: super::history::RecordArgs,
 }
 
 /// Arguments of `imucal stream`.
@@ -268,7 +271,15 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
         status.active_crc,
         status.active_seq
     );
-    Ok(())
+    let welcome = client.welcome();
+    let mut record = imucal::history::CalibrationRecord::new(
+        &welcome.device_id.to_string(),
+        imucal::history::RecordSource::Flash,
+        file,
+        status.active_crc,
+    );
+    record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    super::history::record(&args.history, record)
 }
 
 fn seconds_arg(seconds: Option<f64>) -> anyhow::Result<Option<Duration>> {

@@ -1,17 +1,22 @@
 //! `imucal export`: a parameter file as a C header, a Rust module or versioned JSON.
 
-use std::path::PathBuf;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
+use imucal::compat::{self, encode_packet, AdafruitCalibration};
 use imucal::device::ParamsFile;
 use imucal::export::{export, ExportFormat};
+use imucal_protocol::CalibrationSet;
 
 /// Examples shown by `imucal export --help`.
 pub const EXAMPLES: &str = "Examples:\n  \
     imucal export session/params.json --format c-header -o imucal_calibration.h\n  \
     imucal export params.json --format rust -o src/imu_calibration.rs\n  \
-    imucal export params.json --format json";
+    imucal export params.json --format json\n  \
+    imucal export params.json --format motioncal -o cal.bin\n  \
+    imucal export params.json --format adafruit-json -o sensor_calib.json";
 
 /// Output format flag.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -22,6 +27,11 @@ pub enum ExportFormatArg {
     Rust,
     /// JSON, schema `imucal-calibration-export` version 1 (docs/PARAMS_FORMAT.md).
     Json,
+    /// MotionCal's 68-byte calibration packet (binary, needs `-o`), as Adafruit's sketch
+    /// receives it.
+    Motioncal,
+    /// `sensor_calib.json` of Adafruit's `Adafruit_Sensor_Calibration` flash/SD backend.
+    AdafruitJson,
 }
 
 /// Arguments of `imucal export`.
@@ -56,16 +66,40 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
         ExportFormatArg::CHeader => ExportFormat::CHeader,
         ExportFormatArg::Rust => ExportFormat::Rust,
         ExportFormatArg::Json => ExportFormat::Json,
+        ExportFormatArg::Motioncal | ExportFormatArg::AdafruitJson => {
+            return export_adafruit(&set, args);
+        }
     };
     let text = export(&set, format, &name);
-    match &args.out {
+    write_output(args.out.as_deref(), text.as_bytes())
+}
+
+/// The Adafruit library's forms: what it can apply of `set`, and a note of what it cannot.
+fn export_adafruit(set: &CalibrationSet, args: &ExportArgs) -> anyhow::Result<()> {
+    let conversion = AdafruitCalibration::from_set(set)?;
+    eprint!("{}", compat::limitations(set, &[])?.describe());
+    if args.format == ExportFormatArg::AdafruitJson {
+        let text = conversion.calibration.to_sensor_calib_json();
+        return write_output(args.out.as_deref(), text.as_bytes());
+    }
+    let Some(out) = args.out.as_deref() else {
+        anyhow::bail!("the MotionCal packet is binary; name a file with `-o cal.bin`");
+    };
+    write_output(Some(out), &encode_packet(&conversion.calibration)?)
+}
+
+/// Writes `bytes` to `out`, or to standard output.
+fn write_output(out: Option<&Path>, bytes: &[u8]) -> anyhow::Result<()> {
+    match out {
         Some(path) => {
-            std::fs::write(path, text).with_context(|| {
+            std::fs::write(path, bytes).with_context(|| {
                 format!("cannot write `{}`; check the directory", path.display())
             })?;
             eprintln!("wrote {}", path.display());
         }
-        None => print!("{text}"),
+        None => std::io::stdout()
+            .write_all(bytes)
+            .context("cannot write to standard output")?,
     }
     Ok(())
 }

@@ -15,8 +15,10 @@
 use std::path::Path;
 
 use anyhow::{bail, Context};
+use imucal::device::ParamsFile;
 use imucal::fit::alignment::Alignment;
 use imucal::fit::{Mat3, Method, Vec3};
+use imucal::history::{CalibrationRecord, RecordSource};
 use imucal::pipeline::chain::CandidateOutcome;
 use imucal::pipeline::methods::method_for_sensor;
 use imucal::pipeline::{
@@ -265,7 +267,7 @@ fn write_params(
     calibration: &RecordingCalibration,
     path: &Path,
     source: &Path,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<ParamsFile> {
     if path == source {
         bail!(
             "--params-out `{}` is the recording itself; choose another file name",
@@ -289,7 +291,25 @@ fn write_params(
             format!("; not in it (identity if flashed): {}", left_out.join("; "))
         }
     );
-    Ok(())
+    Ok(file)
+}
+
+/// Record the fit written by --params-out in the history.
+fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
+    let recording = &args.input.recording;
+    let device = args
+        .device
+        .clone()
+        .or_else(|| file.provenance.as_ref().and_then(|p| p.device_id.clone()))
+        .unwrap_or_else(|| {
+            let stem = recording.file_stem().unwrap_or(recording.as_os_str());
+            format!("recording:{}", stem.to_string_lossy())
+        });
+    let crc = file
+        .to_calibration_set(&recording.display().to_string())
+        .map_or(0, |set| set.crc32());
+    let record = CalibrationRecord::new(&device, RecordSource::Fit, file, crc);
+    super::history::record(&args.history, record)
 }
 
 /// Run the command.
@@ -332,9 +352,14 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     } else {
         print_table(&calibration);
     }
-    if let Some(path) = &args.params_out {
-        write_params(&calibration, path, &args.input.recording)?;
-    }
+    // Recorded once the parameter file holds the fit; a failure is returned last.
+    let recorded = match &args.params_out {
+        Some(path) => record_fit(
+            args,
+            write_params(&calibration, path, &args.input.recording)?,
+        ),
+        None => Ok(()),
+    };
     let failed = calibration.failures();
     if !failed.is_empty() {
         bail!(
@@ -347,5 +372,5 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             failed.join("; ")
         );
     }
-    Ok(())
+    recorded
 }

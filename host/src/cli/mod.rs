@@ -6,6 +6,8 @@ pub mod calibrate;
 pub mod device;
 pub mod export;
 pub mod fit;
+pub mod fleet;
+pub mod history;
 pub mod import;
 pub mod report;
 pub mod still;

@@ -113,6 +113,12 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             }
         }
     }
+    if is_session {
+        match super::history::report_figures(args.db.as_deref(), path) {
+            Ok(figures) => data.history = figures,
+            Err(note) => data.notes.push(note),
+        }
+    }
     bar.set_message("drawing the plots");
     let out = args
         .out

@@ -128,6 +128,9 @@ pub struct ReportData {
     pub verdict: Vec<String>,
     /// Other remarks (local field check, thinning, method choices).
     pub notes: Vec<String>,
+    /// The board's parameters over time from the calibration history, `(title, SVG)` per
+    /// figure (see `history::plot::parameters_over_time`); empty when there is no history.
+    pub history: Vec<(String, String)>,
 }
 
 /// The ellipsoid shape `field·A⁻¹` of a calibration `y = A·(x − b)` with `|y| = field`.
@@ -616,6 +619,13 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
     } else {
         format!("<h3>Notes</h3><ul>{notes}</ul>")
     };
+    if !data.history.is_empty() {
+        body.push_str("<h2>Calibration history</h2><p>This board's parameters in every recorded calibration.</p><div class=row>");
+        for (_, svg) in &data.history {
+            body.push_str(&figure(svg));
+        }
+        body.push_str("</div>");
+    }
     Ok(format!(
         "<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8><title>imucal report: {title}</title><style>{STYLE}</style></head><body>\n<h1>IMU calibration report</h1><p class=small>{title}</p>\n{verdict}{summary}{notes}\n{body}\n<h2>Parameters</h2>{parameters}\n</body></html>\n",
         title = escape(&data.source)

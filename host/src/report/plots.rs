@@ -17,7 +17,7 @@ pub struct PlotError {
     pub detail: String,
 }
 
-fn plot_error<E: std::fmt::Display>(figure: &'static str) -> impl Fn(E) -> PlotError {
+pub(crate) fn plot_error<E: std::fmt::Display>(figure: &'static str) -> impl Fn(E) -> PlotError {
     move |e| PlotError {
         figure,
         detail: e.to_string(),
@@ -41,7 +41,7 @@ pub fn thinned<T: Copy>(items: &[T], max: usize) -> Vec<T> {
 }
 
 /// A range padded by 8 % on each side (and widened when empty or degenerate).
-fn padded(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+pub(crate) fn padded(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     let (lo, hi) = values
         .filter(|v| v.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {

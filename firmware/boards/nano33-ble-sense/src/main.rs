@@ -1,5 +1,5 @@
-//! imucal firmware for the Arduino Nano 33 BLE Sense (rev 1): the firmware core with the LSM9DS1
-//! on the internal I²C bus, the host link on USB CDC-ACM and the parameter store in the top two
+//! imucal firmware for the Arduino Nano 33 BLE Sense: the firmware core with the LSM9DS1 (rev 1)
+//! or, built with the `rev2` feature, the BMI270 + BMM150 (Rev2) on the internal I²C bus, the host link on USB CDC-ACM and the parameter store in the top two
 //! flash pages (see the crate's README for how to flash and use it).
 #![no_std]
 #![no_main]
@@ -14,13 +14,14 @@ use imucal_board_nano33_ble_sense::{
     USB_MANUFACTURER, USB_PID, USB_PRODUCT, USB_VID,
 };
 use imucal_firmware::device::{Device, DeviceError, DeviceInfo};
-use imucal_firmware::lsm9ds1::{self, Config, Lsm9ds1};
 use imucal_firmware::store::ParamStore;
 use imucal_protocol::{DeviceId, FirmwareVersion, SensorSet};
 use nrf52840_hal::clocks::Clocks;
 use nrf52840_hal::gpio::{p0, p1, DriveConfig, Level};
 use nrf52840_hal::pac;
 use nrf52840_hal::twim::{self, Twim};
+
+mod sensor;
 use nrf52840_hal::usbd::{UsbPeripheral, Usbd};
 use usb_device::bus::UsbBusAllocator;
 use usb_device::device::{StringDescriptors, UsbDeviceBuilder, UsbVidPid};
@@ -28,11 +29,9 @@ use usbd_serial::{SerialPort, USB_CLASS_CDC};
 
 /// Core clock after reset, Hz (the nRF52840 always runs its Cortex-M4 at 64 MHz).
 const CPU_HZ: u32 = 64_000_000;
-/// Wait after switching on VDD_ENV before talking to the LSM9DS1, which first loads its trimming
-/// values (its boot takes tens of milliseconds); 50 ms also lets the switched supply settle.
+/// Wait after switching on VDD_ENV before talking to the sensors, which first load their
+/// trimming values (tens of milliseconds); 50 ms also lets the switched supply settle.
 const SENSOR_POWER_UP_MS: u32 = 50;
-/// Attempts at configuring the LSM9DS1 before running without it.
-const SENSOR_INIT_ATTEMPTS: u32 = 3;
 
 /// Parses a decimal version component at compile time.
 const fn parse_u16(text: &str) -> u16 {
@@ -56,49 +55,6 @@ const FIRMWARE_VERSION: FirmwareVersion = FirmwareVersion {
 fn halt() -> ! {
     loop {
         cortex_m::asm::wfi();
-    }
-}
-
-/// Logs why the LSM9DS1 could not be configured, as a sentence naming cause and fix.
-fn log_sensor_error(error: &lsm9ds1::Error<twim::Error>) {
-    match error {
-        lsm9ds1::Error::Bus(twim::Error::AddressNack) => defmt::error!(
-            "LSM9DS1: no answer at its I2C address; this firmware needs a Nano 33 BLE Sense rev 1 \
-             (rev 2 carries a BMI270/BMM150 instead), with VDD_ENV (P0.22) and the pull-ups (P1.00) on"
-        ),
-        lsm9ds1::Error::Bus(other) => defmt::error!(
-            "LSM9DS1: I2C transfer failed ({=str}); check the sensor supply and the bus pull-ups",
-            twim_error_name(other)
-        ),
-        lsm9ds1::Error::WrongAccelGyroId { address, found } => defmt::error!(
-            "LSM9DS1: device at {=u8:#x} reports WHO_AM_I {=u8:#x}, not 0x68; this is not an LSM9DS1",
-            address,
-            found
-        ),
-        lsm9ds1::Error::WrongMagId { address, found } => defmt::error!(
-            "LSM9DS1 magnetometer at {=u8:#x} reports WHO_AM_I {=u8:#x}, not 0x3d; this is not an LSM9DS1",
-            address,
-            found
-        ),
-        lsm9ds1::Error::NotInitialised => {
-            defmt::error!("LSM9DS1: read before configuration; configure it first")
-        }
-    }
-}
-
-/// Name of a TWIM error for the log (the HAL type has no defmt support).
-fn twim_error_name(error: &twim::Error) -> &'static str {
-    match error {
-        twim::Error::TxBufferTooLong => "transmit buffer too long",
-        twim::Error::RxBufferTooLong => "receive buffer too long",
-        twim::Error::TxBufferZeroLength => "empty transmit buffer",
-        twim::Error::RxBufferZeroLength => "empty receive buffer",
-        twim::Error::Transmit => "transmit incomplete",
-        twim::Error::Receive => "receive incomplete",
-        twim::Error::DMABufferNotInDataMemory => "buffer not in RAM",
-        twim::Error::AddressNack => "address not acknowledged",
-        twim::Error::DataNack => "data not acknowledged",
-        twim::Error::Overrun => "receive overrun",
     }
 }
 
@@ -137,25 +93,7 @@ fn main() -> ! {
         },
         twim::Frequency::K400,
     );
-    let mut imu = Lsm9ds1::new(i2c, Config::default());
-    let mut attempts = 0;
-    let sensor_ok = loop {
-        attempts += 1;
-        match imu.init() {
-            Ok(()) => break true,
-            Err(error) if attempts >= SENSOR_INIT_ATTEMPTS => {
-                log_sensor_error(&error);
-                break false;
-            }
-            Err(_) => cortex_m::asm::delay(SENSOR_POWER_UP_MS * (CPU_HZ / 1000)),
-        }
-    };
-    if sensor_ok {
-        defmt::info!("LSM9DS1 configured");
-    } else {
-        // The host link still comes up, so the host sees the failure as sensor errors.
-        defmt::warn!("running without the LSM9DS1; every sample counts as a sensor error");
-    }
+    let imu = sensor::configure(i2c);
 
     let flash = match param_flash::take(p.NVMC) {
         Ok(flash) => flash,
@@ -224,7 +162,7 @@ fn main() -> ! {
         Ok(device) => device,
         Err(DeviceError::InvalidSampleRate(rate)) => {
             defmt::error!(
-                "the LSM9DS1 configuration gives {=f32} Hz; configure a rate between 1 Hz and 100 kHz",
+                "the sensor configuration gives {=f32} Hz; configure a rate between 1 Hz and 100 kHz",
                 rate
             );
             halt()

@@ -1,0 +1,84 @@
+//! `imucal fleet`: population statistics per parameter over the newest calibration of every
+//! board, and the boards that are robust outliers with the likely cause.
+
+use clap::Args;
+use imucal::history::{fleet_report, FleetOptions, HistoryStore};
+
+/// Arguments of `imucal fleet`.
+#[derive(Debug, Args)]
+pub struct FleetArgs {
+    /// History database: `sqlite://PATH` or `postgres://user@host/db[?host=/socket/dir&port=N]`
+    /// (default: `$IMUCAL_DB`, else `$XDG_DATA_HOME/imucal/history.sqlite`).
+    #[arg(long, value_name = "URL")]
+    pub db: Option<String>,
+    /// Probability that a fault-free board is flagged (sets the threshold).
+    #[arg(long, default_value_t = FleetOptions::default().false_alarm_per_board)]
+    pub false_alarm: f64,
+    /// Fewest boards to compare against.
+    #[arg(long, default_value_t = FleetOptions::default().min_boards)]
+    pub min_boards: usize,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Run `imucal fleet`.
+pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.false_alarm > 0.0 && args.false_alarm < 1.0,
+        "--false-alarm is {}, but it must be a probability between 0 and 1 (e.g. 0.001)",
+        args.false_alarm
+    );
+    anyhow::ensure!(
+        args.min_boards >= 3,
+        "--min-boards is {}, but a median and MAD need at least 3 boards",
+        args.min_boards
+    );
+    let options = FleetOptions {
+        false_alarm_per_board: args.false_alarm,
+        min_boards: args.min_boards,
+    };
+    let mut store = HistoryStore::open_url(args.db.as_deref())?;
+    let report = fleet_report(&mut store, &options)?;
+    if args.json {
+        let mut out = serde_json::to_value(&report)?;
+        out["database"] = store.location().display().into();
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "Fleet of {} boards in {}\nMethod: {}\nThreshold |z| > {:.2} (false-alarm rate {} per board)\n",
+        report.boards,
+        store.location().display(),
+        report.method,
+        report.threshold_z,
+        report.false_alarm_per_board
+    );
+    println!(
+        "{:<16} {:>6} {:>13} {:>11} {:>13} {:>13}",
+        "parameter", "boards", "median", "robust sd", "min", "max"
+    );
+    for p in &report.parameters {
+        let sd = if p.log_scale {
+            format!("×{:.3}", p.robust_sd.exp())
+        } else {
+            format!("{:.4e}", p.robust_sd)
+        };
+        println!(
+            "{:<16} {:>6} {:>13.6} {:>11} {:>13.6} {:>13.6}",
+            p.parameter, p.boards, p.median, sd, p.min, p.max
+        );
+    }
+    let outliers: Vec<_> = report.results.iter().filter(|b| b.outlier).collect();
+    println!("\n{} outlying boards", outliers.len());
+    for board in outliers {
+        println!("{} (calibration #{})", board.device_id, board.record_id);
+        for f in &board.findings {
+            println!(
+                "  {:<14} {:>12.5} (fleet {:.5}), z = {:+.1}: {}",
+                f.parameter, f.value, f.fleet_median, f.robust_z, f.likely_cause
+            );
+        }
+    }
+    Ok(())
+}

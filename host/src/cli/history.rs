@@ -1,0 +1,187 @@
+//! `imucal history`: every calibration of one board (or all), with each parameter's change
+//! since the board's previous calibration in σ units; and the `--db/--operator/--station`
+//! flags with which calibrating commands record what they did.
+
+use std::path::Path;
+use std::time::{Duration, UNIX_EPOCH};
+
+use clap::Args;
+use imucal::history::plot::parameters_over_time;
+use imucal::history::{
+    device_changes, record_calibration, CalibrationRecord, DbLocation, HistoryStore, RecordChanges,
+};
+
+/// Arguments of `imucal history`.
+#[derive(Debug, Args)]
+pub struct HistoryArgs {
+    /// Only this board (its id as `imucal info` prints it); all boards when left out.
+    pub device: Option<String>,
+    /// History database: `sqlite://PATH` or `postgres://user@host/db[?host=/socket/dir&port=N]`
+    /// (default: `$IMUCAL_DB`, else `$XDG_DATA_HOME/imucal/history.sqlite`).
+    #[arg(long, value_name = "URL")]
+    pub db: Option<String>,
+    /// Changes listed per calibration in the table (all are in `--json`).
+    #[arg(long, default_value_t = 4)]
+    pub changes: usize,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Flags of commands that record a calibration.
+#[derive(Debug, Clone, Default, Args)]
+pub struct RecordArgs {
+    /// History database to record the calibration in: `sqlite://PATH` or
+    /// `postgres://user@host/db[?host=/socket/dir&port=N]` (default: `$IMUCAL_DB`, else
+    /// `$XDG_DATA_HOME/imucal/history.sqlite`).
+    #[arg(long, value_name = "URL")]
+    pub db: Option<String>,
+    /// Who calibrated (kept in the history).
+    #[arg(long)]
+    pub operator: Option<String>,
+    /// Which station or fixture (kept in the history).
+    #[arg(long)]
+    pub station: Option<String>,
+    /// Do not record this calibration in the history.
+    #[arg(long)]
+    pub no_history: bool,
+}
+
+/// Record `record` with the operator and station of `args`. Call it after the calibration is
+/// saved elsewhere: a failure is an error when `--db` was given (the station asked for that
+/// database) and a warning otherwise; either way it says the calibration itself is kept.
+pub fn record(args: &RecordArgs, mut record: CalibrationRecord) -> anyhow::Result<()> {
+    if args.no_history {
+        return Ok(());
+    }
+    record.operator.clone_from(&args.operator);
+    record.station.clone_from(&args.station);
+    match record_calibration(args.db.as_deref(), &record) {
+        Ok((id, location)) => {
+            eprintln!(
+                "Recorded as calibration {id} of {} in {}",
+                record.device_id,
+                location.display()
+            );
+            Ok(())
+        }
+        Err(error) if args.db.is_some() => Err(error.into()),
+        Err(error) => {
+            eprintln!("imucal: warning: {error}");
+            Ok(())
+        }
+    }
+}
+
+/// The report's figures of the board calibrated in `session_dir` over its recorded
+/// calibrations (`summary.json` names the board), or a note why there are none. A missing
+/// default database is not created just to be found empty.
+pub fn report_figures(
+    db: Option<&str>,
+    session_dir: &Path,
+) -> Result<Vec<(String, String)>, String> {
+    let summary = std::fs::read_to_string(session_dir.join("summary.json"))
+        .map_err(|e| format!("no calibration history shown: summary.json unreadable ({e})"))?;
+    let summary: serde_json::Value = serde_json::from_str(&summary)
+        .map_err(|e| format!("no calibration history shown: summary.json: {e}"))?;
+    let Some(device) = summary["device_id"].as_str() else {
+        return Ok(Vec::new());
+    };
+    let location = DbLocation::resolve(db).map_err(|e| e.to_string())?;
+    if matches!(&location, DbLocation::Sqlite(path) if !path.exists()) {
+        return Ok(Vec::new());
+    }
+    let records = HistoryStore::open(&location)
+        .and_then(|mut store| store.records(Some(device)))
+        .map_err(|e| format!("no calibration history shown: {e}"))?;
+    if records.len() < 2 {
+        return Ok(Vec::new());
+    }
+    parameters_over_time(&records).map_err(|e| e.to_string())
+}
+
+/// `major.minor.patch`.
+pub fn firmware_text(version: &imucal_protocol::FirmwareVersion) -> String {
+    format!("{}.{}.{}", version.major, version.minor, version.patch)
+}
+
+/// Run `imucal history`.
+pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
+    let mut store = HistoryStore::open_url(args.db.as_deref())?;
+    let records = store.records(args.device.as_deref())?;
+    let history = device_changes(records);
+    if args.json {
+        let out = serde_json::json!({
+            "database": store.location().display(),
+            "device": args.device,
+            "records": history,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    if history.is_empty() {
+        println!(
+            "No calibrations{} in {}",
+            args.device
+                .as_ref()
+                .map(|d| format!(" of {d}"))
+                .unwrap_or_default(),
+            store.location().display()
+        );
+        return Ok(());
+    }
+    println!(
+        "{} calibration{} in {}",
+        history.len(),
+        if history.len() == 1 { "" } else { "s" },
+        store.location().display()
+    );
+    for entry in &history {
+        print_entry(entry, args.changes);
+    }
+    Ok(())
+}
+
+/// `2026-11-23T13:40:02Z` of a Unix time in ms.
+pub fn utc(unix_ms: i64) -> String {
+    let time = UNIX_EPOCH + Duration::from_millis(u64::try_from(unix_ms).unwrap_or(0));
+    humantime::format_rfc3339_seconds(time).to_string()
+}
+
+fn print_entry(entry: &RecordChanges, shown: usize) {
+    let r = &entry.stored.record;
+    let who: Vec<String> = [("operator", &r.operator), ("station", &r.station)]
+        .iter()
+        .filter_map(|(k, v)| v.as_ref().map(|v| format!("{k} {v}")))
+        .collect();
+    println!(
+        "#{:<5} {}  {}  {:<6}  CRC {:#010x}  {:<8} {}",
+        entry.stored.id,
+        utc(r.recorded_unix_ms),
+        r.device_id,
+        r.source.as_str(),
+        r.params_crc,
+        r.verdict.as_ref().map_or("-", |v| v.level.as_str()),
+        who.join(", ")
+    );
+    match entry.previous {
+        None => println!("       first calibration of this board"),
+        Some(previous) => {
+            let listed: Vec<String> = entry
+                .changes
+                .iter()
+                .filter(|c| c.change != 0.0)
+                .take(shown)
+                .map(|c| match c.change_sigma {
+                    Some(s) => format!("{} {:+.4} ({:+.1}σ)", c.parameter, c.change, s),
+                    None => format!("{} {:+.4}", c.parameter, c.change),
+                })
+                .collect();
+            if listed.is_empty() {
+                println!("       since #{previous}: no parameter changed");
+            } else {
+                println!("       since #{previous}: {}", listed.join(", "));
+            }
+        }
+    }
+}

@@ -1,0 +1,391 @@
+//! Fleet statistics and the robust outlier test: is a board's calibration far outside the
+//! population of boards calibrated before it?
+//!
+//! Method: per parameter, the fleet's centre is the median and its spread the scaled median
+//! absolute deviation `s = 1.4826·MAD` (a consistent estimate of σ for normal data). Both have a
+//! 50 % breakdown point: up to half the fleet may be faulty without moving them much, unlike a
+//! mean and standard deviation that a single gross fault inflates until it hides itself. A
+//! board's distance is the robust z `z = (x − median) / √(s² + σ²)`, where `σ` is the board's own
+//! fit uncertainty of that parameter (an uncertain fit is not evidence of a fault). Noise and
+//! residual parameters are positive and multiplicative, so they are compared as logarithms.
+//!
+//! Threshold: a board is flagged when any `|z|` exceeds `z*`, chosen so that a fault-free board
+//! is flagged with probability at most `α` (the false-alarm rate per board, default 0.1 %):
+//! Bonferroni over the `m` parameters tested gives a two-sided `α/m` per parameter, and because
+//! `s` is itself estimated from `n` boards with the MAD's efficiency of 37 %, the quantile is
+//! Student's t with `ν = 0.37·n` degrees of freedom instead of the normal's. `z*` thus follows
+//! from `α`, `m` and `n`, never from the data's values. Fewer than [`FleetOptions::min_boards`]
+//! boards give too uncertain a spread to test against.
+
+use serde::Serialize;
+
+use super::record::CalibrationRecord;
+use super::stats::{median, t_upper_quantile};
+use super::store::{HistoryStore, RecordId, StoredRecord};
+use super::HistoryError;
+
+/// Consistency factor of the MAD for the normal distribution: `1/Φ⁻¹(3/4)`.
+const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// Asymptotic efficiency of the MAD relative to the standard deviation (normal data).
+const MAD_EFFICIENCY: f64 = 0.367_4;
+
+/// Settings of the outlier test.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FleetOptions {
+    /// Probability that a fault-free board is flagged.
+    pub false_alarm_per_board: f64,
+    /// Fewest boards to test against.
+    pub min_boards: usize,
+}
+
+impl Default for FleetOptions {
+    fn default() -> Self {
+        Self {
+            false_alarm_per_board: 1e-3,
+            // ν = 0.37·20 ≈ 7 degrees of freedom: below that the spread is too uncertain.
+            min_boards: 20,
+        }
+    }
+}
+
+/// Population statistics of one parameter.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParameterStats {
+    /// The parameter (see [`CalibrationRecord::parameters`]).
+    pub parameter: String,
+    /// Boards that have it.
+    pub boards: usize,
+    /// Median, in the parameter's unit.
+    pub median: f64,
+    /// Robust standard deviation `1.4826·MAD`: in the parameter's unit, or of its natural
+    /// logarithm (a relative spread) when `log_scale`.
+    pub robust_sd: f64,
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
+    /// Whether the test compares logarithms (noise, residuals).
+    pub log_scale: bool,
+}
+
+/// One parameter of one board outside the fleet.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Finding {
+    /// The parameter.
+    pub parameter: String,
+    /// The board's value.
+    pub value: f64,
+    /// The fleet's median.
+    pub fleet_median: f64,
+    /// Robust distance `z`.
+    pub robust_z: f64,
+    /// The likely cause, in words.
+    pub likely_cause: String,
+}
+
+/// One board's result in the fleet.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BoardResult {
+    /// The board.
+    pub device_id: String,
+    /// Its newest record.
+    pub record_id: RecordId,
+    /// Whether any parameter is beyond the threshold.
+    pub outlier: bool,
+    /// Largest `|z|` over its parameters.
+    pub max_abs_z: f64,
+    /// The parameters beyond the threshold, farthest first.
+    pub findings: Vec<Finding>,
+}
+
+/// The fleet's statistics and every board's test.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FleetReport {
+    /// Boards in the fleet (newest record of each).
+    pub boards: usize,
+    /// The method, in words.
+    pub method: String,
+    /// False-alarm rate per board the threshold was set for.
+    pub false_alarm_per_board: f64,
+    /// The threshold on `|z|`.
+    pub threshold_z: f64,
+    /// Per parameter.
+    pub parameters: Vec<ParameterStats>,
+    /// Per board, outliers first.
+    pub results: Vec<BoardResult>,
+}
+
+/// The test of one record against the fleet before it is written.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FleetCheck {
+    /// Whether a test was possible (enough boards).
+    pub tested: bool,
+    /// Whether the record is an outlier.
+    pub outlier: bool,
+    /// Boards it was compared with.
+    pub fleet_boards: usize,
+    /// The threshold on `|z|` (0 when not tested).
+    pub threshold_z: f64,
+    /// The parameters beyond it, farthest first.
+    pub findings: Vec<Finding>,
+    /// Why no test was made, if none was.
+    pub note: Option<String>,
+}
+
+/// Why no fleet statistics could be made.
+#[derive(Debug, thiserror::Error)]
+pub enum FleetError {
+    /// The history could not be read.
+    #[error(transparent)]
+    History(#[from] HistoryError),
+    /// Too few boards for a robust spread.
+    #[error("the history holds {boards} boards; the outlier test needs at least {needed} for a trustworthy spread, so calibrate more boards first")]
+    TooFewBoards {
+        /// Boards found.
+        boards: usize,
+        /// Boards needed.
+        needed: usize,
+    },
+}
+
+/// Whether a parameter is compared as a logarithm.
+fn is_log_scale(parameter: &str) -> bool {
+    parameter.contains(".noise.") || parameter.ends_with(".residual")
+}
+
+fn transformed(parameter: &str, value: f64) -> Option<f64> {
+    if is_log_scale(parameter) {
+        (value > 0.0).then(|| value.ln())
+    } else {
+        Some(value)
+    }
+}
+
+/// The fitted population: per parameter its median and robust spread.
+#[derive(Debug, Clone)]
+pub struct FleetModel {
+    boards: usize,
+    parameters: Vec<ParameterStats>,
+    threshold_z: f64,
+}
+
+impl FleetModel {
+    /// The model of `records` (one per board), or why none can be made.
+    pub fn fit(records: &[&CalibrationRecord], options: &FleetOptions) -> Result<Self, FleetError> {
+        let boards = records.len();
+        if boards < options.min_boards {
+            return Err(FleetError::TooFewBoards {
+                boards,
+                needed: options.min_boards,
+            });
+        }
+        let mut columns: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+        for record in records {
+            for (name, value) in record.parameters() {
+                if value.is_finite() {
+                    columns.entry(name).or_default().push(value);
+                }
+            }
+        }
+        let mut parameters = Vec::new();
+        for (name, values) in columns {
+            let mut z: Vec<f64> = values
+                .iter()
+                .filter_map(|v| transformed(&name, *v))
+                .collect();
+            if z.len() < options.min_boards {
+                continue;
+            }
+            let centre = median(&mut z).unwrap_or_default();
+            let mut deviations: Vec<f64> = z.iter().map(|v| (v - centre).abs()).collect();
+            let spread = MAD_TO_SIGMA * median(&mut deviations).unwrap_or_default();
+            // A parameter every board shares exactly (not fitted) cannot tell boards apart.
+            if spread <= 0.0 || !spread.is_finite() {
+                continue;
+            }
+            let log_scale = is_log_scale(&name);
+            parameters.push(ParameterStats {
+                boards: z.len(),
+                median: if log_scale { centre.exp() } else { centre },
+                robust_sd: spread,
+                min: values.iter().copied().fold(f64::INFINITY, f64::min),
+                max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                log_scale,
+                parameter: name,
+            });
+        }
+        let tests = parameters.len().max(1) as f64;
+        let dof = MAD_EFFICIENCY * boards as f64;
+        let threshold_z =
+            t_upper_quantile(options.false_alarm_per_board / (2.0 * tests), dof.max(1.0));
+        Ok(Self {
+            boards,
+            parameters,
+            threshold_z,
+        })
+    }
+
+    /// The threshold on `|z|`.
+    pub fn threshold_z(&self) -> f64 {
+        self.threshold_z
+    }
+
+    /// `|z|` of every parameter of `record` against the fleet, largest first, as findings
+    /// (those beyond the threshold are the outlying ones).
+    pub fn distances(&self, record: &CalibrationRecord) -> Vec<Finding> {
+        let values = record.parameters();
+        let mut out: Vec<Finding> = self
+            .parameters
+            .iter()
+            .filter_map(|stats| {
+                let value = *values.get(&stats.parameter)?;
+                let x = transformed(&stats.parameter, value)?;
+                let centre = transformed(&stats.parameter, stats.median)?;
+                // The fit's own σ, moved to the log scale by d(ln x) = dx / x.
+                let own = record.sigma.get(&stats.parameter).copied().unwrap_or(0.0);
+                let own = if stats.log_scale { own / value } else { own };
+                let z = (x - centre) / stats.robust_sd.hypot(own);
+                Some(Finding {
+                    parameter: stats.parameter.clone(),
+                    value,
+                    fleet_median: stats.median,
+                    robust_z: z,
+                    likely_cause: likely_cause(&stats.parameter),
+                })
+            })
+            .collect();
+        out.sort_by(|a, b| b.robust_z.abs().total_cmp(&a.robust_z.abs()));
+        out
+    }
+
+    /// The findings of `record` beyond the threshold, farthest first.
+    pub fn outlying(&self, record: &CalibrationRecord) -> Vec<Finding> {
+        let mut findings = self.distances(record);
+        findings.retain(|f| f.robust_z.abs() > self.threshold_z);
+        findings
+    }
+}
+
+/// The likely hardware cause of `parameter` being far from the fleet.
+pub fn likely_cause(parameter: &str) -> String {
+    let mut parts = parameter.split('.');
+    let sensor = parts.next().unwrap_or_default();
+    let kind = parts.next().unwrap_or_default();
+    let axis = parts.next().unwrap_or_default();
+    let on_axis = match axis.len() {
+        1 => format!(" on axis {axis}"),
+        2 if axis[..1] == axis[1..] => format!(" on axis {}", &axis[..1]),
+        _ => String::new(),
+    };
+    let diagonal = axis.len() == 2 && axis[..1] == axis[1..];
+    match (sensor, kind) {
+        ("accel", "b") => format!("gross accelerometer offset{on_axis}: cracked or damaged accelerometer axis, or a bad solder joint"),
+        ("accel", "A") if diagonal => format!("gross accelerometer gain error{on_axis}: cracked or damaged accelerometer axis, or a bad solder joint"),
+        ("accel", "A") => "accelerometer cross-axis coupling far out: the IMU is soldered tilted or the board is bent".into(),
+        ("accel", "noise") => format!("excess accelerometer noise{on_axis}: vibration at the fixture, a loose board or a damaged part"),
+        ("gyro", "b") => format!("gyroscope zero-rate offset far out{on_axis}: damaged gyroscope or mechanical stress on the part"),
+        ("gyro", "A") => format!("gyroscope gain or cross-axis far out{on_axis}: damaged gyroscope or the IMU soldered tilted"),
+        ("gyro", "noise") => format!("excess gyroscope noise{on_axis}: damaged MEMS structure, vibration at the fixture or a noisy supply"),
+        ("mag", "b") => format!("magnetometer offset far out{on_axis}: a magnetised part (screw, shield, connector) or a magnet near the board"),
+        ("mag", "A") => "magnetometer scale or soft iron far out: steel or a magnetised part near the sensor".into(),
+        ("mag", "noise") => format!("excess magnetometer noise{on_axis}: switching currents or a motor near the board"),
+        (_, "residual") => format!("the {sensor} fit leaves a large residual: the board moved during capture or the sensor is damaged"),
+        _ => format!("{parameter} far from the fleet"),
+    }
+}
+
+/// The fleet now (newest record of every board), its statistics and every board's test.
+pub fn fleet_report(
+    store: &mut HistoryStore,
+    options: &FleetOptions,
+) -> Result<FleetReport, FleetError> {
+    let latest = store.latest_per_device()?;
+    let records: Vec<&CalibrationRecord> = latest.iter().map(|s| &s.record).collect();
+    let model = FleetModel::fit(&records, options)?;
+    let mut results: Vec<BoardResult> = latest.iter().map(|s| board_result(&model, s)).collect();
+    results.sort_by(|a, b| {
+        b.outlier
+            .cmp(&a.outlier)
+            .then(b.max_abs_z.total_cmp(&a.max_abs_z))
+    });
+    Ok(FleetReport {
+        boards: model.boards,
+        method: METHOD.into(),
+        false_alarm_per_board: options.false_alarm_per_board,
+        threshold_z: model.threshold_z,
+        parameters: model.parameters.clone(),
+        results,
+    })
+}
+
+/// The method in one sentence, for reports.
+pub const METHOD: &str = "per parameter: median and 1.4826·MAD of the fleet (50 % breakdown), \
+    robust z = (x − median)/√(s² + σ_fit²), logarithms for noise and residuals; flagged when \
+    |z| exceeds the Student-t (ν = 0.37·boards) quantile for the false-alarm rate per board \
+    split over the parameters tested (Bonferroni)";
+
+fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
+    let distances = model.distances(&stored.record);
+    let max_abs_z = distances.first().map_or(0.0, |f| f.robust_z.abs());
+    let findings: Vec<Finding> = distances
+        .into_iter()
+        .filter(|f| f.robust_z.abs() > model.threshold_z)
+        .collect();
+    BoardResult {
+        device_id: stored.record.device_id.clone(),
+        record_id: stored.id,
+        outlier: !findings.is_empty(),
+        max_abs_z,
+        findings,
+    }
+}
+
+/// Test `record` against the fleet in `store` (the newest record of every other board) before
+/// its parameters are written. Too small a fleet gives `tested: false` with the reason.
+pub fn is_outlier_against_fleet(
+    record: &CalibrationRecord,
+    store: &mut HistoryStore,
+    options: &FleetOptions,
+) -> Result<FleetCheck, HistoryError> {
+    let latest = store.latest_per_device()?;
+    let others: Vec<&CalibrationRecord> = latest
+        .iter()
+        .map(|s| &s.record)
+        .filter(|r| r.device_id != record.device_id)
+        .collect();
+    Ok(match FleetModel::fit(&others, options) {
+        Ok(model) => {
+            let findings = model.outlying(record);
+            FleetCheck {
+                tested: true,
+                outlier: !findings.is_empty(),
+                fleet_boards: others.len(),
+                threshold_z: model.threshold_z,
+                findings,
+                note: None,
+            }
+        }
+        Err(FleetError::History(e)) => return Err(e),
+        Err(why) => FleetCheck {
+            tested: false,
+            outlier: false,
+            fleet_boards: others.len(),
+            threshold_z: 0.0,
+            findings: Vec::new(),
+            note: Some(why.to_string()),
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn causes_name_the_part_and_axis() {
+        assert!(likely_cause("accel.A.yy").contains("gain error on axis y"));
+        assert!(likely_cause("mag.b.z").contains("magnet"));
+        assert!(likely_cause("gyro.noise.x").contains("excess gyroscope noise on axis x"));
+    }
+}

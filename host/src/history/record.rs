@@ -1,0 +1,280 @@
+//! One calibration as kept in the history: who, when, with what, the parameter set and how sure
+//! the fit was. The named scalar parameters ([`CalibrationRecord::parameters`]) are what the
+//! history compares between calibrations and the fleet statistics compare between boards.
+
+use std::collections::BTreeMap;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+
+use crate::device::params_json::SensorJson;
+use crate::device::ParamsFile;
+use crate::session::{CapturedPose, SessionSummary};
+
+/// What produced a calibration record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RecordSource {
+    /// A guided session (`imucal calibrate`) that fitted, wrote and verified the set.
+    Guided,
+    /// `imucal fit --params-out`: a set fitted from a recording.
+    Fit,
+    /// `imucal flash`: a parameter file written to a board.
+    Flash,
+}
+
+impl RecordSource {
+    /// The name stored in the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Guided => "guided",
+            Self::Fit => "fit",
+            Self::Flash => "flash",
+        }
+    }
+
+    /// The source named `name` in the database.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "guided" => Some(Self::Guided),
+            "fit" => Some(Self::Fit),
+            "flash" => Some(Self::Flash),
+            _ => None,
+        }
+    }
+}
+
+/// Die temperatures seen while the data of a calibration was taken, °C.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TemperatureSpan {
+    /// Lowest.
+    pub min_c: f64,
+    /// Mean.
+    pub mean_c: f64,
+    /// Highest.
+    pub max_c: f64,
+}
+
+/// Verdict of the fit, when the producer judged it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecordVerdict {
+    /// `good`, `marginal` or `poor`.
+    pub level: String,
+    /// One sentence per check that missed its budget.
+    pub reasons: Vec<String>,
+}
+
+/// One calibration of one board.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationRecord {
+    /// The board's id (hex, as the board reports it), or a name given for recordings.
+    pub device_id: String,
+    /// When the calibration was recorded, milliseconds since the Unix epoch (UTC).
+    pub recorded_unix_ms: i64,
+    /// The `imucal` version that produced it.
+    pub tool_version: String,
+    /// The board's firmware version (`major.minor.patch`), when a board was involved.
+    pub firmware_version: Option<String>,
+    /// What produced it.
+    pub source: RecordSource,
+    /// The parameter set.
+    pub params: ParamsFile,
+    /// CRC-32 of the parameter set as the board stores it.
+    pub params_crc: u32,
+    /// One-sigma uncertainty of named parameters, in the parameters' units (see
+    /// [`CalibrationRecord::parameters`]); parameters without an estimate are absent.
+    pub sigma: BTreeMap<String, f64>,
+    /// Residual RMS of the fit per sensor (m/s², rad/s, µT).
+    pub residuals: BTreeMap<String, f64>,
+    /// Sample noise (standard deviation per sample) per sensor axis while still, e.g.
+    /// `gyro.noise.x` in rad/s.
+    pub noise: BTreeMap<String, f64>,
+    /// Die temperatures during the capture.
+    pub temperatures: Option<TemperatureSpan>,
+    /// The fit's verdict.
+    pub verdict: Option<RecordVerdict>,
+    /// Who ran the calibration.
+    pub operator: Option<String>,
+    /// Which station or fixture.
+    pub station: Option<String>,
+}
+
+/// Axis letters used in parameter names.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// Milliseconds since the Unix epoch, now.
+pub fn now_unix_ms() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_millis()).unwrap_or(i64::MAX))
+}
+
+/// The tool's own version.
+pub fn tool_version() -> String {
+    env!("CARGO_PKG_VERSION").to_string()
+}
+
+impl CalibrationRecord {
+    /// A record of `params` for `device_id` made now, with no σ, noise, temperatures, verdict,
+    /// operator or station (fill them in as known).
+    pub fn new(device_id: &str, source: RecordSource, params: ParamsFile, params_crc: u32) -> Self {
+        let residuals = BTreeMap::from([
+            ("accel".to_string(), params.residuals.accel_rms),
+            ("gyro".to_string(), params.residuals.gyro_rms),
+            ("mag".to_string(), params.residuals.mag_rms),
+        ]);
+        Self {
+            device_id: device_id.to_string(),
+            recorded_unix_ms: now_unix_ms(),
+            tool_version: tool_version(),
+            firmware_version: None,
+            source,
+            params,
+            params_crc,
+            sigma: BTreeMap::new(),
+            residuals,
+            noise: BTreeMap::new(),
+            temperatures: None,
+            verdict: None,
+            operator: None,
+            station: None,
+        }
+    }
+
+    /// The record of a guided session: its summary (set, CRC, σ, verdict) and its poses (noise
+    /// and temperatures).
+    pub fn from_session(summary: &SessionSummary, poses: &[CapturedPose]) -> Self {
+        let crc = parse_crc(&summary.params_crc).unwrap_or(0);
+        let mut record = Self::new(
+            &summary.device_id,
+            RecordSource::Guided,
+            summary.params.clone(),
+            crc,
+        );
+        let u = &summary.uncertainties;
+        let g = summary.gravity_mps2;
+        for (i, axis) in AXES.iter().enumerate() {
+            record
+                .sigma
+                .insert(format!("accel.b.{axis}"), u.accel_bias_mg[i] * 1e-3 * g);
+            record
+                .sigma
+                .insert(format!("accel.A.{axis}{axis}"), u.accel_scale_ppm[i] * 1e-6);
+            record
+                .sigma
+                .insert(format!("gyro.b.{axis}"), u.gyro_bias_dps[i].to_radians());
+            record
+                .sigma
+                .insert(format!("mag.b.{axis}"), u.mag_bias_ut[i]);
+        }
+        record.sigma.retain(|_, s| s.is_finite() && *s > 0.0);
+        record.noise = still_noise(poses);
+        record.temperatures = temperature_span(poses);
+        record.verdict = serde_json::to_value(&summary.verdict)
+            .ok()
+            .and_then(|v| serde_json::from_value(v).ok());
+        record
+    }
+
+    /// Every named scalar parameter of the record: `SENSOR.b.AXIS` (offset), `SENSOR.A.ROWCOL`
+    /// (correction matrix), the noise (`SENSOR.noise.AXIS`) and the residual RMS
+    /// (`SENSOR.residual`). Units are the sensor's (m/s², rad/s, µT); `A` is dimensionless.
+    pub fn parameters(&self) -> BTreeMap<String, f64> {
+        let mut out = BTreeMap::new();
+        for (name, sensor) in [
+            ("accel", &self.params.accel),
+            ("gyro", &self.params.gyro),
+            ("mag", &self.params.mag),
+        ] {
+            insert_sensor(&mut out, name, sensor);
+        }
+        out.extend(self.noise.iter().map(|(k, v)| (k.clone(), *v)));
+        out.extend(
+            self.residuals
+                .iter()
+                .filter(|(_, v)| **v > 0.0)
+                .map(|(k, v)| (format!("{k}.residual"), *v)),
+        );
+        out
+    }
+
+    /// The first value that is not a finite number (a parameter, σ or temperature), named;
+    /// such a record is refused rather than stored.
+    pub fn non_finite(&self) -> Option<(String, f64)> {
+        let temperatures = self.temperatures.iter().flat_map(|t| {
+            [
+                ("temperatures.min_c".to_string(), t.min_c),
+                ("temperatures.mean_c".to_string(), t.mean_c),
+                ("temperatures.max_c".to_string(), t.max_c),
+            ]
+        });
+        self.parameters()
+            .into_iter()
+            .chain(self.sigma.iter().map(|(k, v)| (format!("σ of {k}"), *v)))
+            .chain(temperatures)
+            .find(|(_, v)| !v.is_finite())
+    }
+}
+
+fn insert_sensor(out: &mut BTreeMap<String, f64>, name: &str, sensor: &SensorJson) {
+    for (i, row) in AXES.iter().enumerate() {
+        out.insert(format!("{name}.b.{row}"), sensor.b[i]);
+        for (j, col) in AXES.iter().enumerate() {
+            out.insert(format!("{name}.A.{row}{col}"), sensor.a[i][j]);
+        }
+    }
+}
+
+/// `0x1234abcd` or `1234abcd` as a number.
+pub fn parse_crc(text: &str) -> Option<u32> {
+    let digits = text.trim().trim_start_matches("0x");
+    u32::from_str_radix(digits, 16).ok()
+}
+
+/// Per-axis sample noise while still: the square root of the median per-pose variance (the
+/// median keeps one disturbed pose from counting).
+fn still_noise(poses: &[CapturedPose]) -> BTreeMap<String, f64> {
+    let mut out = BTreeMap::new();
+    type Variance = fn(&imucal_protocol::PoseStats) -> [f32; 3];
+    let sensors: [(&str, Variance); 3] = [
+        ("accel", |s| s.accel_var),
+        ("gyro", |s| s.gyro_var),
+        ("mag", |s| s.mag_var),
+    ];
+    for (name, variance) in sensors {
+        for (i, axis) in AXES.iter().enumerate() {
+            let mut v: Vec<f64> = poses
+                .iter()
+                .map(|p| f64::from(variance(&p.stats)[i]))
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .collect();
+            if let Some(median) = super::stats::median(&mut v) {
+                out.insert(format!("{name}.noise.{axis}"), median.sqrt());
+            }
+        }
+    }
+    out
+}
+
+fn temperature_span(poses: &[CapturedPose]) -> Option<TemperatureSpan> {
+    let temps: Vec<&imucal_protocol::PoseStats> = poses
+        .iter()
+        .map(|p| &p.stats)
+        .filter(|s| s.temp_mean_c.is_finite())
+        .collect();
+    if temps.is_empty() {
+        return None;
+    }
+    let n = temps.len() as f64;
+    Some(TemperatureSpan {
+        min_c: temps
+            .iter()
+            .map(|s| f64::from(s.temp_min_c))
+            .fold(f64::INFINITY, f64::min),
+        mean_c: temps.iter().map(|s| f64::from(s.temp_mean_c)).sum::<f64>() / n,
+        max_c: temps
+            .iter()
+            .map(|s| f64::from(s.temp_max_c))
+            .fold(f64::NEG_INFINITY, f64::max),
+    })
+}

@@ -1,0 +1,257 @@
+//! The calibration history store, on SQLite and (with `IMUCAL_TEST_PG_URL`) PostgreSQL:
+//! records come back whole, the database refuses changes, changes are in σ units, failures
+//! are reported, and concurrent writers from several processes lose nothing.
+
+mod history_support;
+
+use std::process::{Command, Stdio};
+
+use history_support::{board_record, databases, url};
+use imucal::history::{
+    device_changes, CalibrationRecord, DbLocation, HistoryError, HistoryStore, RecordVerdict,
+    TemperatureSpan,
+};
+
+fn full_record() -> CalibrationRecord {
+    let mut record = board_record(7);
+    record.firmware_version = Some("1.2.3".into());
+    record.temperatures = Some(TemperatureSpan {
+        min_c: 24.5,
+        mean_c: 25.0,
+        max_c: 26.25,
+    });
+    record.verdict = Some(RecordVerdict {
+        level: "marginal".into(),
+        reasons: vec!["only 5 directions".into()],
+    });
+    record.operator = Some("Ann O'Neil".into());
+    record.station = Some("line 2; fixture \"B\"".into());
+    record
+}
+
+#[test]
+fn a_record_reads_back_with_every_field_and_increasing_ids() {
+    for location in databases("roundtrip") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        let record = full_record();
+        let first = store.record(&record).expect("write");
+        let second = store.record(&board_record(8)).expect("write");
+        assert!(second > first, "{}", location.display());
+        let back = store.records(Some(&record.device_id)).expect("read");
+        assert_eq!(back.len(), 1, "{}", location.display());
+        assert_eq!(back[0].id, first);
+        assert_eq!(back[0].record, record, "{}", location.display());
+        assert_eq!(store.records(None).expect("read all").len(), 2);
+    }
+}
+
+#[test]
+fn the_database_itself_refuses_update_delete_and_truncate() {
+    for location in databases("append_only") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        store.record(&board_record(1)).expect("write");
+        let attempts = [
+            "UPDATE imucal_calibrations SET device_id = 'x'",
+            "DELETE FROM imucal_calibrations",
+        ];
+        match &location {
+            DbLocation::Sqlite(path) => {
+                let raw = rusqlite::Connection::open(path).expect("raw open");
+                for sql in attempts {
+                    let error = raw.execute(sql, []).expect_err(sql).to_string();
+                    assert!(error.contains("append-only"), "{sql}: {error}");
+                }
+            }
+            DbLocation::Postgres(url) => {
+                let mut raw = postgres::Client::connect(url, postgres::NoTls).expect("raw");
+                for sql in attempts.iter().chain(&["TRUNCATE imucal_calibrations"]) {
+                    let error = raw.batch_execute(sql).expect_err(sql);
+                    let message = error.as_db_error().map(|e| e.message().to_string());
+                    assert!(
+                        message.as_deref().unwrap_or("").contains("append-only"),
+                        "{sql}: {error}"
+                    );
+                }
+            }
+        }
+        assert_eq!(store.records(None).expect("read").len(), 1);
+    }
+}
+
+#[test]
+fn changes_since_the_previous_calibration_are_in_combined_sigma() {
+    for location in databases("changes") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        let before = board_record(3);
+        let mut after = before.clone();
+        after.recorded_unix_ms += 86_400_000;
+        // Offset moved by 0.05 m/s²; σ 1 mg·g before and 2 mg·g after.
+        after.params.accel.b[0] += 0.05;
+        after
+            .sigma
+            .insert("accel.b.x".into(), 2.0 * before.sigma["accel.b.x"]);
+        store.record(&before).expect("write");
+        store.record(&after).expect("write");
+        let history = device_changes(store.records(None).expect("read"));
+        assert_eq!(history.len(), 2);
+        assert!(history[0].changes.is_empty() && history[0].previous.is_none());
+        let change = &history[1].changes[0];
+        assert_eq!(change.parameter, "accel.b.x", "largest change first");
+        let sigma = before.sigma["accel.b.x"] * 5f64.sqrt();
+        assert!((change.change - 0.05).abs() < 1e-12);
+        let expected = 0.05 / sigma;
+        assert!(
+            (change.change_sigma.expect("both have σ") - expected).abs() < 1e-9,
+            "{change:?} vs {expected}"
+        );
+        // A parameter without σ in one record has no σ-scaled change.
+        let noise = history[1]
+            .changes
+            .iter()
+            .find(|c| c.parameter == "gyro.noise.x")
+            .expect("noise compared");
+        assert_eq!(noise.change_sigma, None);
+        assert_eq!(noise.change, 0.0);
+    }
+}
+
+#[test]
+fn failed_opens_and_writes_say_what_and_how_to_fix() {
+    let dir = history_support::scratch_dir("failures");
+    let blocker = dir.join("not-a-dir");
+    std::fs::write(&blocker, "x").expect("file");
+    let error = HistoryStore::open(&DbLocation::Sqlite(blocker.join("h.sqlite")))
+        .err()
+        .expect("a file as directory");
+    assert!(matches!(error, HistoryError::CreateDir { .. }), "{error}");
+
+    let error = HistoryStore::open_url(Some("postgres://nobody@/none?host=/nonexistent&port=1"))
+        .err()
+        .expect("no server");
+    let text = error.to_string();
+    assert!(
+        matches!(error, HistoryError::Open { .. }) && text.contains("server is running"),
+        "{text}"
+    );
+
+    for location in databases("bad_values") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        let mut record = board_record(4);
+        record.params.mag.b[2] = f64::NAN;
+        let error = store.record(&record).expect_err("NaN refused");
+        let text = error.to_string();
+        assert!(
+            text.contains("mag.b.z is NaN") && text.contains("still holds it"),
+            "{text}"
+        );
+        assert!(store.records(None).expect("read").is_empty());
+    }
+}
+
+/// Records each writer process adds.
+const PER_WRITER: u64 = 25;
+/// Writer processes.
+const WRITERS: u64 = 6;
+/// Set in a child process: the database URL and the writer's number.
+const CHILD_ENV: &str = "IMUCAL_TEST_HISTORY_WRITER";
+
+/// Runs only as a child of the concurrency test (it is ignored otherwise).
+#[test]
+#[ignore = "run by concurrent_writers_in_separate_processes_lose_no_record"]
+fn writer_process() {
+    let Ok(job) = std::env::var(CHILD_ENV) else {
+        return;
+    };
+    let (writer, url) = job.split_once(' ').expect("`N URL`");
+    let writer: u64 = writer.parse().expect("writer number");
+    let mut store = HistoryStore::open_url(Some(url)).expect("child open");
+    for i in 0..PER_WRITER {
+        let mut record = board_record(1000 * writer + i);
+        record.station = Some(format!("writer {writer}"));
+        store.record(&record).expect("child write");
+    }
+}
+
+#[test]
+fn concurrent_writers_in_separate_processes_lose_no_record() {
+    let exe = std::env::current_exe().expect("test binary");
+    for location in databases("concurrent") {
+        let url = url(&location);
+        let children: Vec<_> = (0..WRITERS)
+            .map(|writer| {
+                Command::new(&exe)
+                    .args(["--exact", "writer_process", "--ignored"])
+                    .env(CHILD_ENV, format!("{writer} {url}"))
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::piped())
+                    .spawn()
+                    .expect("spawn writer")
+            })
+            .collect();
+        for child in children {
+            let out = child.wait_with_output().expect("writer ran");
+            assert!(
+                out.status.success(),
+                "a writer failed on {}: {}",
+                location.display(),
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        let mut store = HistoryStore::open(&location).expect("open");
+        let records = store.records(None).expect("read");
+        assert_eq!(
+            records.len() as u64,
+            WRITERS * PER_WRITER,
+            "{}",
+            location.display()
+        );
+        let mut ids: Vec<i64> = records.iter().map(|r| r.id.0).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        assert_eq!(ids.len() as u64, WRITERS * PER_WRITER, "unique keys");
+        for writer in 0..WRITERS {
+            let station = format!("writer {writer}");
+            let mine = records
+                .iter()
+                .filter(|r| r.record.station.as_deref() == Some(station.as_str()))
+                .count() as u64;
+            assert_eq!(mine, PER_WRITER, "{station} on {}", location.display());
+        }
+    }
+}
+
+#[test]
+fn a_boards_history_plots_each_parameter_group_over_time() {
+    let mut first = board_record(5);
+    first.recorded_unix_ms = 0;
+    let mut second = first.clone();
+    second.recorded_unix_ms = 2 * 86_400_000;
+    second.params.mag.b[0] += 30.0;
+    let location = &databases("plot")[0];
+    let mut store = HistoryStore::open(location).expect("open");
+    store.record(&first).expect("write");
+    store.record(&second).expect("write");
+    let records = store.records(None).expect("read");
+    let series = imucal::history::plot::parameter_series(&records, "mag.b.x");
+    assert_eq!(series.len(), 2);
+    assert_eq!(series[1].0, 2.0, "days since the first calibration");
+    assert!((series[1].1 - series[0].1 - 30.0).abs() < 1e-9);
+    let figures = imucal::history::plot::parameters_over_time(&records).expect("plots");
+    let titles: Vec<&str> = figures.iter().map(|(t, _)| t.as_str()).collect();
+    assert_eq!(
+        titles,
+        [
+            "Accelerometer offset",
+            "Accelerometer gain (diagonal of A)",
+            "Gyroscope offset",
+            "Magnetometer offset",
+            "Magnetometer gain (diagonal of A)"
+        ]
+    );
+    for (title, svg) in &figures {
+        assert!(
+            svg.starts_with("<svg") && svg.contains("polyline"),
+            "{title}"
+        );
+    }
+}

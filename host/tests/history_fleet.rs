@@ -1,0 +1,201 @@
+//! The fleet outlier test on a history seeded with simulated boards, some with hardware faults:
+//! exactly the faulty boards are flagged, each with its cause; the check before writing flags a
+//! faulty newcomer and passes a healthy one; `imucal fleet` and `imucal history` print them.
+
+mod history_support;
+
+use std::process::Command;
+
+use history_support::{board_record, databases, url};
+use imucal::history::{
+    fleet_report, is_outlier_against_fleet, CalibrationRecord, FleetOptions, HistoryStore,
+};
+
+/// Healthy boards in the seeded fleet.
+const HEALTHY: u64 = 56;
+
+/// A hardware fault, applied to a healthy board's record, and the words its cause must contain.
+struct Fault {
+    name: &'static str,
+    apply: fn(&mut CalibrationRecord),
+    cause: &'static str,
+}
+
+const FAULTS: [Fault; 4] = [
+    Fault {
+        // A cracked y axis reads 0.2 g off (the healthy range is ±0.03 g).
+        name: "accel offset",
+        apply: |r| r.params.accel.b[1] += 2.0,
+        cause: "accelerometer offset on axis y",
+    },
+    Fault {
+        // A damaged z axis with 25 % too little gain (healthy: ±3 %).
+        name: "accel gain",
+        apply: |r| r.params.accel.a[2][2] *= 1.25,
+        cause: "gain error on axis z",
+    },
+    Fault {
+        // A small magnet a few cm away adds hundreds of µT of hard iron (healthy: ±50 µT).
+        name: "magnet",
+        apply: |r| {
+            for (b, shift) in r.params.mag.b.iter_mut().zip([320.0, -150.0, 410.0]) {
+                *b += shift;
+            }
+        },
+        cause: "magnet near the board",
+    },
+    Fault {
+        // A damaged gyro x axis with five times the noise.
+        name: "gyro noise",
+        apply: |r| {
+            if let Some(n) = r.noise.get_mut("gyro.noise.x") {
+                *n *= 5.0;
+            }
+        },
+        cause: "excess gyroscope noise on axis x",
+    },
+];
+
+/// Seeds 56 healthy and 4 faulty boards; returns the faulty boards' ids with their faults.
+fn seed(store: &mut HistoryStore) -> Vec<(String, &'static Fault)> {
+    let mut faulty = Vec::new();
+    for seed in 0..HEALTHY + FAULTS.len() as u64 {
+        let mut record = board_record(seed);
+        if let Some(fault) = seed.checked_sub(HEALTHY).map(|i| &FAULTS[i as usize]) {
+            (fault.apply)(&mut record);
+            faulty.push((record.device_id.clone(), fault));
+        }
+        store.record(&record).expect("seed write");
+    }
+    faulty
+}
+
+#[test]
+fn of_sixty_simulated_boards_exactly_the_faulty_ones_are_flagged_with_their_cause() {
+    for location in databases("fleet") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        let faulty = seed(&mut store);
+        let report = fleet_report(&mut store, &FleetOptions::default()).expect("fleet");
+        assert_eq!(report.boards, 60);
+        // 1e-3 false alarms per board over ~45 parameters and ν ≈ 22: z* between 5 and 7.
+        assert!(
+            (5.0..7.0).contains(&report.threshold_z),
+            "{}",
+            report.threshold_z
+        );
+        let flagged: Vec<&str> = report
+            .results
+            .iter()
+            .filter(|b| b.outlier)
+            .map(|b| b.device_id.as_str())
+            .collect();
+        let mut expected: Vec<&str> = faulty.iter().map(|(id, _)| id.as_str()).collect();
+        let mut got = flagged.clone();
+        expected.sort_unstable();
+        got.sort_unstable();
+        assert_eq!(got, expected, "{}", location.display());
+        for (id, fault) in &faulty {
+            let board = report
+                .results
+                .iter()
+                .find(|b| &b.device_id == id)
+                .expect("listed");
+            let cause = &board.findings[0].likely_cause;
+            assert!(cause.contains(fault.cause), "{}: {cause}", fault.name);
+        }
+        // A healthy board's largest distance stays well inside the threshold.
+        let healthy_max = report
+            .results
+            .iter()
+            .filter(|b| !b.outlier)
+            .map(|b| b.max_abs_z)
+            .fold(0.0, f64::max);
+        assert!(healthy_max < report.threshold_z, "{healthy_max}");
+    }
+}
+
+#[test]
+fn a_new_board_is_checked_against_the_fleet_before_writing() {
+    for location in databases("precheck") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        seed(&mut store);
+        let options = FleetOptions::default();
+        let healthy = board_record(500);
+        let check = is_outlier_against_fleet(&healthy, &mut store, &options).expect("check");
+        assert!(check.tested && !check.outlier, "{check:?}");
+        assert_eq!(check.fleet_boards, 60);
+
+        let mut magnet = board_record(501);
+        (FAULTS[2].apply)(&mut magnet);
+        let check = is_outlier_against_fleet(&magnet, &mut store, &options).expect("check");
+        assert!(check.outlier, "{check:?}");
+        assert!(check.findings[0].parameter.starts_with("mag.b"));
+
+        // A board compared with itself does not count: its own old record is left out.
+        let again = is_outlier_against_fleet(&board_record(0), &mut store, &options).expect("");
+        assert_eq!(again.fleet_boards, 59);
+    }
+}
+
+#[test]
+fn too_small_a_fleet_is_not_tested_and_says_so() {
+    for location in databases("small_fleet") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        for seed in 0..5 {
+            store.record(&board_record(seed)).expect("write");
+        }
+        let options = FleetOptions::default();
+        let error = fleet_report(&mut store, &options).expect_err("5 boards");
+        assert!(error.to_string().contains("at least 20"), "{error}");
+        let check = is_outlier_against_fleet(&board_record(9), &mut store, &options).expect("");
+        assert!(!check.tested && !check.outlier);
+        assert!(check.note.expect("why").contains("5 boards"));
+    }
+}
+
+fn imucal(args: &[&str]) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(args)
+        .output()
+        .expect("imucal runs");
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON on stdout")
+}
+
+#[test]
+fn fleet_and_history_commands_list_outliers_and_changes_as_json() {
+    for location in databases("cli") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        let faulty = seed(&mut store);
+        let db = url(&location);
+        let fleet = imucal(&["fleet", "--db", &db, "--json"]);
+        let outliers: Vec<&str> = fleet["results"]
+            .as_array()
+            .expect("results")
+            .iter()
+            .filter(|b| b["outlier"] == true)
+            .map(|b| b["device_id"].as_str().expect("id"))
+            .collect();
+        assert_eq!(outliers.len(), faulty.len(), "{fleet}");
+
+        let device = &faulty[0].0;
+        let mut again = board_record(HEALTHY);
+        again.recorded_unix_ms += 1000;
+        store.record(&again).expect("second calibration");
+        let history = imucal(&["history", device, "--db", &db, "--json"]);
+        let records = history["records"].as_array().expect("records");
+        assert_eq!(records.len(), 2);
+        // The repaired board's y offset came back by 2 m/s², i.e. 2/(√2·1 mg·g) ≈ 144 σ.
+        let change = &records[1]["changes"][0];
+        assert_eq!(change["parameter"], "accel.b.y");
+        let sigma = change["change_sigma"].as_f64().expect("σ");
+        assert!(
+            (sigma + 2.0 / (2f64.sqrt() * 9.806_65e-3)).abs() < 1.0,
+            "{sigma}"
+        );
+    }
+}
