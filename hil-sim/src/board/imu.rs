@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::{ErrorType, I2c, Operation};
 use imucal_firmware::bmi270::{self, Bmi270Bmm150};
-use imucal_firmware::imu::{Imu, RawSample, SensorScales};
+use imucal_firmware::imu::{Imu, RawSample, Reading, SensorScales};
 use imucal_firmware::lsm9ds1::{self, Lsm9ds1};
 
 use super::parts::SharedChip;
@@ -171,6 +171,13 @@ impl Imu for BoardImu {
         match self {
             Self::Lsm9ds1(d) => d.read().map_err(BoardImuError::Lsm9ds1),
             Self::Bmi270(d) => d.read().map_err(BoardImuError::Bmi270),
+        }
+    }
+
+    fn read_with_status(&mut self) -> Result<Reading, Self::Error> {
+        match self {
+            Self::Lsm9ds1(d) => d.read_with_status().map_err(BoardImuError::Lsm9ds1),
+            Self::Bmi270(d) => d.read_with_status().map_err(BoardImuError::Bmi270),
         }
     }
 }
