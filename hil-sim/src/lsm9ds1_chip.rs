@@ -590,7 +590,7 @@ impl Lsm9ds1Chip {
                 let ready = u8::from(out.accel_gyro_ready);
                 // TDA | GDA | XLDA, for the sensors that run.
                 (ready * u8::from(self.accel_on()) * 0b101)
-                    | (ready * u8::from(self.gyro_on()) << 1)
+                    | ((ready * u8::from(self.gyro_on())) << 1)
             }
             (Device::AccelGyro, r @ OUT_X_L_G..=0x1D) => Self::vector_byte(out.gyro, r - OUT_X_L_G),
             (Device::AccelGyro, r @ OUT_X_L_XL..=0x2D) => {

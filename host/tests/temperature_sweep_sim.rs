@@ -80,7 +80,12 @@ fn analyzed_calibration_holds_g_within_1_mg_at_25_c_and_2_mg_over_10_to_40_c() {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
         .args(["calibrate", "--sim", "--yes", "--json", "--speed", "30"])
         .args(["--sim-seed", SEED, "--rounds", "3", "--analyze"])
-        .args(["--sim-temperature", "sweep:10:40:90", "--sim-effect", EFFECT])
+        .args([
+            "--sim-temperature",
+            "sweep:10:40:90",
+            "--sim-effect",
+            EFFECT,
+        ])
         // The chip's clock 0.5 % slow: repeated samples are skipped, magnetometer repeats are
         // averaged once.
         .args(["--sim-odr-error", "-0.005"])
