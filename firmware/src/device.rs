@@ -20,6 +20,7 @@ use imucal_protocol::{
 use crate::apply::Correction;
 use crate::imu::{Imu, RawSample, SensorScales};
 use crate::pose::{PoseCapture, PoseConfig, PoseFailure, PoseState};
+use crate::sampling::ConversionTracker;
 use crate::stillness::{StillnessDetector, StillnessThresholds};
 use crate::store::ParamStore;
 
@@ -88,6 +89,7 @@ pub struct Device<I: Imu, L, F: NorFlash, C: Clock, const W: usize = 64> {
     scales: SensorScales,
     period_us: u64,
     next_sample_us: u64,
+    conversions: ConversionTracker,
     boot_us: u64,
     stillness: StillnessDetector<W>,
     still: bool,
@@ -140,6 +142,7 @@ where
             scales,
             period_us,
             next_sample_us: now,
+            conversions: ConversionTracker::new(),
             boot_us: now,
             stillness: StillnessDetector::new(StillnessThresholds::default()),
             still: false,
@@ -182,8 +185,18 @@ where
                 // Fell behind by more than a period: resynchronise instead of bursting.
                 self.next_sample_us = now.saturating_add(self.period_us);
             }
-            match self.imu.read() {
-                Ok(sample) => self.on_sample(&sample, now),
+            match self.imu.read_with_status() {
+                Ok(reading) => {
+                    let verdict = self.conversions.account(
+                        reading.new_data,
+                        now,
+                        self.period_us,
+                        &mut self.errors,
+                    );
+                    if verdict.use_sample {
+                        self.on_sample(&reading.sample, verdict.mag_is_new, now);
+                    }
+                }
                 Err(_) => {
                     self.errors.sensor_errors = self.errors.sensor_errors.saturating_add(1);
                     crate::log::log_warn!("IMU read failed");
@@ -453,7 +466,7 @@ where
         })
     }
 
-    fn on_sample(&mut self, sample: &RawSample, now: u64) {
+    fn on_sample(&mut self, sample: &RawSample, mag_is_new: bool, now: u64) {
         self.stillness.push(sample);
         let still = self.stillness.is_still(&self.scales);
         if still != self.still {
@@ -464,7 +477,9 @@ where
                 t_ms,
             }));
         }
-        let state = self.pose.update(sample, still, now, &self.scales);
+        let state = self
+            .pose
+            .update_reading(sample, mag_is_new, still, now, &self.scales);
         self.finish_pose(state);
         self.stream_sample(sample, now);
     }

@@ -12,5 +12,6 @@ mod log;
 pub mod lsm9ds1;
 pub mod pose;
 pub mod ram_flash;
+pub mod sampling;
 pub mod stillness;
 pub mod store;

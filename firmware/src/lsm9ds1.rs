@@ -17,7 +17,7 @@
 
 use embedded_hal::i2c::I2c;
 
-use crate::imu::{Imu, RawSample, SensorScales};
+use crate::imu::{Imu, NewData, RawSample, Reading, SensorScales};
 
 /// Standard gravity, m/s² per g (the datasheet's accelerometer unit).
 const STANDARD_GRAVITY_MPS2: f32 = 9.806_65;
@@ -84,12 +84,22 @@ pub mod mag_reg {
     pub const CTRL_REG4_M: u8 = 0x23;
     /// FAST_READ, BDU (bit 6).
     pub const CTRL_REG5_M: u8 = 0x24;
+    /// ZYXOR (bit 7, a conversion overwritten unread) and ZYXDA (bit 3, new X, Y and Z data).
+    pub const STATUS_REG_M: u8 = 0x27;
     /// Magnetometer X output, low byte; Y and Z follow up to 0x2D.
     pub const OUT_X_L_M: u8 = 0x28;
     /// Set in a magnetometer sub-address to make a multi-byte access advance the address.
     pub const AUTO_INCREMENT: u8 = 0x80;
 }
 
+/// STATUS_REG (0x17): accelerometer new data available.
+const STATUS_XLDA: u8 = 1 << 0;
+/// STATUS_REG (0x17): gyroscope new data available.
+const STATUS_GDA: u8 = 1 << 1;
+/// STATUS_REG_M: new X, Y and Z magnetometer data available.
+const STATUS_M_ZYXDA: u8 = 1 << 3;
+/// STATUS_REG_M: a magnetometer conversion overwrote one that was not read.
+const STATUS_M_ZYXOR: u8 = 1 << 7;
 /// CTRL_REG8: block data update, so a multi-byte read never mixes two samples.
 const CTRL_REG8_BDU: u8 = 1 << 6;
 /// CTRL_REG8: advance the register address during multi-byte accesses.
@@ -633,9 +643,15 @@ impl<I2C: I2c> Imu for Lsm9ds1<I2C> {
         self.config.scales()
     }
 
-    /// Three bursts: temperature, status and gyroscope (0x15..0x1D), accelerometer
-    /// (0x28..0x2D), magnetometer (0x28..0x2D with the auto-increment bit).
     fn read(&mut self) -> Result<RawSample, Self::Error> {
+        self.read_with_status().map(|reading| reading.sample)
+    }
+
+    /// Three bursts: temperature, STATUS_REG and gyroscope (0x15..0x1D), accelerometer
+    /// (0x28..0x2D), STATUS_REG_M and magnetometer (0x27..0x2D with the auto-increment bit).
+    /// Each status byte is read before the outputs it describes, so a conversion landing during
+    /// the read shows as new on the next read instead of being lost.
+    fn read_with_status(&mut self) -> Result<Reading, Self::Error> {
         if !self.initialised {
             return Err(Error::NotInitialised);
         }
@@ -648,26 +664,35 @@ impl<I2C: I2c> Imu for Lsm9ds1<I2C> {
         self.i2c
             .write_read(ag, &[accel_gyro_reg::OUT_X_L_XL], &mut accel)
             .map_err(Error::Bus)?;
-        let mut mag = [0u8; 6];
+        let mut status_mag = [0u8; 7];
         self.i2c
             .write_read(
                 self.config.mag_address(),
-                &[mag_reg::OUT_X_L_M | mag_reg::AUTO_INCREMENT],
-                &mut mag,
+                &[mag_reg::STATUS_REG_M | mag_reg::AUTO_INCREMENT],
+                &mut status_mag,
             )
             .map_err(Error::Bus)?;
 
-        let [tl, th, _status, gxl, gxh, gyl, gyh, gzl, gzh] = temp_status_gyro;
-        let mut mag = vector_from_le(mag);
+        let [tl, th, status, gxl, gxh, gyl, gyh, gzl, gzh] = temp_status_gyro;
+        let [status_m, mxl, mxh, myl, myh, mzl, mzh] = status_mag;
+        let mut mag = vector_from_le([mxl, mxh, myl, myh, mzl, mzh]);
         if self.config.mag_axes == MagAxes::AlignedToAccelGyro {
             let [x, _, _] = &mut mag;
             *x = x.saturating_neg();
         }
-        Ok(RawSample {
-            accel: vector_from_le(accel),
-            gyro: vector_from_le([gxl, gxh, gyl, gyh, gzl, gzh]),
-            mag,
-            temp: i16::from_le_bytes([tl, th]),
+        Ok(Reading {
+            sample: RawSample {
+                accel: vector_from_le(accel),
+                gyro: vector_from_le([gxl, gxh, gyl, gyh, gzl, gzh]),
+                mag,
+                temp: i16::from_le_bytes([tl, th]),
+            },
+            // Both flags: the accelerometer and gyroscope convert together when both run.
+            new_data: NewData {
+                accel_gyro: status & (STATUS_XLDA | STATUS_GDA) != 0,
+                mag: status_m & STATUS_M_ZYXDA != 0,
+                mag_overrun: status_m & STATUS_M_ZYXOR != 0,
+            },
         })
     }
 }

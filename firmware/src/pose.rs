@@ -75,6 +75,9 @@ pub struct PoseCapture {
     first_us: u64,
     last_us: u64,
     count: u32,
+    /// Distinct magnetometer conversions in the average (fewer than `count` when the
+    /// magnetometer converts slower than the samples arrive).
+    mag_count: u32,
     saw_motion: bool,
     channels: [Welford; CHANNELS],
     temp_min: i16,
@@ -102,6 +105,7 @@ impl PoseCapture {
             first_us: 0,
             last_us: 0,
             count: 0,
+            mag_count: 0,
             saw_motion: false,
             channels: [Welford::default(); CHANNELS],
             temp_min: i16::MAX,
@@ -160,6 +164,21 @@ impl PoseCapture {
         now_us: u64,
         scales: &SensorScales,
     ) -> PoseState {
+        self.update_reading(sample, true, still, now_us, scales)
+    }
+
+    /// [`Self::update`] for a sample whose magnetometer value may repeat the previous one
+    /// (`mag_is_new` false): the repeat is not averaged again, so the magnetometer mean and
+    /// variance count each conversion once. The first sample of an average always contributes
+    /// its magnetometer value (a measurement not yet counted).
+    pub fn update_reading(
+        &mut self,
+        sample: &RawSample,
+        mag_is_new: bool,
+        still: bool,
+        now_us: u64,
+        scales: &SensorScales,
+    ) -> PoseState {
         if self.state != PoseState::Capturing {
             return self.state;
         }
@@ -168,7 +187,7 @@ impl PoseCapture {
                 self.state = PoseState::Failed(PoseFailure::Saturated);
                 return self.state;
             }
-            self.accumulate(sample, now_us);
+            self.accumulate(sample, mag_is_new, now_us);
             if self.count >= self.config.samples {
                 self.state = PoseState::Done(self.summary(scales));
                 return self.state;
@@ -197,6 +216,7 @@ impl PoseCapture {
 
     fn discard_average(&mut self) {
         self.count = 0;
+        self.mag_count = 0;
         self.channels = [Welford::default(); CHANNELS];
         self.temp_min = i16::MAX;
         self.temp_max = i16::MIN;
@@ -210,42 +230,48 @@ impl PoseCapture {
             .any(|(axes, limit)| axes.iter().any(|&c| i32::from(c).abs() >= limit))
     }
 
-    fn accumulate(&mut self, sample: &RawSample, now_us: u64) {
+    fn accumulate(&mut self, sample: &RawSample, mag_is_new: bool, now_us: u64) {
         if self.count == 0 {
             self.first_us = now_us;
         }
         self.last_us = now_us;
         self.count = self.count.saturating_add(1);
         let inv_n = 1.0 / f64::from(self.count);
-        let values = [
-            sample.accel[0],
-            sample.accel[1],
-            sample.accel[2],
-            sample.gyro[0],
-            sample.gyro[1],
-            sample.gyro[2],
-            sample.mag[0],
-            sample.mag[1],
-            sample.mag[2],
-            sample.temp,
+        let accel_gyro_temp = [
+            (0, sample.accel[0]),
+            (1, sample.accel[1]),
+            (2, sample.accel[2]),
+            (3, sample.gyro[0]),
+            (4, sample.gyro[1]),
+            (5, sample.gyro[2]),
+            (9, sample.temp),
         ];
-        for (channel, value) in self.channels.iter_mut().zip(values) {
-            channel.add(value, inv_n);
+        for (index, value) in accel_gyro_temp {
+            if let Some(channel) = self.channels.get_mut(index) {
+                channel.add(value, inv_n);
+            }
+        }
+        if mag_is_new || self.mag_count == 0 {
+            self.mag_count = self.mag_count.saturating_add(1);
+            let inv_mag_n = 1.0 / f64::from(self.mag_count);
+            for (channel, value) in self.channels.iter_mut().skip(6).zip(sample.mag) {
+                channel.add(value, inv_mag_n);
+            }
         }
         self.temp_min = self.temp_min.min(sample.temp);
         self.temp_max = self.temp_max.max(sample.temp);
     }
 
     fn summary(&self, scales: &SensorScales) -> PoseStats {
-        let denominator = f64::from(self.count.saturating_sub(1).max(1));
-        let mean_var = |first: usize, per_count: f32| {
+        let denominator = |n: u32| f64::from(n.saturating_sub(1).max(1));
+        let mean_var = |first: usize, per_count: f32, n: u32| {
             let per_count = f64::from(per_count);
             let mut mean = [0.0f32; 3];
             let mut variance = [0.0f32; 3];
             for axis in 0..3 {
                 if let Some(channel) = self.channels.get(first + axis) {
                     mean[axis] = (channel.mean * per_count) as f32;
-                    variance[axis] = (channel.m2 / denominator * per_count * per_count) as f32;
+                    variance[axis] = (channel.m2 / denominator(n) * per_count * per_count) as f32;
                 }
             }
             (mean, variance)
@@ -260,9 +286,9 @@ impl PoseCapture {
         } else {
             (self.temp_max, self.temp_min)
         };
-        let (accel_mean, accel_var) = mean_var(0, scales.accel_mps2_per_count);
-        let (gyro_mean, gyro_var) = mean_var(3, scales.gyro_rads_per_count);
-        let (mag_mean, mag_var) = mean_var(6, scales.mag_ut_per_count);
+        let (accel_mean, accel_var) = mean_var(0, scales.accel_mps2_per_count, self.count);
+        let (gyro_mean, gyro_var) = mean_var(3, scales.gyro_rads_per_count, self.count);
+        let (mag_mean, mag_var) = mean_var(6, scales.mag_ut_per_count, self.mag_count);
         let span_ms = self.last_us.saturating_sub(self.first_us) / 1000;
         PoseStats {
             n: self.count,
@@ -327,6 +353,38 @@ mod tests {
             mag: [1_000, -2_000, 3_000],
             temp,
         }
+    }
+
+    #[test]
+    fn repeated_magnetometer_values_are_averaged_once() {
+        let mut capture = PoseCapture::new();
+        capture.start(config(), &scales(), 0);
+        // 5 samples, but only two magnetometer conversions: 100 (read twice), 400 (read thrice).
+        let reads = [
+            (100, true),
+            (100, false),
+            (400, true),
+            (400, false),
+            (400, false),
+        ];
+        let mut state = PoseState::Capturing;
+        for (i, (mag_x, new)) in reads.into_iter().enumerate() {
+            let mut sample = still_sample(0, 0);
+            sample.mag[0] = mag_x;
+            state = capture.update_reading(&sample, new, true, 10_000 * i as u64, &scales());
+        }
+        let PoseState::Done(stats) = state else {
+            panic!("capture did not finish: {state:?}");
+        };
+        assert_eq!(stats.n, 5);
+        // Each conversion once: mean (100 + 400) / 2 counts, sample variance of {100, 400}.
+        // Counting repeats would give a mean of 280 counts (3.92 µT) instead.
+        let per_count = f64::from(scales().mag_ut_per_count);
+        assert!((f64::from(stats.mag_mean[0]) - 250.0 * per_count).abs() < 1e-5);
+        let variance = 45_000.0 * per_count * per_count;
+        assert!((f64::from(stats.mag_var[0]) - variance).abs() < 1e-4 * variance);
+        // Other channels keep every sample.
+        assert!((f64::from(stats.mag_mean[1]) - (-2_000.0 * per_count)).abs() < 1e-4);
     }
 
     #[test]

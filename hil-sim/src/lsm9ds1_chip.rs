@@ -11,17 +11,27 @@
 //! clamped to the nominal full scale and the 16-bit range (temperature: 16 counts/°C around
 //! 25 °C, 12-bit).
 //!
-//! Not modelled (stored, without effect): filters and bandwidths, FIFO, interrupts, data-ready
-//! timing, self-test, single-conversion mode (treated as continuous). Block data update is
-//! implicit: the state never changes during a transaction. A powered-down sensor reads 0 where the
-//! real chip holds its last sample.
+//! Conversion timing is optional ([`Lsm9ds1Chip::run_on_own_clock`], [`conversion`]): the chip
+//! converts at its output data rate off by a relative error, latches its outputs at each
+//! conversion and raises the data-ready flags (XLDA/GDA/TDA, ZYXDA, and ZYXOR on a magnetometer
+//! overrun), which reading the outputs clears. Without it, outputs follow the physical state on
+//! every read and data is always ready.
+//!
+//! Not modelled (stored, without effect): filters and bandwidths, FIFO, interrupts, self-test,
+//! single-conversion mode (treated as continuous). Block data update is implicit: the state
+//! never changes during a transaction. A powered-down sensor reads 0 where the real chip holds
+//! its last sample.
 //!
 //! Writes to reserved or read-only registers, and the unavailable gyroscope full-scale code 10,
 //! are refused with an error: ST warns that writing reserved registers can damage the device, so a
 //! driver that does it is wrong even though the real chip would acknowledge.
 
+mod conversion;
+
 use embedded_hal::i2c::{self, ErrorKind, NoAcknowledgeSource, Operation};
 use imucal_firmware::lsm9ds1::SdoLevel;
+
+use conversion::ChipClock;
 
 /// Standard gravity, m/s² per g.
 const STANDARD_GRAVITY_MPS2: f64 = 9.806_65;
@@ -239,6 +249,8 @@ pub struct Lsm9ds1Chip {
     mag_pointer: u8,
     mag_auto_increment: bool,
     physical: Physical,
+    /// The chip's own conversion timebase, when modelled.
+    clock: Option<ChipClock>,
 }
 
 impl Default for Lsm9ds1Chip {
@@ -269,6 +281,68 @@ impl Lsm9ds1Chip {
                 temp_c: TEMP_AT_ZERO_COUNTS_C,
                 ..Physical::default()
             },
+            clock: None,
+        }
+    }
+
+    /// Convert on the chip's own oscillator from now on: output data rates are the nominal ones
+    /// times `1 + odr_error` (e.g. ±0.005 for ±0.5 %), outputs change only at conversions, and
+    /// the data-ready flags say whether a read gets a new one. Time starts at 0 s and moves with
+    /// [`Self::advance_time`].
+    pub fn run_on_own_clock(&mut self, odr_error: f64) {
+        self.clock = Some(ChipClock::new(odr_error));
+    }
+
+    /// The relative output data rate error of a chip on its own clock; `None` when conversion
+    /// timing is not modelled.
+    pub fn odr_error(&self) -> Option<f64> {
+        self.clock.as_ref().map(ChipClock::odr_error)
+    }
+
+    /// Move the chip's time to `t_s`, latching the current physical state into the outputs of
+    /// every sensor that converted since the previous call. No effect without
+    /// [`Self::run_on_own_clock`].
+    pub fn advance_time(&mut self, t_s: f64) {
+        let (accel_gyro_hz, mag_hz) = (self.accel_gyro_rate_hz(), self.mag_rate_hz());
+        let Some(clock) = self.clock.as_mut() else {
+            return;
+        };
+        let converted = clock.advance(t_s, accel_gyro_hz, mag_hz);
+        let (accel, gyro, temp, mag) = (
+            self.accel_counts(),
+            self.gyro_counts(),
+            self.temp_counts(),
+            self.mag_counts(),
+        );
+        if let Some(clock) = self.clock.as_mut() {
+            if converted.accel_gyro {
+                clock.outputs.accel = accel;
+                clock.outputs.gyro = gyro;
+                clock.outputs.temp = temp;
+            }
+            if converted.mag {
+                clock.outputs.mag = mag;
+            }
+        }
+    }
+
+    /// Reading an output register consumes the conversion it holds: the sensor's data-ready
+    /// (and for the magnetometer, overrun) flags clear. Accelerometer and gyroscope share one
+    /// flag here (they convert together); reading the temperature leaves it set, as XLDA/GDA
+    /// are on the chip.
+    fn clear_on_output_read(&mut self, device: Device, register: u8) {
+        let Some(clock) = self.clock.as_mut() else {
+            return;
+        };
+        match (device, register) {
+            (Device::AccelGyro, OUT_X_L_G..=0x1D | OUT_X_L_XL..=0x2D) => {
+                clock.outputs.accel_gyro_ready = false;
+            }
+            (Device::Mag, OUT_X_L_M..=0x2D) => {
+                clock.outputs.mag_ready = false;
+                clock.outputs.mag_overrun = false;
+            }
+            _ => {}
         }
     }
 
@@ -480,6 +554,11 @@ impl Lsm9ds1Chip {
     }
 
     fn read_register(&self, device: Device, register: u8) -> u8 {
+        if let Some(clock) = &self.clock {
+            if let Some(value) = self.latched_register(clock, device, register) {
+                return value;
+            }
+        }
         match device {
             Device::AccelGyro => match register {
                 OUT_TEMP_L => self.temp_counts().to_le_bytes()[0],
@@ -499,6 +578,32 @@ impl Lsm9ds1Chip {
                 r => self.m(r),
             },
         }
+    }
+
+    /// Status and output registers of a chip on its own clock; `None` for the others.
+    fn latched_register(&self, clock: &ChipClock, device: Device, register: u8) -> Option<u8> {
+        let out = &clock.outputs;
+        let value = match (device, register) {
+            (Device::AccelGyro, OUT_TEMP_L) => out.temp.to_le_bytes()[0],
+            (Device::AccelGyro, OUT_TEMP_H) => out.temp.to_le_bytes()[1],
+            (Device::AccelGyro, AG_STATUS_REG | AG_STATUS_REG_2) => {
+                let ready = u8::from(out.accel_gyro_ready);
+                // TDA | GDA | XLDA, for the sensors that run.
+                (ready * u8::from(self.accel_on()) * 0b101)
+                    | ((ready * u8::from(self.gyro_on())) << 1)
+            }
+            (Device::AccelGyro, r @ OUT_X_L_G..=0x1D) => Self::vector_byte(out.gyro, r - OUT_X_L_G),
+            (Device::AccelGyro, r @ OUT_X_L_XL..=0x2D) => {
+                Self::vector_byte(out.accel, r - OUT_X_L_XL)
+            }
+            (Device::Mag, STATUS_REG_M) => {
+                // ZYXOR | ZOR | YOR | XOR, ZYXDA | ZDA | YDA | XDA.
+                (u8::from(out.mag_overrun) * 0xF0) | (u8::from(out.mag_ready) * 0x0F)
+            }
+            (Device::Mag, r @ OUT_X_L_M..=0x2D) => Self::vector_byte(out.mag, r - OUT_X_L_M),
+            _ => return None,
+        };
+        Some(value)
     }
 
     fn write_register(
@@ -628,7 +733,9 @@ impl i2c::I2c for Lsm9ds1Chip {
                 }
                 Operation::Read(buffer) => {
                     for byte in buffer.iter_mut() {
-                        *byte = self.read_register(device, self.pointer(device));
+                        let register = self.pointer(device);
+                        *byte = self.read_register(device, register);
+                        self.clear_on_output_read(device, register);
                         self.advance(device);
                     }
                     expecting_sub_address = true;

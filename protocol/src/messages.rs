@@ -216,6 +216,17 @@ pub struct ErrorCounters {
     pub sensor_errors: u32,
     /// Failed flash operations.
     pub flash_errors: u32,
+    /// Accelerometer/gyroscope reads that found no new conversion (the sensor's data-ready bits
+    /// clear: its clock runs slower than the read timer); the repeated sample is not used.
+    pub repeated_samples: u32,
+    /// Accelerometer/gyroscope conversions overwritten before they were read, inferred from a
+    /// gap of at least 1.5 sample periods between reads (the chip has no overrun flag).
+    pub missed_samples: u32,
+    /// Reads whose magnetometer value was not new (its rate is below the read rate); the
+    /// repeated value is not averaged again.
+    pub mag_repeats: u32,
+    /// Magnetometer conversions overwritten before they were read (the chip's overrun flag).
+    pub mag_overruns: u32,
 }
 
 /// The device's state, answered to `Status`.

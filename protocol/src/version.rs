@@ -14,7 +14,9 @@ pub struct ProtocolVersion {
 }
 
 /// Major version of the protocol implemented by this crate.
-pub const PROTOCOL_MAJOR: u16 = 2;
+/// 3: `ErrorCounters` gained the data-ready counters (repeated, missed, magnetometer repeats
+/// and overruns), which an older peer would decode wrongly.
+pub const PROTOCOL_MAJOR: u16 = 3;
 /// Minor version of the protocol implemented by this crate.
 pub const PROTOCOL_MINOR: u16 = 0;
 /// The protocol version implemented by this crate.

@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::i2c::{ErrorType, I2c, Operation};
 use imucal_firmware::bmi270::{self, Bmi270Bmm150};
-use imucal_firmware::imu::{Imu, RawSample, SensorScales};
+use imucal_firmware::imu::{Imu, RawSample, Reading, SensorScales};
 use imucal_firmware::lsm9ds1::{self, Lsm9ds1};
 
 use super::parts::SharedChip;
@@ -78,10 +78,11 @@ pub enum BoardChip {
 }
 
 impl BoardChip {
-    /// A chip just after power-on.
-    pub fn new(kind: SensorChip) -> Self {
+    /// A chip just after power-on; an LSM9DS1 converts on its own clock when `lsm_odr_error`
+    /// is given ([`Lsm9ds1Chip::run_on_own_clock`]).
+    pub fn new(kind: SensorChip, lsm_odr_error: Option<f64>) -> Self {
         match kind {
-            SensorChip::Lsm9ds1 => Self::Lsm9ds1(SharedChip::new(Lsm9ds1Chip::default())),
+            SensorChip::Lsm9ds1 => Self::Lsm9ds1(SharedChip::new(lsm9ds1_chip(lsm_odr_error))),
             SensorChip::Bmi270 => Self::Bmi270(SharedBmi270(Arc::new(Mutex::new(
                 Bmi270Chip::new(&SIM_BMI270_CONFIG),
             )))),
@@ -91,7 +92,7 @@ impl BoardChip {
     /// Powers the chip off and on (registers back to their defaults).
     pub fn power_cycle(&self) {
         match self {
-            Self::Lsm9ds1(chip) => chip.with(|c| *c = Lsm9ds1Chip::default()),
+            Self::Lsm9ds1(chip) => chip.with(|c| *c = lsm9ds1_chip(c.odr_error())),
             Self::Bmi270(chip) => *lock(&chip.0) = Bmi270Chip::new(&SIM_BMI270_CONFIG),
         }
     }
@@ -107,6 +108,13 @@ impl BoardChip {
         match self {
             Self::Lsm9ds1(chip) => chip.with(|c| c.set_physical(accel, gyro, mag, temp_c)),
             Self::Bmi270(chip) => lock(&chip.0).set_physical(accel, gyro, mag, temp_c),
+        }
+    }
+
+    /// Moves the chip's own clock to `t_s` (only an LSM9DS1 on its own clock has one).
+    pub fn set_time(&self, t_s: f64) {
+        if let Self::Lsm9ds1(chip) = self {
+            chip.with(|c| c.advance_time(t_s));
         }
     }
 
@@ -129,6 +137,15 @@ impl BoardChip {
             }
         }
     }
+}
+
+/// An LSM9DS1 just after power-on, on its own clock when `odr_error` is given.
+fn lsm9ds1_chip(odr_error: Option<f64>) -> Lsm9ds1Chip {
+    let mut chip = Lsm9ds1Chip::default();
+    if let Some(error) = odr_error {
+        chip.run_on_own_clock(error);
+    }
+    chip
 }
 
 /// A driver error of either chip.
@@ -171,6 +188,13 @@ impl Imu for BoardImu {
         match self {
             Self::Lsm9ds1(d) => d.read().map_err(BoardImuError::Lsm9ds1),
             Self::Bmi270(d) => d.read().map_err(BoardImuError::Bmi270),
+        }
+    }
+
+    fn read_with_status(&mut self) -> Result<Reading, Self::Error> {
+        match self {
+            Self::Lsm9ds1(d) => d.read_with_status().map_err(BoardImuError::Lsm9ds1),
+            Self::Bmi270(d) => d.read_with_status().map_err(BoardImuError::Bmi270),
         }
     }
 }

@@ -104,6 +104,11 @@ pub struct BoardConfig {
     pub chip: lsm9ds1::Config,
     /// Which sensor chip the board carries.
     pub sensor: SensorChip,
+    /// LSM9DS1 conversion timing: `Some(e)` makes the chip convert on its own oscillator at
+    /// `1 + e` times the nominal rates (e.g. ±0.005), with data-ready flags, so reads repeat or
+    /// miss conversions as the clocks drift and the 80 Hz magnetometer repeats under 119 Hz
+    /// reads; `None` gives a new value of every sensor at every read.
+    pub lsm9ds1_odr_error: Option<f64>,
     /// Unique id the board reports.
     pub device_id: u64,
 }
@@ -125,6 +130,7 @@ impl BoardConfig {
             temperature: None,
             chip: lsm9ds1::Config::default(),
             sensor: SensorChip::Lsm9ds1,
+            lsm9ds1_odr_error: None,
             device_id: 0x5349_4d00_0000_0000 | (seed & 0xFFFF_FFFF),
         }
     }
@@ -220,7 +226,7 @@ impl SimBoard {
             world,
             physics,
             person,
-            chip: BoardChip::new(config.sensor),
+            chip: BoardChip::new(config.sensor, config.lsm9ds1_odr_error),
             flash: SharedFlash::new(),
             clock: SimClock::default(),
             link,
@@ -453,6 +459,7 @@ impl SimBoard {
             v(sample.mag.analog),
             state.temp_c,
         )?;
+        self.chip.set_time(t_s);
         self.clock.set_us(t_us);
         self.samples += 1;
         self.last_sample = Some(sample);

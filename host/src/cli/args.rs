@@ -317,6 +317,11 @@ pub struct CalibrateArgs {
     /// Simulator: simulated seconds per wall second.
     #[arg(long, default_value_t = 15.0, requires = "sim")]
     pub speed: f64,
+    /// Simulator: the LSM9DS1 converts on its own clock, this relative error off its nominal
+    /// output data rates (e.g. -0.005), so reads repeat or miss conversions as on hardware and
+    /// the 80 Hz magnetometer repeats under 119 Hz reads. Without it every read is new.
+    #[arg(long, requires = "sim", allow_hyphen_values = true)]
+    pub sim_odr_error: Option<f64>,
     /// Simulator: die temperature, `constant` (the person's ambient) or `sweep[:LOW:HIGH:PERIOD]`
     /// (°C, °C, s; `sweep` alone is 10–40 °C every 90 s).
     #[arg(long, default_value = "constant", requires = "sim")]

@@ -52,6 +52,14 @@ impl Simulated {
         let mut options = SimOptions::new(args.sim_seed);
         options.speed = args.speed;
         options.board.sensor = args.sim_chip;
+        if let Some(error) = args.sim_odr_error {
+            anyhow::ensure!(
+                error.is_finite() && error.abs() < 0.5,
+                "--sim-odr-error {error} is not a plausible rate error; give a fraction such as \
+                 -0.005 (0.5 % slow)"
+            );
+            options.board.lsm9ds1_odr_error = Some(error);
+        }
         options.board.temperature = temperature_profile(&args.sim_temperature)?;
         if args.rounds > 1 {
             options.schedule = imucal_hil_sim::board::PersonSchedule::Rounds(args.rounds);

@@ -274,7 +274,7 @@ pub fn device_status() -> BoxedStrategy<DeviceStatus> {
         any::<bool>(),
         any::<u32>(),
         any::<u32>(),
-        prop::array::uniform4(any::<u32>()),
+        prop::array::uniform8(any::<u32>()),
     )
         .prop_map(
             |(uptime_ms, streaming, still, active_crc, active_seq, e)| DeviceStatus {
@@ -288,6 +288,10 @@ pub fn device_status() -> BoxedStrategy<DeviceStatus> {
                     dropped_samples: e[1],
                     sensor_errors: e[2],
                     flash_errors: e[3],
+                    repeated_samples: e[4],
+                    missed_samples: e[5],
+                    mag_repeats: e[6],
+                    mag_overruns: e[7],
                 },
             },
         )
