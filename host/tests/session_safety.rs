@@ -207,3 +207,61 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `imucal calibrate --sim` in `dir` with the history in a temporary database.
+fn calibrate_command(dir: &Path, resume: bool) -> std::process::Command {
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"));
+    command
+        .args(["calibrate", "--sim", "--yes", "--speed", "10"])
+        .arg(if resume { "--resume" } else { "-o" })
+        .arg(dir)
+        .env("IMUCAL_DB", dir.with_extension("db"));
+    command
+}
+
+#[test]
+fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
+    let dir = session_dir("sigint");
+    let mut child = calibrate_command(&dir, false)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run imucal");
+    // Interrupt once the first positions are on disk (the session saves after every pose).
+    let started = std::time::Instant::now();
+    while load_poses(&dir.join("poses.json")).map_or(0, |p| p.len()) < 2 {
+        assert!(
+            started.elapsed().as_secs() < 300,
+            "no pose was saved within 300 s"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("send SIGINT");
+    assert!(sent.success());
+    let out = child.wait_with_output().expect("imucal ends");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "an interrupted session fails");
+    assert!(stderr.contains("stopped by the user"), "{stderr}");
+    assert!(stderr.contains("nothing was written"), "{stderr}");
+    assert!(stderr.contains("--resume"), "{stderr}");
+    let progress = load_progress(&dir).expect("the progress is saved");
+    assert!(progress.poses >= 2, "{progress:?}");
+    let saved = load_poses(&dir.join("poses.json")).expect("the poses are saved");
+    assert_eq!(saved.len(), progress.poses);
+
+    // `--resume` finishes the session and keeps the saved positions.
+    let out = calibrate_command(&dir, true).output().expect("run imucal");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("already captured"), "{stderr}");
+    let all = load_poses(&dir.join("poses.json")).expect("the finished poses");
+    for pose in &saved {
+        assert!(all.contains(pose), "{} was replaced", pose.target.name);
+    }
+    assert!(dir.join("summary.json").is_file() && !dir.join(PROGRESS_FILE).exists());
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(dir.with_extension("db"));
+}
