@@ -83,7 +83,10 @@ fn sabotaged_session(
     sim: &SimHandle,
     sabotage: Sabotage,
     dir: &Path,
-) -> (Result<imucal::session::SessionOutcome, SessionError>, Vec<String>) {
+) -> (
+    Result<imucal::session::SessionOutcome, SessionError>,
+    Vec<String>,
+) {
     let interrupt = Arc::new(AtomicBool::new(false));
     let mut observer = Saboteur {
         sim,
@@ -139,7 +142,10 @@ fn a_corrupted_read_back_after_the_commit_says_the_board_holds_the_new_set() {
     let error = result.expect_err("the verification sees the corrupted read-back");
     let message = error.to_string();
     let progress = load_progress(&dir).expect("the progress is saved");
-    let crc = progress.params_crc.clone().expect("the fitted set is saved");
+    let crc = progress
+        .params_crc
+        .clone()
+        .expect("the fitted set is saved");
     // The board committed the set: its status (not the tampered read-back) shows the new CRC.
     assert!(
         matches!(&error, SessionError::Stopped { board_holds, .. }
@@ -252,16 +258,36 @@ fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     let saved = load_poses(&dir.join("poses.json")).expect("the poses are saved");
     assert_eq!(saved.len(), progress.poses);
 
-    // `--resume` finishes the session and keeps the saved positions.
-    let out = calibrate_command(&dir, true).output().expect("run imucal");
+    // `--resume` does not ask for the saved positions again. A fresh simulated board's person
+    // waits in the first position, which is already captured, until asked for a pose there; so
+    // the resumed run stops at its pose timeout, which saves too and names only the others.
+    let out = calibrate_command(&dir, true)
+        .args(["--pose-timeout", "20"])
+        .output()
+        .expect("run imucal");
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(out.status.success(), "{stderr}");
+    assert!(!out.status.success(), "{stderr}");
     assert!(stderr.contains("already captured"), "{stderr}");
-    let all = load_poses(&dir.join("poses.json")).expect("the finished poses");
+    let missing = stderr
+        .split("still needed: ")
+        .nth(1)
+        .and_then(|rest| rest.split(". ").next())
+        .unwrap_or_else(|| panic!("the timeout names the positions still needed: {stderr}"));
+    let missing: Vec<&str> = missing.split(", ").collect();
+    assert_eq!(missing.len(), 12 - saved.len(), "{missing:?}");
     for pose in &saved {
-        assert!(all.contains(pose), "{} was replaced", pose.target.name);
+        assert!(
+            !missing.contains(&pose.target.name.as_str()),
+            "{} is asked for again",
+            pose.target.name
+        );
     }
-    assert!(dir.join("summary.json").is_file() && !dir.join(PROGRESS_FILE).exists());
+    let kept = load_poses(&dir.join("poses.json")).expect("the poses are still saved");
+    assert_eq!(kept, saved);
+    assert!(load_progress(&dir)
+        .expect("the progress is saved")
+        .stopped_because
+        .contains("no new orientation"));
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(dir.with_extension("db"));
 }

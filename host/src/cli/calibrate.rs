@@ -172,11 +172,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         anyhow::anyhow!(
             "{error}\nContinue with `imucal calibrate --resume {}`{}",
             dir.display(),
-            if args.sim {
-                " --sim (same seed)"
-            } else {
-                ""
-            }
+            if args.sim { " --sim (same seed)" } else { "" }
         )
     })?;
     save_session(&outcome, &dir)?;

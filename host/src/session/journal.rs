@@ -111,7 +111,12 @@ impl Journal {
 
     /// The session stopped: say why and what the board holds. Errors writing are ignored here
     /// (the session's own error is the one to report), but reported in the returned note.
-    pub(super) fn stopped(&mut self, because: &str, board_holds: &str, mag: &[MagSample]) -> String {
+    pub(super) fn stopped(
+        &mut self,
+        because: &str,
+        board_holds: &str,
+        mag: &[MagSample],
+    ) -> String {
         self.progress.stopped_because = because.to_string();
         self.progress.board_holds = board_holds.to_string();
         let Some(dir) = self.dir.clone() else {
