@@ -24,9 +24,9 @@ const SPEED: f64 = 5.0;
 enum Sabotage {
     /// Close the board's port once the set is verified (during the "after" measurement).
     VanishAfterCommit,
-    /// Corrupt every parameter read-back once the set is fitted (the commit succeeds, the
-    /// verification after it fails).
-    CorruptReadBack,
+    /// None by the observer (the board's link corrupts every parameter read-back: the commit
+    /// succeeds, the verification after it fails).
+    Nothing,
     /// Raise the interrupt flag once this many positions are captured.
     InterruptAfter(usize),
 }
@@ -43,10 +43,6 @@ impl SessionObserver for Saboteur<'_> {
         match (event, &self.sabotage) {
             (SessionEvent::Prompt { target, .. }, _) => self.prompted.push(target.name.clone()),
             (SessionEvent::Verified(_), Sabotage::VanishAfterCommit) => self.sim.vanish(),
-            (SessionEvent::Fitted(_), Sabotage::CorruptReadBack) => self
-                .sim
-                .set_param_tamper(Some(ParamTamper::FlipReadBack { bit: 20 }))
-                .expect("the simulator takes the tamper"),
             (SessionEvent::Captured { captured, .. }, Sabotage::InterruptAfter(n))
                 if captured >= n =>
             {
@@ -58,8 +54,15 @@ impl SessionObserver for Saboteur<'_> {
 }
 
 fn board(seed: u64) -> SimHandle {
+    board_with_tamper(seed, None)
+}
+
+/// A board whose link can tamper with parameter sets (the tamper is set at start: a link
+/// started without faults is a plain pipe).
+fn board_with_tamper(seed: u64, tamper: Option<ParamTamper>) -> SimHandle {
     let mut options = SimOptions::new(seed);
     options.speed = SPEED;
+    options.faults.param_tamper = tamper;
     SimServer::start(options).expect("the simulator starts")
 }
 
@@ -136,9 +139,9 @@ fn a_board_lost_after_the_commit_leaves_the_session_saved_and_says_its_set_canno
 
 #[test]
 fn a_corrupted_read_back_after_the_commit_says_the_board_holds_the_new_set() {
-    let sim = board(32);
+    let sim = board_with_tamper(32, Some(ParamTamper::FlipReadBack { bit: 20 }));
     let dir = session_dir("readback");
-    let (result, _) = sabotaged_session(&sim, Sabotage::CorruptReadBack, &dir);
+    let (result, _) = sabotaged_session(&sim, Sabotage::Nothing, &dir);
     let error = result.expect_err("the verification sees the corrupted read-back");
     let message = error.to_string();
     let progress = load_progress(&dir).expect("the progress is saved");
@@ -228,7 +231,7 @@ fn calibrate_command(dir: &Path, resume: bool) -> std::process::Command {
 #[test]
 fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     let dir = session_dir("sigint");
-    let mut child = calibrate_command(&dir, false)
+    let child = calibrate_command(&dir, false)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
