@@ -347,9 +347,15 @@ pub struct CalibrateArgs {
     /// Print the machine-readable summary (JSON) on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
-    /// Session directory (default: `imucal-session-<unix time>` here).
-    #[arg(long, short = 'o')]
+    /// Session directory (default: `imucal-session-<unix time>` here). It is written as the
+    /// session goes, so a session stopped early (Ctrl-C, a timeout, a lost board) keeps what
+    /// was measured.
+    #[arg(long, short = 'o', conflicts_with = "resume")]
     pub out: Option<PathBuf>,
+    /// Continue the unfinished session saved in SESSION_DIR on the same board: the positions
+    /// already captured are not asked for again, and the directory is updated.
+    #[arg(long, value_name = "SESSION_DIR")]
+    pub resume: Option<PathBuf>,
     /// Where to record the calibration.
     #[command(flatten)]
     pub history: super::history::RecordArgs,

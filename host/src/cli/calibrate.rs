@@ -9,12 +9,17 @@
 //! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`.
 
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
 use imucal::device::{choose_port, list_ports, DeviceClient};
-use imucal::session::{run_session, save_session, summary, SessionOptions};
+use imucal::session::{
+    load_poses, load_progress, run_session_with, save_session, summary, CapturedPose,
+    SessionControl, SessionOptions,
+};
 
 use super::args::CalibrateArgs;
 use super::calibrate_extend::close_the_loop;
@@ -35,7 +40,44 @@ fn unix_now() -> u64 {
         .map_or(0, |d| d.as_secs())
 }
 
-/// The die temperature profile of `--sim-temperature`.
+/// The poses of the unfinished session in `dir`, refused when it was started on another board.
+fn resumed_poses(dir: &Path, device_id: &str) -> anyhow::Result<Vec<CapturedPose>> {
+    let progress = load_progress(dir)?;
+    anyhow::ensure!(
+        progress.device_id == device_id,
+        "{} was measured on device {}, but this board is device {device_id}; resume it on its \
+         own board, or start a new session without --resume",
+        dir.display(),
+        progress.device_id
+    );
+    let poses = load_poses(&dir.join("poses.json"))?;
+    let names: Vec<&str> = poses.iter().map(|p| p.target.name.as_str()).collect();
+    eprintln!(
+        "Resuming {} (stopped: {}): {} positions already captured ({}); they are not asked for \
+         again",
+        dir.display(),
+        progress.stopped_because,
+        poses.len(),
+        names.join(", ")
+    );
+    Ok(poses)
+}
+
+/// A flag set by the first Ctrl-C, which the session notices at its next batch of samples (it
+/// then stops the stream and saves); a second Ctrl-C ends the program at once.
+fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let handler_flag = Arc::clone(&flag);
+    ctrlc::set_handler(move || {
+        if handler_flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        eprintln!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
+    })
+    .context("the Ctrl-C handler could not be installed")?;
+    Ok(flag)
+}
+
 /// Run `imucal calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
@@ -109,15 +151,30 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         welcome.firmware_version.patch,
         welcome.scales.sample_rate_hz
     );
+    let dir = args
+        .resume
+        .clone()
+        .or_else(|| args.out.clone())
+        .unwrap_or_else(|| PathBuf::from(format!("imucal-session-{}", unix_now())));
+    let control = SessionControl {
+        resume: match &args.resume {
+            Some(dir) => resumed_poses(dir, &welcome.device_id.to_string())?,
+            None => Vec::new(),
+        },
+        save_dir: Some(dir.clone()),
+        interrupt: Some(interrupt_flag()?),
+    };
     let plain = args.yes || !std::io::stderr().is_terminal();
     let mut terminal = Terminal::new(plain, args.yes, port.clone());
-    let outcome = run_session(&mut client, &options, &mut terminal)?;
+    let result = run_session_with(&mut client, &options, &mut terminal, &control);
     terminal.bar.finish_and_clear();
-
-    let dir = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("imucal-session-{}", unix_now())));
+    let outcome = result.map_err(|error| {
+        anyhow::anyhow!(
+            "{error}\nContinue with `imucal calibrate --resume {}`{}",
+            dir.display(),
+            if args.sim { " --sim (same seed)" } else { "" }
+        )
+    })?;
     save_session(&outcome, &dir)?;
     if let Some(sim) = &simulated {
         sim.save_truth(&dir.join("truth.json"))?;

@@ -139,6 +139,9 @@ impl<L: Read + Write> Runner<'_, L> {
                                 t_s: last_sample_s + 0.5 * f64::from(stats.duration_ms) * 1e-3,
                             });
                             last_progress = Instant::now();
+                            if let Some(pose) = captured.last() {
+                                self.journal.pose(pose)?;
+                            }
                             self.observer.event(&SessionEvent::Captured {
                                 target: actual,
                                 samples: stats.n,

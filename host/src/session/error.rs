@@ -102,4 +102,17 @@ pub enum SessionError {
         /// The operating system's error.
         cause: std::io::Error,
     },
+    /// The user stopped the session (Ctrl-C).
+    #[error("the session was stopped by the user (Ctrl-C)")]
+    Interrupted,
+    /// The session stopped early; says what the board holds and where the measurements are.
+    #[error("{cause}\nThe board holds {board_holds}.\nSession: {saved}.")]
+    Stopped {
+        /// Why the session stopped.
+        cause: Box<SessionError>,
+        /// What the board holds now, in words (read back from the board when a write started).
+        board_holds: String,
+        /// Where what was measured is saved, or why it is not.
+        saved: String,
+    },
 }

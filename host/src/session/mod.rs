@@ -37,6 +37,7 @@ pub mod extend;
 pub mod gyro_fit;
 pub mod gyro_moves;
 pub mod hold;
+pub mod journal;
 mod mag_phase;
 pub mod motion;
 pub mod options;
@@ -49,12 +50,16 @@ pub mod solve;
 pub mod targets;
 
 use std::io::{Read, Write};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::Instant;
 
 use imucal_protocol::{ParamStatus, StreamKind};
 
 use crate::device::DeviceClient;
 use crate::fit::Vec3;
+use journal::Journal;
 use runner::{unix_now, Runner};
 
 pub use coverage::{Coverage, REGIONS};
@@ -62,6 +67,7 @@ pub use error::SessionError;
 pub use events::{MagSample, Phase, SessionEvent, SessionObserver, Unattended};
 pub use extend::{analyse_poses, extend_set, ExtendedSet};
 pub use gyro_fit::{GyroBudgets, GyroScale};
+pub use journal::{load_progress, Progress, PROGRESS_FILE};
 pub use motion::{MotionMonitor, MotionState};
 pub use options::SessionOptions;
 pub use rest::{rest_errors, RestErrors};
@@ -114,14 +120,61 @@ pub struct SessionOutcome {
     pub lost_samples: u64,
 }
 
+/// How a session runs beyond its options: where it is saved as it goes, poses of an earlier
+/// run to continue from, and a flag that stops it.
+#[derive(Debug, Clone, Default)]
+pub struct SessionControl {
+    /// The session directory, written after every pose and phase ([`journal`]); when the
+    /// session stops early it holds what was measured and `progress.json` says why.
+    pub save_dir: Option<PathBuf>,
+    /// Poses of an earlier run of this session ([`load_poses`]); their positions are not asked
+    /// for again.
+    pub resume: Vec<CapturedPose>,
+    /// Set (by a Ctrl-C handler) to stop the session at the next batch of samples.
+    pub interrupt: Option<Arc<AtomicBool>>,
+}
+
 /// Run a whole guided session on a connected board (see the module documentation).
 pub fn run_session<L: Read + Write>(
     client: &mut DeviceClient<L>,
     options: &SessionOptions,
     observer: &mut dyn SessionObserver,
 ) -> Result<SessionOutcome, SessionError> {
+    run_session_with(client, options, observer, &SessionControl::default())
+}
+
+/// Run a whole guided session under `control`. A session that stops early (a lost board, a
+/// lost reply, a timeout, `control.interrupt`) stops the stream, saves what was measured, and
+/// returns [`SessionError::Stopped`], which says what the board holds: its earlier set when no
+/// write started, otherwise the active CRC read back (or that it could not be read).
+pub fn run_session_with<L: Read + Write>(
+    client: &mut DeviceClient<L>,
+    options: &SessionOptions,
+    observer: &mut dyn SessionObserver,
+    control: &SessionControl,
+) -> Result<SessionOutcome, SessionError> {
     options.validate()?;
-    let mut runner = Runner::new(client, options, observer);
+    let device_id = client.welcome().device_id.to_string();
+    let mut journal = Journal::new(control.save_dir.as_deref(), device_id)?;
+    journal.resume_with(&control.resume);
+    let mut runner = Runner::new(
+        client,
+        options,
+        observer,
+        journal,
+        control.interrupt.clone(),
+    );
+    match run_phases(&mut runner, &control.resume) {
+        Ok(outcome) => Ok(outcome),
+        Err(cause) => Err(runner.stop(cause)),
+    }
+}
+
+fn run_phases<L: Read + Write>(
+    runner: &mut Runner<'_, L>,
+    resumed: &[CapturedPose],
+) -> Result<SessionOutcome, SessionError> {
+    let options = runner.options;
     // A stream left running by an earlier program would mix into the replies' timing.
     runner.client.stop_stream()?;
     let board_start_s = runner.board_time_s()?;
@@ -137,7 +190,12 @@ pub fn run_session<L: Read + Write>(
             )));
         }
         // Each round captures every position once more; poses of earlier rounds do not count.
-        let mut this_round = Vec::new();
+        // A resumed session's poses count for the first round.
+        let mut this_round = if round == 1 {
+            resumed.to_vec()
+        } else {
+            Vec::new()
+        };
         runner.capture_targets(&twelve, &mut this_round, options.pose_timeout, false)?;
         runner.client.stop_stream()?;
         captured.append(&mut this_round);
@@ -147,9 +205,12 @@ pub fn run_session<L: Read + Write>(
         .observer
         .event(&SessionEvent::Note(extra_positions_note.clone()));
 
+    runner.journal.stage("magnetometer", &runner.mag)?;
     let coverage = runner.magnetometer()?;
+    runner.journal.stage("rest", &runner.mag)?;
     runner.wait_for_rest()?;
     let raw_rest = runner.measure(StreamKind::Raw)?;
+    runner.journal.stage("fitting", &runner.mag)?;
 
     // Every moving sample shows a field direction: those of the moves between the positions and
     // of the tumble.
@@ -180,6 +241,7 @@ pub fn run_session<L: Read + Write>(
         options.gyro_budgets,
     )
     .ok();
+    runner.journal.fitted(&fit.set)?;
     runner.observer.event(&SessionEvent::Fitted(&fit));
 
     let mut outcome = SessionOutcome {
@@ -202,7 +264,10 @@ pub fn run_session<L: Read + Write>(
         gyro_scale,
     };
     if runner.observer.confirm_write(&outcome.fit) {
+        runner.write_started = Some(outcome.fit.set.crc32());
+        runner.journal.stage("writing", &runner.mag)?;
         let status = runner.client.write_params_verified(&outcome.fit.set)?;
+        runner.journal.stage("after", &runner.mag)?;
         outcome.written = true;
         outcome.verified = true;
         outcome.param_status = Some(status);

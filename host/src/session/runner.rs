@@ -3,12 +3,15 @@
 //! sphere fit, and the raw stream of each move between two holds for the gyroscope's scale).
 
 use std::io::{Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use imucal_protocol::StreamKind;
 
 use super::error::SessionError;
 use super::events::{MagSample, Phase, SessionObserver};
+use super::journal::Journal;
 use super::motion::MotionMonitor;
 use super::options::SessionOptions;
 use super::targets::Target;
@@ -27,6 +30,12 @@ pub(super) struct Runner<'a, L: Read + Write> {
     pub(super) moves: Vec<Vec<UnitSample>>,
     /// The axis the moves were last said to lack rotation about.
     pub(super) lacking_axis: Option<usize>,
+    /// The session directory, written as the session goes.
+    pub(super) journal: Journal,
+    /// Set (by a Ctrl-C handler) to stop the session at the next batch of samples.
+    pub(super) interrupt: Option<Arc<AtomicBool>>,
+    /// The CRC of the set once its write started: from then on the board may hold it.
+    pub(super) write_started: Option<u32>,
 }
 
 /// Seconds since the Unix epoch (0 if the clock is before it).
@@ -50,8 +59,13 @@ impl<'a, L: Read + Write> Runner<'a, L> {
         client: &'a mut DeviceClient<L>,
         options: &'a SessionOptions,
         observer: &'a mut dyn SessionObserver,
+        journal: Journal,
+        interrupt: Option<Arc<AtomicBool>>,
     ) -> Self {
         Self {
+            journal,
+            interrupt,
+            write_started: None,
             monitor: MotionMonitor::new(options.window_s, options.thresholds),
             client,
             options,
@@ -64,6 +78,13 @@ impl<'a, L: Read + Write> Runner<'a, L> {
     }
 
     pub(super) fn read_chunk(&mut self) -> Result<SampleChunk, SessionError> {
+        if self
+            .interrupt
+            .as_ref()
+            .is_some_and(|flag| flag.load(Ordering::SeqCst))
+        {
+            return Err(SessionError::Interrupted);
+        }
         match self.client.next_samples(self.options.read_timeout)? {
             Some(chunk) => Ok(chunk),
             None => Err(SessionError::NoSamples {
@@ -101,5 +122,42 @@ impl<'a, L: Read + Write> Runner<'a, L> {
 
     pub(super) fn board_time_s(&mut self) -> Result<f64, SessionError> {
         Ok(self.client.status()?.uptime_ms as f64 * 1e-3)
+    }
+
+    /// End a session stopped by `cause`: stop the stream (the board may be gone), say what the
+    /// board holds, save what was measured.
+    pub(super) fn stop(&mut self, cause: SessionError) -> SessionError {
+        let _ = self.client.stop_stream();
+        let board_holds = self.board_holds();
+        let saved = self
+            .journal
+            .stopped(&cause.to_string(), &board_holds, &self.mag);
+        SessionError::Stopped {
+            cause: Box::new(cause),
+            board_holds,
+            saved,
+        }
+    }
+
+    /// What the board holds, read back from it once a write has started.
+    fn board_holds(&mut self) -> String {
+        let Some(written) = self.write_started else {
+            return "its earlier calibration: nothing was written".to_string();
+        };
+        match self.client.status() {
+            Ok(status) if status.active_crc == written => {
+                format!("the new set (active CRC {written:#010x}, read back from the board)")
+            }
+            Ok(status) => format!(
+                "its earlier set, not the new one (active CRC {:#010x} read back; the new set's \
+                 is {written:#010x})",
+                status.active_crc
+            ),
+            Err(error) => format!(
+                "a set that could not be read back ({error}); the new set's CRC is \
+                 {written:#010x}: compare it with `imucal info --port {}` once the board answers",
+                self.client.port_name()
+            ),
+        }
     }
 }

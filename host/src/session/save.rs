@@ -15,7 +15,7 @@ use super::gyro_fit::GyroScale;
 use super::rest::RestErrors;
 use super::solve::{CapturedPose, FieldSource, Uncertainties, Verdict};
 use super::targets::Target;
-use super::{SessionError, SessionOutcome};
+use super::{MagSample, SessionError, SessionOutcome};
 use crate::device::ParamsFile;
 use crate::fit::Vec3;
 
@@ -156,12 +156,27 @@ pub fn load_poses(path: &Path) -> Result<Vec<CapturedPose>, SessionError> {
         .collect())
 }
 
-fn write_file(path: &Path, text: &str) -> Result<PathBuf, SessionError> {
-    std::fs::write(path, text).map_err(|cause| SessionError::Save {
+/// Write `text` to `path` through a temporary file and a rename, so a session file is never
+/// left half-written when the program is stopped mid-write.
+pub(super) fn write_file(path: &Path, text: &str) -> Result<PathBuf, SessionError> {
+    let save_error = |cause| SessionError::Save {
         path: path.display().to_string(),
         cause,
-    })?;
+    };
+    let mut partial = path.as_os_str().to_owned();
+    partial.push(".partial");
+    let partial = PathBuf::from(partial);
+    std::fs::write(&partial, text).map_err(save_error)?;
+    std::fs::rename(&partial, path).map_err(save_error)?;
     Ok(path.to_path_buf())
+}
+
+/// Create the session directory `dir` if missing.
+pub(super) fn create_dir(dir: &Path) -> Result<(), SessionError> {
+    std::fs::create_dir_all(dir).map_err(|cause| SessionError::Save {
+        path: dir.display().to_string(),
+        cause,
+    })
 }
 
 fn json_text<T: Serialize>(value: &T) -> String {
@@ -169,19 +184,9 @@ fn json_text<T: Serialize>(value: &T) -> String {
     serde_json::to_string_pretty(value).unwrap_or_default()
 }
 
-/// Write the session directory `dir` (created if missing); returns the files written.
-pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>, SessionError> {
-    std::fs::create_dir_all(dir).map_err(|cause| SessionError::Save {
-        path: dir.display().to_string(),
-        cause,
-    })?;
-    let mut written = Vec::new();
-    written.push(write_file(
-        &dir.join("params.json"),
-        &ParamsFile::from(&outcome.fit.set).to_json(),
-    )?);
-    let poses: Vec<PoseRecord<'_>> = outcome
-        .poses
+/// The text of `poses.json` for `poses`.
+pub(super) fn poses_json(poses: &[CapturedPose]) -> String {
+    let records: Vec<PoseRecord<'_>> = poses
         .iter()
         .map(|p| PoseRecord {
             target: &p.target.name,
@@ -191,9 +196,13 @@ pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>
             stats: &p.stats,
         })
         .collect();
-    written.push(write_file(&dir.join("poses.json"), &json_text(&poses))?);
+    json_text(&records)
+}
+
+/// The text of `mag_samples.csv` for `samples`.
+pub(super) fn mag_csv(samples: &[MagSample]) -> String {
     let mut csv = String::from("t_s,mx,my,mz,temp_c,phase\n");
-    for m in &outcome.mag_samples {
+    for m in samples {
         csv.push_str(&format!(
             "{:.6},{:.4},{:.4},{:.4},{:.3},{}\n",
             m.t_s,
@@ -204,11 +213,22 @@ pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>
             m.phase.name()
         ));
     }
-    written.push(write_file(&dir.join("mag_samples.csv"), &csv)?);
-    written.push(write_file(
-        &dir.join("summary.json"),
-        &json_text(&summary(outcome)),
-    )?);
+    csv
+}
+
+/// Write the session directory `dir` (created if missing); returns the files written.
+pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>, SessionError> {
+    create_dir(dir)?;
+    let written = vec![
+        write_file(
+            &dir.join("params.json"),
+            &ParamsFile::from(&outcome.fit.set).to_json(),
+        )?,
+        write_file(&dir.join("poses.json"), &poses_json(&outcome.poses))?,
+        write_file(&dir.join("mag_samples.csv"), &mag_csv(&outcome.mag_samples))?,
+        write_file(&dir.join("summary.json"), &json_text(&summary(outcome)))?,
+    ];
+    super::journal::finish(dir)?;
     Ok(written)
 }
 

@@ -1,0 +1,296 @@
+//! Nothing a session measured is lost: a guided session on the simulated board that stops early
+//! (the board vanishes after the commit, the read-back is corrupted, the user interrupts) saves
+//! what it measured, says what the board holds, and can be resumed without asking again for the
+//! positions already captured.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use imucal::device::DeviceClient;
+use imucal::fit::Vec3;
+use imucal::session::{
+    load_poses, load_progress, run_session_with, save_session, SessionControl, SessionError,
+    SessionEvent, SessionObserver, SessionOptions, PROGRESS_FILE,
+};
+use imucal_hil_sim::link_faults::ParamTamper;
+use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
+
+/// Simulated seconds per wall second, as in `calibrate_sim.rs`: the serving loop keeps up with
+/// the full-rate stream on a loaded machine.
+const SPEED: f64 = 5.0;
+
+/// What the test does to the board or the session, and when.
+enum Sabotage {
+    /// Close the board's port once the set is verified (during the "after" measurement).
+    VanishAfterCommit,
+    /// None by the observer (the board's link corrupts every parameter read-back: the commit
+    /// succeeds, the verification after it fails).
+    Nothing,
+    /// Raise the interrupt flag once this many positions are captured.
+    InterruptAfter(usize),
+}
+
+struct Saboteur<'a> {
+    sim: &'a SimHandle,
+    sabotage: Sabotage,
+    interrupt: Arc<AtomicBool>,
+    prompted: Vec<String>,
+}
+
+impl SessionObserver for Saboteur<'_> {
+    fn event(&mut self, event: &SessionEvent<'_>) {
+        match (event, &self.sabotage) {
+            (SessionEvent::Prompt { target, .. }, _) => self.prompted.push(target.name.clone()),
+            (SessionEvent::Verified(_), Sabotage::VanishAfterCommit) => self.sim.vanish(),
+            (SessionEvent::Captured { captured, .. }, Sabotage::InterruptAfter(n))
+                if captured >= n =>
+            {
+                self.interrupt.store(true, Ordering::SeqCst);
+            }
+            _ => {}
+        }
+    }
+}
+
+fn board(seed: u64) -> SimHandle {
+    board_with_tamper(seed, None)
+}
+
+/// A board whose link can tamper with parameter sets (the tamper is set at start: a link
+/// started without faults is a plain pipe).
+fn board_with_tamper(seed: u64, tamper: Option<ParamTamper>) -> SimHandle {
+    let mut options = SimOptions::new(seed);
+    options.speed = SPEED;
+    options.faults.param_tamper = tamper;
+    SimServer::start(options).expect("the simulator starts")
+}
+
+fn options_for(sim: &SimHandle) -> SessionOptions {
+    let truth = sim.truth();
+    SessionOptions {
+        gravity_mps2: truth.world.gravity_mps2,
+        field_ut: Some(Vec3::from(truth.world.field_world_ut).norm()),
+        ..SessionOptions::default()
+    }
+}
+
+fn session_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("imucal-safety-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// Run a session on `sim` under `sabotage`, saving into `dir`.
+fn sabotaged_session(
+    sim: &SimHandle,
+    sabotage: Sabotage,
+    dir: &Path,
+) -> (
+    Result<imucal::session::SessionOutcome, SessionError>,
+    Vec<String>,
+) {
+    let interrupt = Arc::new(AtomicBool::new(false));
+    let mut observer = Saboteur {
+        sim,
+        sabotage,
+        interrupt: Arc::clone(&interrupt),
+        prompted: Vec::new(),
+    };
+    let control = SessionControl {
+        save_dir: Some(dir.to_path_buf()),
+        resume: Vec::new(),
+        interrupt: Some(interrupt),
+    };
+    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let result = run_session_with(&mut client, &options_for(sim), &mut observer, &control);
+    (result, observer.prompted)
+}
+
+#[test]
+fn a_board_lost_after_the_commit_leaves_the_session_saved_and_says_its_set_cannot_be_read() {
+    let sim = board(31);
+    let dir = session_dir("vanish");
+    let (result, _) = sabotaged_session(&sim, Sabotage::VanishAfterCommit, &dir);
+    let error = result.expect_err("the after measurement cannot finish without the board");
+    let message = error.to_string();
+    assert!(
+        matches!(&error, SessionError::Stopped { board_holds, .. }
+            if board_holds.contains("could not be read back")),
+        "{message}"
+    );
+    assert!(message.contains(&dir.display().to_string()), "{message}");
+    // Everything measured before the loss is on disk: twelve positions, the fitted set, and
+    // the progress file naming the stage and the board's state.
+    let poses = load_poses(&dir.join("poses.json")).expect("the poses are saved");
+    assert!(poses.len() >= 12, "{} poses saved", poses.len());
+    assert!(dir.join("params.json").is_file());
+    let progress = load_progress(&dir).expect("the progress is saved");
+    assert_eq!(progress.stage, "stopped");
+    assert!(
+        progress.stopped_because.contains("stage `after`"),
+        "{}",
+        progress.stopped_because
+    );
+    assert!(progress.params_crc.is_some());
+    assert!(progress.mag_samples > 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_corrupted_read_back_after_the_commit_says_the_board_holds_the_new_set() {
+    let sim = board_with_tamper(32, Some(ParamTamper::FlipReadBack { bit: 20 }));
+    let dir = session_dir("readback");
+    let (result, _) = sabotaged_session(&sim, Sabotage::Nothing, &dir);
+    let error = result.expect_err("the verification sees the corrupted read-back");
+    let message = error.to_string();
+    let progress = load_progress(&dir).expect("the progress is saved");
+    let crc = progress
+        .params_crc
+        .clone()
+        .expect("the fitted set is saved");
+    // The board committed the set: its status (not the tampered read-back) shows the new CRC.
+    assert!(
+        matches!(&error, SessionError::Stopped { board_holds, .. }
+            if board_holds.starts_with("the new set") && board_holds.contains(&crc)),
+        "{message}"
+    );
+    assert!(progress.board_holds.starts_with("the new set"));
+    assert!(
+        progress.stopped_because.contains("stage `writing`"),
+        "{}",
+        progress.stopped_because
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_again() {
+    let sim = board(33);
+    let dir = session_dir("resume");
+    let (result, _) = sabotaged_session(&sim, Sabotage::InterruptAfter(5), &dir);
+    let error = result.expect_err("the interrupt stops the session");
+    assert!(
+        matches!(&error, SessionError::Stopped { cause, board_holds, .. }
+            if matches!(**cause, SessionError::Interrupted)
+                && board_holds.contains("nothing was written")),
+        "{error}"
+    );
+    let first = load_poses(&dir.join("poses.json")).expect("the poses are saved");
+    assert_eq!(first.len(), 5, "the poses captured before the interrupt");
+    assert!(load_progress(&dir).is_ok());
+
+    // Resume on the same board: the five positions are neither prompted for nor captured again.
+    let mut observer = Saboteur {
+        sim: &sim,
+        sabotage: Sabotage::InterruptAfter(usize::MAX),
+        interrupt: Arc::new(AtomicBool::new(false)),
+        prompted: Vec::new(),
+    };
+    let control = SessionControl {
+        save_dir: Some(dir.clone()),
+        resume: first.clone(),
+        interrupt: None,
+    };
+    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let outcome = run_session_with(&mut client, &options_for(&sim), &mut observer, &control)
+        .expect("the resumed session completes");
+    for pose in &first {
+        assert!(
+            !observer.prompted.contains(&pose.target.name),
+            "{} was asked for again",
+            pose.target.name
+        );
+        let again = outcome
+            .poses
+            .iter()
+            .filter(|p| p.target.index == pose.target.index)
+            .count();
+        assert_eq!(again, 1, "{} captured once", pose.target.name);
+    }
+    assert!(outcome.poses.len() >= 12 && outcome.verified);
+    save_session(&outcome, &dir).expect("the finished session is saved");
+    assert!(
+        !dir.join(PROGRESS_FILE).exists(),
+        "a finished session has no progress file"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `imucal calibrate --sim` in `dir` with the history in a temporary database.
+fn calibrate_command(dir: &Path, resume: bool) -> std::process::Command {
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"));
+    command
+        .args(["calibrate", "--sim", "--yes", "--speed", "10"])
+        .arg(if resume { "--resume" } else { "-o" })
+        .arg(dir)
+        .env("IMUCAL_DB", dir.with_extension("db"));
+    command
+}
+
+#[test]
+fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
+    let dir = session_dir("sigint");
+    let child = calibrate_command(&dir, false)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run imucal");
+    // Interrupt once the first positions are on disk (the session saves after every pose).
+    let started = std::time::Instant::now();
+    while load_poses(&dir.join("poses.json")).map_or(0, |p| p.len()) < 2 {
+        assert!(
+            started.elapsed().as_secs() < 300,
+            "no pose was saved within 300 s"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("send SIGINT");
+    assert!(sent.success());
+    let out = child.wait_with_output().expect("imucal ends");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "an interrupted session fails");
+    assert!(stderr.contains("stopped by the user"), "{stderr}");
+    assert!(stderr.contains("nothing was written"), "{stderr}");
+    assert!(stderr.contains("--resume"), "{stderr}");
+    let progress = load_progress(&dir).expect("the progress is saved");
+    assert!(progress.poses >= 2, "{progress:?}");
+    let saved = load_poses(&dir.join("poses.json")).expect("the poses are saved");
+    assert_eq!(saved.len(), progress.poses);
+
+    // `--resume` does not ask for the saved positions again. A fresh simulated board's person
+    // waits in the first position, which is already captured, until asked for a pose there; so
+    // the resumed run stops at its pose timeout, which saves too and names only the others.
+    let out = calibrate_command(&dir, true)
+        .args(["--pose-timeout", "20"])
+        .output()
+        .expect("run imucal");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("already captured"), "{stderr}");
+    let missing = stderr
+        .split("still needed: ")
+        .nth(1)
+        .and_then(|rest| rest.split(". ").next())
+        .unwrap_or_else(|| panic!("the timeout names the positions still needed: {stderr}"));
+    let missing: Vec<&str> = missing.split(", ").collect();
+    assert_eq!(missing.len(), 12 - saved.len(), "{missing:?}");
+    for pose in &saved {
+        assert!(
+            !missing.contains(&pose.target.name.as_str()),
+            "{} is asked for again",
+            pose.target.name
+        );
+    }
+    let kept = load_poses(&dir.join("poses.json")).expect("the poses are still saved");
+    assert_eq!(kept, saved);
+    assert!(load_progress(&dir)
+        .expect("the progress is saved")
+        .stopped_because
+        .contains("no new orientation"));
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(dir.with_extension("db"));
+}
