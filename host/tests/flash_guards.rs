@@ -65,9 +65,15 @@ fn a_misspelled_sensor_key_is_refused_naming_it_and_the_valid_keys() {
     let _ = std::fs::remove_file(&path);
     let stderr = text(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("`acel` is not a parameter file key"), "{stderr}");
+    assert!(
+        stderr.contains("`acel` is not a parameter file key"),
+        "{stderr}"
+    );
     assert!(stderr.contains("accel, gyro, mag"), "{stderr}");
-    assert!(fake.state().requests.is_empty(), "the board was not touched");
+    assert!(
+        fake.state().requests.is_empty(),
+        "the board was not touched"
+    );
 }
 
 #[test]
@@ -167,7 +173,9 @@ fn implausible_metadata_is_refused_naming_the_field() {
     let good = ParamsFile::from(&calibrated_set());
     let cases: [(&str, fn(&mut ParamsFile)); 3] = [
         ("residuals.accel_rms", |f| f.residuals.accel_rms = -1e30),
-        ("reference.gravity_mps2", |f| f.reference.gravity_mps2 = -1.0),
+        ("reference.gravity_mps2", |f| {
+            f.reference.gravity_mps2 = -1.0
+        }),
         ("reference.field_ut", |f| f.reference.field_ut = 0.0),
     ];
     for (field, spoil) in cases {
@@ -180,5 +188,8 @@ fn implausible_metadata_is_refused_naming_the_field() {
         assert!(stderr.contains(field), "{field}: {stderr}");
     }
     let _ = std::fs::remove_file(&path);
-    assert!(fake.state().requests.is_empty(), "the board was not touched");
+    assert!(
+        fake.state().requests.is_empty(),
+        "the board was not touched"
+    );
 }

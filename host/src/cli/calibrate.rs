@@ -14,8 +14,8 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
 use imucal::device::{choose_port, list_ports, DeviceClient, ParamsFile};
-use imucal_protocol::Welcome;
 use imucal::session::{run_session, save_session, summary, SessionOptions};
+use imucal_protocol::Welcome;
 
 use super::args::CalibrateArgs;
 use super::calibrate_extend::close_the_loop;

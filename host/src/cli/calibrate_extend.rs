@@ -49,15 +49,21 @@ pub(super) fn close_the_loop(
     }
     eprintln!("Extended terms added: {}", extended.added.join(", "));
     let base_path = dir.join("params-base.json");
-    std::fs::write(&base_path, ParamsFile::from(&outcome.fit.set)
+    std::fs::write(
+        &base_path,
+        ParamsFile::from(&outcome.fit.set)
             .bound_to(client.welcome())
-            .to_json())
-        .with_context(|| format!("could not write {}", base_path.display()))?;
+            .to_json(),
+    )
+    .with_context(|| format!("could not write {}", base_path.display()))?;
     let params_path = dir.join("params.json");
-    std::fs::write(&params_path, ParamsFile::from(&extended.set)
+    std::fs::write(
+        &params_path,
+        ParamsFile::from(&extended.set)
             .bound_to(client.welcome())
-            .to_json())
-        .with_context(|| format!("could not write {}", params_path.display()))?;
+            .to_json(),
+    )
+    .with_context(|| format!("could not write {}", params_path.display()))?;
     if !outcome.written {
         eprintln!(
             "The base set was not written, so neither is the extended one; `imucal flash {}` \

@@ -4,9 +4,9 @@
 
 use std::time::{Duration, Instant};
 
+use super::write_policy::{WriteDecision, WritePolicy};
 use imucal::session::{SessionEvent, SessionFit, SessionObserver, SessionOutcome, VerdictLevel};
 use imucal_protocol::StreamKind;
-use super::write_policy::{WriteDecision, WritePolicy};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// The terminal interface of a session.

@@ -366,7 +366,8 @@ fn merge_with_active(
     let left_out: Vec<SensorArg> = [SensorArg::Accel, SensorArg::Gyro, SensorArg::Mag]
         .into_iter()
         .filter(|s| {
-            file.absent_sensors.iter().any(|a| a == s.key()) || file.not_fitted.contains_key(s.key())
+            file.absent_sensors.iter().any(|a| a == s.key())
+                || file.not_fitted.contains_key(s.key())
         })
         .collect();
     let identity = CalibrationSet::identity();
@@ -390,11 +391,17 @@ fn merge_with_active(
         client.get_params()?
     };
     for sensor in &left_out {
-        let source = if kept.contains(sensor) { &active } else { &identity };
+        let source = if kept.contains(sensor) {
+            &active
+        } else {
+            &identity
+        };
         let why = file
             .not_fitted
             .get(sensor.key())
-            .map_or("it is not in the file".to_string(), |w| format!("not fitted: {w}"));
+            .map_or("it is not in the file".to_string(), |w| {
+                format!("not fitted: {w}")
+            });
         match sensor {
             SensorArg::Accel => {
                 set.accel = source.accel;
@@ -415,7 +422,11 @@ fn merge_with_active(
         } else {
             "is set to identity (--reset)"
         };
-        eprintln!("imucal: note: `{shown}` has no {} calibration ({why}); the board's {} {what}", sensor.key(), sensor.key());
+        eprintln!(
+            "imucal: note: `{shown}` has no {} calibration ({why}); the board's {} {what}",
+            sensor.key(),
+            sensor.key()
+        );
     }
     Ok(())
 }

@@ -93,8 +93,14 @@ mod tests {
 
     #[test]
     fn yes_writes_a_usable_set_but_not_a_poor_one() {
-        assert_eq!(YES.settled(VerdictLevel::Good, true), Some(WriteDecision::Write));
-        assert_eq!(YES.settled(VerdictLevel::Marginal, true), Some(WriteDecision::Write));
+        assert_eq!(
+            YES.settled(VerdictLevel::Good, true),
+            Some(WriteDecision::Write)
+        );
+        assert_eq!(
+            YES.settled(VerdictLevel::Marginal, true),
+            Some(WriteDecision::Write)
+        );
         assert_eq!(
             YES.settled(VerdictLevel::Poor, true),
             Some(WriteDecision::RefusedPoor)
@@ -107,8 +113,14 @@ mod tests {
             yes: false,
             accept_poor: true,
         };
-        assert_eq!(accept.settled(VerdictLevel::Poor, true), Some(WriteDecision::Write));
-        assert_eq!(accept.settled(VerdictLevel::Poor, false), Some(WriteDecision::Write));
+        assert_eq!(
+            accept.settled(VerdictLevel::Poor, true),
+            Some(WriteDecision::Write)
+        );
+        assert_eq!(
+            accept.settled(VerdictLevel::Poor, false),
+            Some(WriteDecision::Write)
+        );
     }
 
     #[test]

@@ -97,7 +97,12 @@ impl DeviceJson {
                 self.ranges.gyro_rads,
                 board.ranges.gyro_rads,
             ),
-            ("magnetometer", "µT", self.ranges.mag_ut, board.ranges.mag_ut),
+            (
+                "magnetometer",
+                "µT",
+                self.ranges.mag_ut,
+                board.ranges.mag_ut,
+            ),
         ] {
             if differs(file, now) {
                 found.push(format!(
