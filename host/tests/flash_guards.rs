@@ -166,12 +166,15 @@ fn a_file_that_names_no_board_is_written_with_a_note() {
     assert_eq!(fake.state().active, calibrated_set());
 }
 
+/// A change that makes one metadata value implausible.
+type Spoil = fn(&mut ParamsFile);
+
 #[test]
 fn implausible_metadata_is_refused_naming_the_field() {
     let fake = FakeDevice::start(FakeConfig::default());
     let path = temp_file("metadata.json");
     let good = ParamsFile::from(&calibrated_set());
-    let cases: [(&str, fn(&mut ParamsFile)); 3] = [
+    let cases: [(&str, Spoil); 3] = [
         ("residuals.accel_rms", |f| f.residuals.accel_rms = -1e30),
         ("reference.gravity_mps2", |f| {
             f.reference.gravity_mps2 = -1.0

@@ -43,7 +43,8 @@ fn sensor_names(welcome: &Welcome) -> Vec<String> {
         (s.temp, "temp"),
     ]
     .into_iter()
-    .filter_map(|(present, name)| present.then(|| name.to_string()))
+    .filter(|(present, _)| *present)
+    .map(|(_, name)| name.to_string())
     .collect()
 }
 
