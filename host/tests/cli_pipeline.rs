@@ -9,7 +9,11 @@ use imucal_hil_sim::board::PersonSchedule;
 use imucal_hil_sim::serve::{SimOptions, SimServer};
 
 fn imucal(args: &[&str]) -> Output {
+    // The history goes to a database of this test process, never the user's.
+    let db =
+        std::env::temp_dir().join(format!("imucal-cli-pipeline-{}.sqlite", std::process::id()));
     Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", db)
         .args(args)
         .output()
         .expect("the imucal binary runs")

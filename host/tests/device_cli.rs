@@ -11,6 +11,7 @@ use imucal_protocol::CalibrationSet;
 
 fn imucal(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", temp_file("history.sqlite"))
         .args(args)
         .output()
         .expect("the imucal binary runs")
@@ -131,6 +132,7 @@ fn an_absent_port_fails_with_exit_code_1_and_a_sentence() {
 /// Runs `imucal args…`, killing it after `limit`; `None` when it had to be killed.
 fn imucal_within(args: &[&str], limit: std::time::Duration) -> Option<Output> {
     let mut child = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", temp_file("history.sqlite"))
         .args(args)
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())

@@ -96,7 +96,15 @@ fn calibrate_location_writes_the_modelled_field_as_the_reference() {
         .total_ut;
     let dir = std::env::temp_dir().join(format!("imucal-location-{}", std::process::id()));
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
-        .args(["calibrate", "--sim", "--yes", "--json", "--speed", "30"])
+        .args([
+            "calibrate",
+            "--sim",
+            "--yes",
+            "--json",
+            "--speed",
+            "30",
+            "--no-history",
+        ])
         .args(["--location", "48.14,11.58", "-o"])
         .arg(&dir)
         .output()

@@ -341,9 +341,14 @@ pub struct CalibrateArgs {
     /// --sim-effect accel.bias_temperature=2 --rounds 3 --analyze --yes
     #[arg(long, verbatim_doc_comment)]
     pub analyze: bool,
-    /// Unattended: write without asking, and print plain progress lines.
+    /// Unattended: write a good or marginal calibration without asking, and print plain
+    /// progress lines. A poor one is not written (exit code 1) unless --accept-poor.
     #[arg(long, short = 'y')]
     pub yes: bool,
+    /// Write the calibration even when its verdict is poor (by default a poor calibration is
+    /// saved but not written; the prompt's default is then "no").
+    #[arg(long)]
+    pub accept_poor: bool,
     /// Print the machine-readable summary (JSON) on stdout instead of the table.
     #[arg(long)]
     pub json: bool,

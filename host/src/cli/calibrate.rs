@@ -15,16 +15,18 @@ use std::sync::Arc;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
-use imucal::device::{choose_port, list_ports, DeviceClient};
+use imucal::device::{choose_port, list_ports, DeviceClient, ParamsFile};
 use imucal::session::{
     load_poses, load_progress, run_session_with, save_session, summary, CapturedPose,
     SessionControl, SessionOptions,
 };
+use imucal_protocol::Welcome;
 
 use super::args::CalibrateArgs;
 use super::calibrate_extend::close_the_loop;
 use super::calibrate_sim::Simulated;
 use super::calibrate_view::{before_after_table, Terminal};
+use super::write_policy::{refused_poor, WriteDecision, WritePolicy};
 
 fn duration_arg(name: &str, seconds: f64) -> anyhow::Result<Duration> {
     anyhow::ensure!(
@@ -76,6 +78,14 @@ fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
     })
     .context("the Ctrl-C handler could not be installed")?;
     Ok(flag)
+}
+
+/// Binds the saved parameter file to the board it was measured on, so that `flash` can tell
+/// it from another board's.
+fn bind_saved_params(path: &std::path::Path, welcome: &Welcome) -> anyhow::Result<()> {
+    let file = ParamsFile::load(path)?.bound_to(welcome);
+    std::fs::write(path, file.to_json())
+        .with_context(|| format!("could not write {}", path.display()))
 }
 
 /// Run `imucal calibrate`.
@@ -165,7 +175,11 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         interrupt: Some(interrupt_flag()?),
     };
     let plain = args.yes || !std::io::stderr().is_terminal();
-    let mut terminal = Terminal::new(plain, args.yes, port.clone());
+    let policy = WritePolicy {
+        yes: args.yes,
+        accept_poor: args.accept_poor,
+    };
+    let mut terminal = Terminal::new(plain, policy, port.clone());
     let result = run_session_with(&mut client, &options, &mut terminal, &control);
     terminal.bar.finish_and_clear();
     let outcome = result.map_err(|error| {
@@ -176,6 +190,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         )
     })?;
     save_session(&outcome, &dir)?;
+    bind_saved_params(&dir.join("params.json"), &welcome)?;
     if let Some(sim) = &simulated {
         sim.save_truth(&dir.join("truth.json"))?;
     }
@@ -192,6 +207,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             &outcome,
             &dir,
             args.json,
+            policy,
         )?)
     } else {
         None
@@ -206,7 +222,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         println!();
         print!("{}", before_after_table(&outcome));
-        if let Some(Some(extended)) = &closed {
+        if let Some(Ok(Some(extended))) = &closed {
             println!(
                 "With the extended set at rest: |a| error {:.3} mg, |m| error {:.3} %, gyro rate \
                  {:.4} °/s",
@@ -237,5 +253,13 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             dir.join("params.json").display()
         );
     }
-    recorded
+    recorded?;
+    // Nothing written because of the verdict is a failure for scripts, after all is saved.
+    if terminal.decision == Some(WriteDecision::RefusedPoor) {
+        return Err(refused_poor("The calibration", &dir.join("params.json")));
+    }
+    if let Some(Err(params)) = closed {
+        return Err(refused_poor("The extended set", &params));
+    }
+    Ok(())
 }

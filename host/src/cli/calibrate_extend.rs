@@ -1,6 +1,8 @@
 //! `imucal calibrate --analyze`: the residual analysis of the session's poses, and the extended
 //! set (the effects it accepts as the firmware's terms) written and checked at rest.
 
+use std::path::PathBuf;
+
 use anyhow::Context;
 use imucal::analysis::report;
 use imucal::device::DeviceClient;
@@ -10,15 +12,20 @@ use imucal::session::{
 };
 use imucal_protocol::StreamKind;
 
+use super::write_policy::{WriteDecision, WritePolicy};
+
 /// `--analyze`: the residual analysis of the poses, and the extended set written and checked at
-/// rest when it adds anything. Returns the at-rest errors with the extended set, if written.
+/// rest when it adds anything and `policy` allows its verdict. Returns the at-rest errors with
+/// the extended set, if written, or `Err(path)` of the saved set when its verdict kept it off
+/// the board.
 pub(super) fn close_the_loop(
     client: &mut DeviceClient,
     options: &SessionOptions,
     outcome: &SessionOutcome,
     dir: &std::path::Path,
     json: bool,
-) -> anyhow::Result<Option<RestErrors>> {
+    policy: WritePolicy,
+) -> anyhow::Result<Result<Option<RestErrors>, PathBuf>> {
     let analysis = analyse_poses(&outcome.poses, options.gravity_mps2);
     std::fs::write(
         dir.join("analysis.json"),
@@ -38,22 +45,42 @@ pub(super) fn close_the_loop(
     }
     if !extended.extended() {
         eprintln!("The analysis accepted no effect the firmware applies; the base set stays.");
-        return Ok(None);
+        return Ok(Ok(None));
     }
     eprintln!("Extended terms added: {}", extended.added.join(", "));
     let base_path = dir.join("params-base.json");
-    std::fs::write(&base_path, ParamsFile::from(&outcome.fit.set).to_json())
-        .with_context(|| format!("could not write {}", base_path.display()))?;
+    std::fs::write(
+        &base_path,
+        ParamsFile::from(&outcome.fit.set)
+            .bound_to(client.welcome())
+            .to_json(),
+    )
+    .with_context(|| format!("could not write {}", base_path.display()))?;
     let params_path = dir.join("params.json");
-    std::fs::write(&params_path, ParamsFile::from(&extended.set).to_json())
-        .with_context(|| format!("could not write {}", params_path.display()))?;
+    std::fs::write(
+        &params_path,
+        ParamsFile::from(&extended.set)
+            .bound_to(client.welcome())
+            .to_json(),
+    )
+    .with_context(|| format!("could not write {}", params_path.display()))?;
     if !outcome.written {
         eprintln!(
             "The base set was not written, so neither is the extended one; `imucal flash {}` \
              writes it",
             params_path.display()
         );
-        return Ok(None);
+        return Ok(Ok(None));
+    }
+    // The extended terms come from the same poses, so the base fit's verdict is theirs too.
+    let question = format!("Write the extended set to the board on {}", outcome.port);
+    match policy.decide(outcome.fit.verdict.level, &question) {
+        WriteDecision::Write => {}
+        WriteDecision::Declined => {
+            eprintln!("The extended set was not written; the board keeps the base set");
+            return Ok(Ok(None));
+        }
+        WriteDecision::RefusedPoor => return Ok(Err(params_path)),
     }
     let status = client.write_params_verified(&extended.set)?;
     eprintln!(
@@ -69,5 +96,5 @@ pub(super) fn close_the_loop(
     )?;
     let errors = rest_errors(&samples, outcome.fit.gravity_mps2, outcome.fit.field_ut)
         .context("no calibrated samples arrived for the check at rest")?;
-    Ok(Some(errors))
+    Ok(Ok(Some(errors)))
 }

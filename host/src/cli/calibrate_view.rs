@@ -2,9 +2,9 @@
 //! progress and coverage (plain lines with `--yes` or when stderr is not a terminal), the fitted
 //! result and the before/after table.
 
-use std::io::{BufRead, IsTerminal, Write};
 use std::time::{Duration, Instant};
 
+use super::write_policy::{WriteDecision, WritePolicy};
 use imucal::session::{SessionEvent, SessionFit, SessionObserver, SessionOutcome, VerdictLevel};
 use imucal_protocol::StreamKind;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -12,7 +12,9 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 /// The terminal interface of a session.
 pub(super) struct Terminal {
     plain: bool,
-    yes: bool,
+    policy: WritePolicy,
+    /// What became of the offer to write the fitted set (`None` before it is made).
+    pub(super) decision: Option<WriteDecision>,
     port: String,
     pub(super) bar: ProgressBar,
     last_line: Option<Instant>,
@@ -20,7 +22,7 @@ pub(super) struct Terminal {
 }
 
 impl Terminal {
-    pub(super) fn new(plain: bool, yes: bool, port: String) -> Self {
+    pub(super) fn new(plain: bool, policy: WritePolicy, port: String) -> Self {
         let bar = if plain {
             ProgressBar::hidden()
         } else {
@@ -34,7 +36,8 @@ impl Terminal {
         };
         Self {
             plain,
-            yes,
+            policy,
+            decision: None,
             port,
             bar,
             last_line: None,
@@ -288,24 +291,10 @@ impl SessionObserver for Terminal {
     }
 
     fn confirm_write(&mut self, fit: &SessionFit) -> bool {
-        if self.yes || !std::io::stdin().is_terminal() {
-            return true;
-        }
-        let advice = if fit.verdict.level == VerdictLevel::Poor {
-            " (the verdict is poor)"
-        } else {
-            ""
-        };
-        eprint!(
-            "Write these parameters to the board on {}{advice}? [Y/n] ",
-            self.port
-        );
-        let _ = std::io::stderr().flush();
-        let mut answer = String::new();
-        if std::io::stdin().lock().read_line(&mut answer).is_err() {
-            return false;
-        }
-        !matches!(answer.trim().to_lowercase().as_str(), "n" | "no")
+        let question = format!("Write these parameters to the board on {}", self.port);
+        let decision = self.policy.decide(fit.verdict.level, &question);
+        self.decision = Some(decision);
+        decision == WriteDecision::Write
     }
 }
 

@@ -10,7 +10,7 @@ use clap::{Args, Subcommand};
 use imucal::device::{
     choose_port, list_ports, DeviceClient, ParamsFile, RecordingWriter, SampleChunk, UnitSample,
 };
-use imucal_protocol::{CalibrationSet, SensorSet, StreamKind};
+use imucal_protocol::{CalibrationSet, SensorSet, StreamKind, Welcome};
 
 /// Commands that talk to a board.
 #[derive(Debug, Subcommand)]
@@ -58,9 +58,38 @@ pub struct FlashArgs {
     /// Which port to use.
     #[command(flatten)]
     pub port: PortArgs,
+    /// Set this sensor to identity instead of keeping the board's calibration when the file
+    /// leaves it out (repeatable).
+    #[arg(long, value_enum, value_name = "SENSOR")]
+    pub reset: Vec<SensorArg>,
+    /// Write the file even though it was made for another board (or other sensors or ranges).
+    #[arg(long)]
+    pub force_other_device: bool,
     /// Where to record the flash.
     #[command(flatten)]
     pub history: super::history::RecordArgs,
+}
+
+/// A sensor a parameter file calibrates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SensorArg {
+    /// Accelerometer.
+    Accel,
+    /// Gyroscope.
+    Gyro,
+    /// Magnetometer.
+    Mag,
+}
+
+impl SensorArg {
+    /// The key of the sensor in a parameter file.
+    pub fn key(self) -> &'static str {
+        match self {
+            SensorArg::Accel => "accel",
+            SensorArg::Gyro => "gyro",
+            SensorArg::Mag => "mag",
+        }
+    }
 }
 
 /// Arguments of `imucal stream`.
@@ -259,11 +288,10 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
             counts.join(", ")
         );
     }
-    for (sensor, why) in &file.not_fitted {
-        eprintln!("imucal: note: `{shown}` has no {sensor} calibration ({why}); the board's {sensor} is set to identity");
-    }
-    let set = file.to_calibration_set(&shown)?;
+    let mut set = file.to_calibration_set(&shown)?;
     let mut client = connect(&args.port)?;
+    check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
+    merge_with_active(&mut client, &file, &mut set, &args.reset, &shown)?;
     let status = client.write_params_verified(&set)?;
     println!(
         "wrote {shown} to {} (CRC {:#010x}, store sequence {}), committed, and verified by reading it back",
@@ -280,6 +308,127 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     );
     record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
     super::history::record(&args.history, record)
+}
+
+/// Refuses a file made for another board unless `force`; notes a file that names no board.
+fn check_binding(
+    file: &ParamsFile,
+    welcome: &Welcome,
+    shown: &str,
+    force: bool,
+) -> anyhow::Result<()> {
+    let board = welcome.device_id.to_string();
+    let mut mismatches = match &file.device {
+        Some(device) => {
+            for note in device.notes(welcome) {
+                eprintln!("imucal: note: {note}");
+            }
+            device.mismatches(welcome)
+        }
+        None => Vec::new(),
+    };
+    match file.device_id() {
+        None => eprintln!(
+            "imucal: note: `{shown}` names no board (it was fitted from a recording without \
+             --device-id); writing it to device {board}"
+        ),
+        Some(id) if file.device.is_none() && id != board => mismatches.push(format!(
+            "it was fitted for device {id}, but the board is device {board}"
+        )),
+        Some(_) => {}
+    }
+    if mismatches.is_empty() {
+        return Ok(());
+    }
+    if force {
+        eprintln!(
+            "imucal: warning: writing `{shown}` although {} (--force-other-device)",
+            mismatches.join("; ")
+        );
+        return Ok(());
+    }
+    anyhow::bail!(
+        "`{shown}` is not for this board: {}; calibrate this board, or pass \
+         --force-other-device to write it anyway",
+        mismatches.join("; ")
+    )
+}
+
+/// Sensors the file leaves out (absent or not fitted) keep the board's active calibration,
+/// unless `reset` names them; then they become identity.
+fn merge_with_active(
+    client: &mut DeviceClient,
+    file: &ParamsFile,
+    set: &mut CalibrationSet,
+    reset: &[SensorArg],
+    shown: &str,
+) -> anyhow::Result<()> {
+    let left_out: Vec<SensorArg> = [SensorArg::Accel, SensorArg::Gyro, SensorArg::Mag]
+        .into_iter()
+        .filter(|s| {
+            file.absent_sensors.iter().any(|a| a == s.key())
+                || file.not_fitted.contains_key(s.key())
+        })
+        .collect();
+    let identity = CalibrationSet::identity();
+    for sensor in reset {
+        if !left_out.contains(sensor) {
+            anyhow::bail!(
+                "--reset {0} conflicts with `{shown}`, which calibrates the {0}; leave out \
+                 --reset {0} or remove {0} from the file",
+                sensor.key()
+            );
+        }
+    }
+    let kept: Vec<SensorArg> = left_out
+        .iter()
+        .copied()
+        .filter(|s| !reset.contains(s))
+        .collect();
+    let active = if kept.is_empty() {
+        identity
+    } else {
+        client.get_params()?
+    };
+    for sensor in &left_out {
+        let source = if kept.contains(sensor) {
+            &active
+        } else {
+            &identity
+        };
+        let why = file
+            .not_fitted
+            .get(sensor.key())
+            .map_or("it is not in the file".to_string(), |w| {
+                format!("not fitted: {w}")
+            });
+        match sensor {
+            SensorArg::Accel => {
+                set.accel = source.accel;
+                set.residuals.accel_rms = source.residuals.accel_rms;
+            }
+            SensorArg::Gyro => {
+                set.gyro = source.gyro;
+                set.gyro_g_sensitivity = source.gyro_g_sensitivity;
+                set.residuals.gyro_rms = source.residuals.gyro_rms;
+            }
+            SensorArg::Mag => {
+                set.mag = source.mag;
+                set.residuals.mag_rms = source.residuals.mag_rms;
+            }
+        }
+        let what = if kept.contains(sensor) {
+            "keeps its current calibration (--reset to set it to identity)"
+        } else {
+            "is set to identity (--reset)"
+        };
+        eprintln!(
+            "imucal: note: `{shown}` has no {} calibration ({why}); the board's {} {what}",
+            sensor.key(),
+            sensor.key()
+        );
+    }
+    Ok(())
 }
 
 fn seconds_arg(seconds: Option<f64>) -> anyhow::Result<Option<Duration>> {

@@ -14,6 +14,7 @@ pub mod history;
 pub mod import;
 pub mod report;
 pub mod still;
+mod write_policy;
 
 use anyhow::Context;
 use imucal::pipeline::{InputOptions, ReferenceError, References};

@@ -10,6 +10,7 @@
 
 mod client;
 mod error;
+mod params_binding;
 pub mod params_json;
 mod ports;
 mod samples;

@@ -30,8 +30,16 @@ use imucal_protocol::{
 };
 use serde::{Deserialize, Serialize};
 
+pub use super::params_binding::{DeviceJson, RangesJson};
+
 /// Format version of the parameter file written by this tool.
 pub const PARAMS_FILE_FORMAT: u16 = 2;
+
+/// Largest reference gravity accepted, m/s² (ten times Earth's).
+const MAX_REFERENCE_GRAVITY: f64 = 100.0;
+
+/// Largest reference field accepted, µT (a magnetometer's range is a few mT at most).
+const MAX_REFERENCE_FIELD_UT: f64 = 10_000.0;
 
 /// Oldest parameter file format this tool reads.
 pub const OLDEST_PARAMS_FILE_FORMAT: u16 = 1;
@@ -62,6 +70,26 @@ pub enum ParamsFileError {
         path: String,
         /// The format found.
         found: u16,
+    },
+    /// A top-level key is not one of the file's (a misspelled sensor would otherwise be identity).
+    #[error("`{path}`: `{key}` is not a parameter file key; the keys are {}; correct or remove it", KNOWN_KEYS.join(", "))]
+    UnknownKey {
+        /// The file.
+        path: String,
+        /// The key found.
+        key: String,
+    },
+    /// A reference or residual is outside what it can physically be.
+    #[error("`{path}`: {field} is {value}, but it must be {expected}; correct the file or refit")]
+    Implausible {
+        /// The file.
+        path: String,
+        /// Which value.
+        field: String,
+        /// The value found.
+        value: f64,
+        /// What it must be.
+        expected: &'static str,
     },
     /// A value is not finite or does not fit an `f32`.
     #[error(
@@ -178,7 +206,25 @@ pub struct ResidualsJson {
     pub mag_rms: f64,
 }
 
-/// The whole parameter file. Unknown top-level keys (such as a report) are ignored.
+/// Every top-level key of a parameter file; any other is refused on reading.
+pub const KNOWN_KEYS: [&str; 11] = [
+    "format",
+    "created_unix_s",
+    "accel",
+    "gyro",
+    "mag",
+    "gyro_g_sensitivity",
+    "reference",
+    "residuals",
+    "not_fitted",
+    "provenance",
+    "device",
+];
+
+/// The sensors a parameter file calibrates, by key.
+pub const SENSOR_KEYS: [&str; 3] = ["accel", "gyro", "mag"];
+
+/// The whole parameter file. Unknown top-level keys are refused when it is read.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParamsFile {
     /// File format version ([`PARAMS_FILE_FORMAT`]).
@@ -209,6 +255,13 @@ pub struct ParamsFile {
     /// Where the calibration came from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub provenance: Option<Provenance>,
+    /// The board it was made for (absent in files fitted offline from a recording).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<DeviceJson>,
+    /// Sensors (of [`SENSOR_KEYS`]) absent from the file as read: `flash` keeps the board's
+    /// current calibration for them. Not written.
+    #[serde(skip)]
+    pub absent_sensors: Vec<String>,
 }
 
 impl From<&SensorCalibration> for SensorJson {
@@ -253,6 +306,8 @@ impl From<&CalibrationSet> for ParamsFile {
             },
             not_fitted: BTreeMap::new(),
             provenance: None,
+            device: None,
+            absent_sensors: Vec::new(),
         }
     }
 }
@@ -339,18 +394,82 @@ impl ParamsFile {
     }
 
     /// Parses a parameter file from JSON text; `path` names it in errors.
+    /// Unknown top-level keys, an unsupported format and implausible references or residuals
+    /// are errors naming the field.
     pub fn from_json(text: &str, path: &str) -> Result<Self, ParamsFileError> {
-        let file: Self = serde_json::from_str(text).map_err(|cause| ParamsFileError::Json {
+        let json_error = |cause| ParamsFileError::Json {
             path: path.to_string(),
             cause,
-        })?;
+        };
+        let value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
+        let keys: Vec<String> = value
+            .as_object()
+            .map(|o| o.keys().cloned().collect())
+            .unwrap_or_default();
+        if let Some(key) = keys.iter().find(|k| !KNOWN_KEYS.contains(&k.as_str())) {
+            return Err(ParamsFileError::UnknownKey {
+                path: path.to_string(),
+                key: key.clone(),
+            });
+        }
+        let mut file: Self = serde_json::from_value(value).map_err(json_error)?;
         if !(OLDEST_PARAMS_FILE_FORMAT..=PARAMS_FILE_FORMAT).contains(&file.format) {
             return Err(ParamsFileError::UnsupportedFormat {
                 path: path.to_string(),
                 found: file.format,
             });
         }
+        file.absent_sensors = SENSOR_KEYS
+            .iter()
+            .filter(|k| !keys.iter().any(|key| key == *k))
+            .map(|k| k.to_string())
+            .collect();
+        file.check_metadata(path)?;
         Ok(file)
+    }
+
+    /// References must be physical magnitudes and residuals non-negative RMS values.
+    fn check_metadata(&self, path: &str) -> Result<(), ParamsFileError> {
+        let implausible = |field: &str, value: f64, expected| ParamsFileError::Implausible {
+            path: path.to_string(),
+            field: field.to_string(),
+            value,
+            expected,
+        };
+        // Gravity is 9.76–9.84 m/s² on the Earth's surface; the bounds leave room for a
+        // normalised fit (1) and anything a centrifuge or another planet might be given.
+        let g = self.reference.gravity_mps2;
+        if !(g.is_finite() && g > 0.0 && g <= MAX_REFERENCE_GRAVITY) {
+            return Err(implausible(
+                "reference.gravity_mps2",
+                g,
+                "a positive number of m/s² (9.8 on Earth)",
+            ));
+        }
+        // The geomagnetic field is 22–67 µT; 1 marks a fit normalised to the unit sphere.
+        let h = self.reference.field_ut;
+        if !(h.is_finite() && h > 0.0 && h <= MAX_REFERENCE_FIELD_UT) {
+            return Err(implausible(
+                "reference.field_ut",
+                h,
+                "a positive number of µT (about 25–65 on Earth, 1 for a normalised fit)",
+            ));
+        }
+        let r = &self.residuals;
+        for (field, value) in [
+            ("residuals.accel_rms", r.accel_rms),
+            ("residuals.gyro_rms", r.gyro_rms),
+            ("residuals.mag_rms", r.mag_rms),
+        ] {
+            if !(value.is_finite() && value >= 0.0 && value <= f64::from(f32::MAX)) {
+                return Err(implausible(
+                    field,
+                    value,
+                    "a root mean square: a finite number of zero or more",
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Reads and parses a parameter file.
@@ -361,6 +480,20 @@ impl ParamsFile {
             cause,
         })?;
         Self::from_json(&text, &shown)
+    }
+
+    /// The file bound to the board that sent `welcome` (its id, sensors, ranges, firmware).
+    pub fn bound_to(mut self, welcome: &imucal_protocol::Welcome) -> Self {
+        self.device = Some(DeviceJson::from_welcome(welcome));
+        self
+    }
+
+    /// The device id the file names: its board's, else the one `fit --device-id` recorded.
+    pub fn device_id(&self) -> Option<&str> {
+        self.device.as_ref().map(|d| d.id.as_str()).or(self
+            .provenance
+            .as_ref()
+            .and_then(|p| p.device_id.as_deref()))
     }
 
     /// Pretty JSON text of the file.

@@ -108,6 +108,8 @@ pub fn board_record(seed: u64) -> CalibrationRecord {
             mag_rms: 0.3 * part_factor(&mut rng),
         },
         not_fitted: Default::default(),
+        device: None,
+        absent_sensors: Vec::new(),
         provenance: None,
     };
     let device = format!("{seed:032x}");

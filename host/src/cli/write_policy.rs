@@ -1,0 +1,139 @@
+//! Whether a fitted set may be written to a board: a poor verdict is never written unless the
+//! user says so (`--accept-poor`, or an explicit "y" at the prompt, whose default is "no").
+
+use std::io::{BufRead, IsTerminal, Write};
+
+use imucal::session::VerdictLevel;
+
+/// The user's standing answers for writing a set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct WritePolicy {
+    /// `--yes`: write a usable (good or marginal) set without asking.
+    pub yes: bool,
+    /// `--accept-poor`: write a set whose verdict is poor.
+    pub accept_poor: bool,
+}
+
+/// What became of a set offered for writing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum WriteDecision {
+    /// Write it.
+    Write,
+    /// The user answered no.
+    Declined,
+    /// Not written because its verdict is poor (and neither `--accept-poor` nor "y" said so).
+    RefusedPoor,
+}
+
+impl WritePolicy {
+    /// Decides without asking when the flags or a non-interactive input settle it; otherwise
+    /// asks on the terminal with `question` (a poor verdict defaults to "no").
+    pub(super) fn decide(&self, level: VerdictLevel, question: &str) -> WriteDecision {
+        if let Some(settled) = self.settled(level, std::io::stdin().is_terminal()) {
+            return settled;
+        }
+        let poor = level == VerdictLevel::Poor;
+        let (suffix, choices) = if poor {
+            (" (the verdict is poor)", "[y/N]")
+        } else {
+            ("", "[Y/n]")
+        };
+        eprint!("{question}{suffix}? {choices} ");
+        let _ = std::io::stderr().flush();
+        let mut answer = String::new();
+        if std::io::stdin().lock().read_line(&mut answer).is_err() {
+            return WriteDecision::Declined;
+        }
+        match (answer.trim().to_lowercase().as_str(), poor) {
+            ("y" | "yes", _) => WriteDecision::Write,
+            ("", false) => WriteDecision::Write,
+            ("", true) => WriteDecision::RefusedPoor,
+            _ => WriteDecision::Declined,
+        }
+    }
+}
+
+impl WritePolicy {
+    /// The decision when no question is needed: `--accept-poor` for a poor set, and `--yes`
+    /// or an input that is not a terminal (nobody to ask) for the rest; `None` means ask.
+    fn settled(&self, level: VerdictLevel, interactive: bool) -> Option<WriteDecision> {
+        let poor = level == VerdictLevel::Poor;
+        if poor && self.accept_poor {
+            Some(WriteDecision::Write)
+        } else if self.yes || !interactive {
+            Some(if poor {
+                WriteDecision::RefusedPoor
+            } else {
+                WriteDecision::Write
+            })
+        } else {
+            None
+        }
+    }
+}
+
+/// The error ending a command that wrote nothing because the verdict was poor.
+pub(super) fn refused_poor(what: &str, params: &std::path::Path) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{what} was not written to the board because its verdict is poor (see the reasons \
+         above); redo the positions the reasons name, or, to use it anyway, run again with \
+         --accept-poor or write the saved file with `imucal flash {}`",
+        params.display()
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const YES: WritePolicy = WritePolicy {
+        yes: true,
+        accept_poor: false,
+    };
+
+    #[test]
+    fn yes_writes_a_usable_set_but_not_a_poor_one() {
+        assert_eq!(
+            YES.settled(VerdictLevel::Good, true),
+            Some(WriteDecision::Write)
+        );
+        assert_eq!(
+            YES.settled(VerdictLevel::Marginal, true),
+            Some(WriteDecision::Write)
+        );
+        assert_eq!(
+            YES.settled(VerdictLevel::Poor, true),
+            Some(WriteDecision::RefusedPoor)
+        );
+    }
+
+    #[test]
+    fn accept_poor_writes_a_poor_set_with_or_without_a_terminal() {
+        let accept = WritePolicy {
+            yes: false,
+            accept_poor: true,
+        };
+        assert_eq!(
+            accept.settled(VerdictLevel::Poor, true),
+            Some(WriteDecision::Write)
+        );
+        assert_eq!(
+            accept.settled(VerdictLevel::Poor, false),
+            Some(WriteDecision::Write)
+        );
+    }
+
+    #[test]
+    fn without_a_terminal_a_poor_set_is_refused_and_with_one_the_user_is_asked() {
+        let plain = WritePolicy {
+            yes: false,
+            accept_poor: false,
+        };
+        assert_eq!(
+            plain.settled(VerdictLevel::Poor, false),
+            Some(WriteDecision::RefusedPoor)
+        );
+        assert_eq!(plain.settled(VerdictLevel::Poor, true), None);
+        assert_eq!(plain.settled(VerdictLevel::Good, true), None);
+    }
+}

@@ -1,0 +1,198 @@
+//! What `imucal flash` lets reach a board: misspelled sensors, sensors the file leaves out,
+//! and files made for another board, against a fake board on a pseudo-terminal.
+
+mod device_fake;
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use device_fake::{FakeConfig, FakeDevice};
+use imucal::device::params_json::{DeviceJson, RangesJson};
+use imucal::device::ParamsFile;
+use imucal_protocol::{CalibrationSet, SensorCalibration};
+
+/// A file path unique to this test process.
+fn temp_file(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("imucal-flash-guards-{}-{name}", std::process::id()))
+}
+
+/// Runs `imucal flash FILE --port PORT extra…` with the history in a temporary database.
+fn flash(file: &PathBuf, port: &str, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", temp_file("history.sqlite"))
+        .arg("flash")
+        .arg(file)
+        .args(["--port", port])
+        .args(extra)
+        .output()
+        .expect("the imucal binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn calibrated_set() -> CalibrationSet {
+    let mut set = CalibrationSet::identity();
+    set.accel.b = [0.25, -0.125, 0.0625];
+    set.gyro.b = [0.01, 0.02, -0.03];
+    set.mag.a[0][1] = 0.015;
+    set.mag.b = [12.0, -3.5, 40.0];
+    set
+}
+
+/// The JSON of `set` with the `drop` sensor key removed.
+fn file_without(set: &CalibrationSet, drop: &str) -> String {
+    let mut value: serde_json::Value =
+        serde_json::from_str(&ParamsFile::from(set).to_json()).expect("own output is JSON");
+    value
+        .as_object_mut()
+        .expect("an object")
+        .remove(drop)
+        .expect("the key was there");
+    value.to_string()
+}
+
+#[test]
+fn a_misspelled_sensor_key_is_refused_naming_it_and_the_valid_keys() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let path = temp_file("acel.json");
+    let json = ParamsFile::from(&calibrated_set())
+        .to_json()
+        .replace("\"accel\"", "\"acel\"");
+    std::fs::write(&path, json).expect("temp dir writable");
+    let out = flash(&path, &fake.path, &[]);
+    let _ = std::fs::remove_file(&path);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("`acel` is not a parameter file key"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("accel, gyro, mag"), "{stderr}");
+    assert!(
+        fake.state().requests.is_empty(),
+        "the board was not touched"
+    );
+}
+
+#[test]
+fn a_sensor_the_file_leaves_out_keeps_the_boards_calibration() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let full = calibrated_set();
+    let path = temp_file("full.json");
+    std::fs::write(&path, ParamsFile::from(&full).to_json()).expect("temp dir writable");
+    assert!(flash(&path, &fake.path, &[]).status.success());
+
+    let mut update = CalibrationSet::identity();
+    update.accel.b = [0.5, 0.5, 0.5];
+    std::fs::write(&path, file_without(&update, "mag")).expect("temp dir writable");
+    let out = flash(&path, &fake.path, &[]);
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("keeps its current calibration"), "{stderr}");
+    let active = fake.state().active;
+    assert_eq!(active.accel.b, [0.5, 0.5, 0.5], "the file's accelerometer");
+    assert_eq!(active.mag, full.mag, "the board's magnetometer is kept");
+
+    let out = flash(&path, &fake.path, &["--reset", "mag"]);
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(fake.state().active.mag, SensorCalibration::identity());
+}
+
+#[test]
+fn reset_of_a_sensor_the_file_calibrates_is_refused() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let path = temp_file("reset-conflict.json");
+    std::fs::write(&path, ParamsFile::from(&calibrated_set()).to_json())
+        .expect("temp dir writable");
+    let out = flash(&path, &fake.path, &["--reset", "accel"]);
+    let _ = std::fs::remove_file(&path);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("--reset accel conflicts"), "{stderr}");
+    assert_eq!(fake.state().commits, 0);
+}
+
+fn foreign_file(path: &PathBuf) {
+    let mut file = ParamsFile::from(&calibrated_set());
+    file.device = Some(DeviceJson {
+        id: "00000000000000000000000000001234".to_string(),
+        sensors: vec!["accel".into(), "gyro".into(), "mag".into(), "temp".into()],
+        ranges: RangesJson {
+            accel_mps2: 39.2,
+            gyro_rads: 34.9,
+            mag_ut: 400.0,
+        },
+        firmware: "0.3.1".to_string(),
+    });
+    std::fs::write(path, file.to_json()).expect("temp dir writable");
+}
+
+#[test]
+fn a_file_made_for_another_board_is_refused_unless_forced() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let path = temp_file("foreign.json");
+    foreign_file(&path);
+    let out = flash(&path, &fake.path, &[]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("is not for this board"), "{stderr}");
+    assert!(
+        stderr.contains("made for device 00000000000000000000000000001234"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("--force-other-device"), "{stderr}");
+    assert_eq!(fake.state().commits, 0, "nothing written");
+
+    let out = flash(&path, &fake.path, &["--force-other-device"]);
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(fake.state().active, calibrated_set());
+}
+
+#[test]
+fn a_file_that_names_no_board_is_written_with_a_note() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let path = temp_file("offline.json");
+    std::fs::write(&path, ParamsFile::from(&calibrated_set()).to_json())
+        .expect("temp dir writable");
+    let out = flash(&path, &fake.path, &[]);
+    let _ = std::fs::remove_file(&path);
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("names no board"), "{stderr}");
+    assert_eq!(fake.state().active, calibrated_set());
+}
+
+/// A change that makes one metadata value implausible.
+type Spoil = fn(&mut ParamsFile);
+
+#[test]
+fn implausible_metadata_is_refused_naming_the_field() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let path = temp_file("metadata.json");
+    let good = ParamsFile::from(&calibrated_set());
+    let cases: [(&str, Spoil); 3] = [
+        ("residuals.accel_rms", |f| f.residuals.accel_rms = -1e30),
+        ("reference.gravity_mps2", |f| {
+            f.reference.gravity_mps2 = -1.0
+        }),
+        ("reference.field_ut", |f| f.reference.field_ut = 0.0),
+    ];
+    for (field, spoil) in cases {
+        let mut file = good.clone();
+        spoil(&mut file);
+        std::fs::write(&path, file.to_json()).expect("temp dir writable");
+        let out = flash(&path, &fake.path, &[]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{field}: {stderr}");
+        assert!(stderr.contains(field), "{field}: {stderr}");
+    }
+    let _ = std::fs::remove_file(&path);
+    assert!(
+        fake.state().requests.is_empty(),
+        "the board was not touched"
+    );
+}
