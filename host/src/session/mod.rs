@@ -38,6 +38,7 @@ pub mod gyro_fit;
 pub mod gyro_moves;
 pub mod hold;
 mod mag_phase;
+pub mod motioncal;
 pub mod motion;
 pub mod options;
 pub mod plan;
