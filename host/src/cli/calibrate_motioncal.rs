@@ -62,8 +62,12 @@ pub(super) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         let now = imucal::pipeline::calibrate::now_unix_s();
         PathBuf::from(format!("imucal-session-{now}"))
     });
-    save_motioncal_session(&outcome, &dir)
-        .with_context(|| format!("the session directory `{}` could not be written", dir.display()))?;
+    save_motioncal_session(&outcome, &dir).with_context(|| {
+        format!(
+            "the session directory `{}` could not be written",
+            dir.display()
+        )
+    })?;
     if let Some(sim) = &simulated {
         sim.save_eeprom(&dir.join("sim-eeprom.json"))?;
     }
@@ -153,9 +157,9 @@ impl SimulatedSketch {
                 "stored_count": self.handle.stored_count(),
             })
         });
-        let text = serde_json::to_string_pretty(&value).context("the EEPROM could not be encoded")?;
-        std::fs::write(path, text)
-            .with_context(|| format!("could not write `{}`", path.display()))
+        let text =
+            serde_json::to_string_pretty(&value).context("the EEPROM could not be encoded")?;
+        std::fs::write(path, text).with_context(|| format!("could not write `{}`", path.display()))
     }
 }
 

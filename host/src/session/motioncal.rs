@@ -291,12 +291,13 @@ fn collect<'a, L: Read + Write>(
     let mut mag_started_s = None;
     let mut index = 0usize;
     loop {
-        let reading = client
-            .next_reading(session.read_timeout)?
-            .ok_or(MotionCalError::Timeout {
-                what: "sensor readings",
-                seconds: session.read_timeout.as_secs_f64(),
-            })?;
+        let reading =
+            client
+                .next_reading(session.read_timeout)?
+                .ok_or(MotionCalError::Timeout {
+                    what: "sensor readings",
+                    seconds: session.read_timeout.as_secs_f64(),
+                })?;
         let t_s = index as f64 / options.sample_rate_hz;
         index += 1;
         let sample = UnitSample {
@@ -448,7 +449,10 @@ pub fn save_motioncal_session(
         })
         .collect();
     let text = |v: &serde_json::Value| serde_json::to_string_pretty(v).unwrap_or_default();
-    write("poses.json", text(&serde_json::Value::from(poses)).as_bytes())?;
+    write(
+        "poses.json",
+        text(&serde_json::Value::from(poses)).as_bytes(),
+    )?;
     let limits = &outcome.limitations;
     let summary = serde_json::json!({
         "verdict": outcome.fit.verdict,
