@@ -295,6 +295,28 @@ pub struct StillArgs {
     pub json: bool,
 }
 
+impl CalibrateArgs {
+    /// Whether the board (at --port, or the simulated one) runs a MotionCal sketch.
+    pub fn talks_motioncal(&self) -> bool {
+        let protocol = if self.sim {
+            self.sim_protocol
+        } else {
+            self.protocol
+        };
+        protocol == BoardProtocol::Motioncal
+    }
+}
+
+/// What a board runs, so which protocol talks to it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum BoardProtocol {
+    /// imucal's firmware (binary frames, poses averaged on the board).
+    #[default]
+    Imucal,
+    /// A sketch for PJRC's MotionCal (`Raw:`/`Uni:` lines, the 68-byte calibration packet).
+    Motioncal,
+}
+
 /// Arguments of `imucal calibrate`.
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -314,6 +336,17 @@ pub struct CalibrateArgs {
     #[arg(long, value_enum, default_value = "lsm9ds1", requires = "sim")]
     #[cfg(feature = "sim")]
     pub sim_chip: imucal_hil_sim::board::SensorChip,
+    /// Simulator: what the simulated board runs, imucal's firmware or Adafruit's MotionCal
+    /// calibration sketch.
+    #[arg(long, value_enum, default_value = "imucal", requires = "sim")]
+    pub sim_protocol: BoardProtocol,
+    /// What the board at --port runs: imucal's firmware, or a sketch that prints MotionCal's
+    /// `Raw:`/`Uni:` lines and stores its 68-byte packet (Adafruit_Sensor_Calibration).
+    #[arg(long, value_enum, default_value = "imucal", conflicts_with = "sim")]
+    pub protocol: BoardProtocol,
+    /// MotionCal sketch: readings per second it prints (Adafruit's sketch: 100).
+    #[arg(long, default_value_t = 100.0)]
+    pub sketch_rate: f64,
     /// Simulator: simulated seconds per wall second.
     #[arg(long, default_value_t = 15.0, requires = "sim")]
     pub speed: f64,

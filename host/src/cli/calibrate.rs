@@ -6,7 +6,8 @@
 //! before/after table, and the session directory. With `--analyze` the residual analysis of the
 //! session's poses follows, and the effects it accepts are written as the firmware's extended
 //! terms (`imucal::session::extend`). The screen is `calibrate_view.rs`, the `--analyze` step
-//! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`.
+//! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`, boards that run a MotionCal
+//! sketch `calibrate_motioncal.rs`.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -88,29 +89,15 @@ fn bind_saved_params(path: &std::path::Path, welcome: &Welcome) -> anyhow::Resul
         .with_context(|| format!("could not write {}", path.display()))
 }
 
-/// Run `imucal calibrate`.
-pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        args.gravity.is_finite() && args.gravity > 0.0,
-        "--gravity is {}, but it must be a positive number of m/s²",
-        args.gravity
-    );
+/// The magnetometer's reference from `--field-ut`, or the World Magnetic Model at
+/// `--location` (announced), or `None`.
+pub(super) fn field_reference(args: &CalibrateArgs) -> anyhow::Result<Option<f64>> {
     if let Some(field) = args.field_ut {
         anyhow::ensure!(
             field.is_finite() && field > 0.0,
             "--field-ut is {field}, but it must be a positive number of µT"
         );
     }
-    let simulated = if args.sim {
-        Some(Simulated::start(args)?)
-    } else {
-        None
-    };
-    let port = match (&simulated, &args.port) {
-        (Some(sim), _) => sim.port(),
-        (None, Some(port)) => port.clone(),
-        (None, None) => choose_port(&list_ports()?)?.path.clone(),
-    };
     let modelled = args
         .location
         .as_ref()
@@ -123,25 +110,20 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             model.total_ut, model.inclination_deg
         );
     }
-    let field_ut = args
-        .field_ut
-        .or(modelled.as_ref().map(|m| m.total_ut))
-        .or(simulated.as_ref().map(Simulated::field_ut));
-    if simulated.is_some() {
-        eprintln!(
-            "Simulated board (seed {}, {}× real time) on {port}; field {:.2} µT{}",
-            args.sim_seed,
-            args.speed,
-            field_ut.unwrap_or_default(),
-            if args.field_ut.is_some() || modelled.is_some() {
-                " (given)"
-            } else {
-                " (the simulated site's, as if looked up for the location)"
-            }
-        );
-    }
+    Ok(args.field_ut.or(modelled.as_ref().map(|m| m.total_ut)))
+}
 
-    let options = SessionOptions {
+/// The session's options from the command line.
+pub(super) fn session_options(
+    args: &CalibrateArgs,
+    field_ut: Option<f64>,
+) -> anyhow::Result<SessionOptions> {
+    anyhow::ensure!(
+        args.gravity.is_finite() && args.gravity > 0.0,
+        "--gravity is {}, but it must be a positive number of m/s²",
+        args.gravity
+    );
+    Ok(SessionOptions {
         gravity_mps2: args.gravity,
         field_ut,
         hold: duration_arg("--hold", args.hold)?,
@@ -150,7 +132,41 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         rest_timeout: duration_arg("--rest-timeout", args.rest_timeout)?,
         rounds: usize::from(args.rounds),
         ..SessionOptions::default()
+    })
+}
+
+/// Run `imucal calibrate`.
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    if args.talks_motioncal() {
+        return super::calibrate_motioncal::run(args);
+    }
+    let simulated = if args.sim {
+        Some(Simulated::start(args)?)
+    } else {
+        None
     };
+    let port = match (&simulated, &args.port) {
+        (Some(sim), _) => sim.port(),
+        (None, Some(port)) => port.clone(),
+        (None, None) => choose_port(&list_ports()?)?.path.clone(),
+    };
+    let field_ut = field_reference(args)?.or(simulated.as_ref().map(Simulated::field_ut));
+    if simulated.is_some() {
+        let field_given = args.field_ut.is_some() || args.location.is_some();
+        eprintln!(
+            "Simulated board (seed {}, {}× real time) on {port}; field {:.2} µT{}",
+            args.sim_seed,
+            args.speed,
+            field_ut.unwrap_or_default(),
+            if field_given {
+                " (given)"
+            } else {
+                " (the simulated site's, as if looked up for the location)"
+            }
+        );
+    }
+
+    let options = session_options(args, field_ut)?;
     let mut client = DeviceClient::open(&port)?;
     let welcome = *client.welcome();
     eprintln!(

@@ -40,6 +40,7 @@ pub mod hold;
 pub mod journal;
 mod mag_phase;
 pub mod motion;
+pub mod motioncal;
 pub mod options;
 pub mod plan;
 pub mod rest;

@@ -1,0 +1,191 @@
+//! `imucal calibrate --protocol motioncal` (and `--sim --sim-protocol motioncal`): the guided
+//! session on a board that runs Adafruit's or PJRC's MotionCal calibration sketch
+//! (`imucal::session::motioncal`), with the same screen as imucal's own boards; the simulated
+//! sketch board runs in-process behind a pseudo-terminal.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use imucal::compat::motioncal::RawAccelScaling;
+use imucal::compat::MotionCalClient;
+use imucal::device::{choose_port, list_ports};
+use imucal::session::motioncal::{
+    run_motioncal_session, save_motioncal_session, MotionCalOptions, MotionCalOutcome,
+};
+
+use super::write_policy::WritePolicy;
+use super::args::CalibrateArgs;
+use super::calibrate::{field_reference, session_options};
+use super::calibrate_view::Terminal;
+
+/// Longest wait for the board's `Cal1:`/`Cal2:` echo (Adafruit's sketch prints it every 1.5 s).
+const ECHO_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Run the session on a MotionCal sketch board.
+pub(super) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let field_ut = field_reference(args)?;
+    let options = MotionCalOptions {
+        session: session_options(args, field_ut)?,
+        sample_rate_hz: args.sketch_rate,
+        accept_poor: args.accept_poor,
+        echo_timeout: ECHO_TIMEOUT,
+    };
+    let simulated = if args.sim {
+        Some(SimulatedSketch::start(args)?)
+    } else {
+        None
+    };
+    let port = match (&simulated, &args.port) {
+        (Some(sim), _) => sim.port(),
+        (None, Some(port)) => port.clone(),
+        (None, None) => choose_port(&list_ports()?)?.path.clone(),
+    };
+    if simulated.is_some() {
+        eprintln!(
+            "Simulated MotionCal sketch board (seed {}, {}× real time) on {port}",
+            args.sim_seed, args.speed
+        );
+    }
+    let mut client = MotionCalClient::open(&port, RawAccelScaling::AdafruitSketch)?;
+    eprintln!(
+        "Connected to {port}: a MotionCal sketch board ({} readings/s assumed). It cannot detect \
+         stillness or average poses, so this computer does both from its readings.",
+        args.sketch_rate
+    );
+    let plain = args.yes || !std::io::stderr().is_terminal();
+    let policy = WritePolicy {
+        yes: args.yes,
+        accept_poor: args.accept_poor,
+    };
+    let mut terminal = Terminal::new(plain, policy, port.clone());
+    let outcome = run_motioncal_session(&mut client, &options, &mut terminal)?;
+    terminal.bar.finish_and_clear();
+
+    let dir = args.out.clone().unwrap_or_else(|| {
+        let now = imucal::pipeline::calibrate::now_unix_s();
+        PathBuf::from(format!("imucal-session-{now}"))
+    });
+    save_motioncal_session(&outcome, &dir).with_context(|| {
+        format!(
+            "the session directory `{}` could not be written",
+            dir.display()
+        )
+    })?;
+    if let Some(sim) = &simulated {
+        sim.save_eeprom(&dir.join("sim-eeprom.json"))?;
+    }
+    print_result(&outcome, &dir);
+    if args.json {
+        let summary = std::fs::read_to_string(dir.join("motioncal.json"))
+            .context("the session summary could not be read back")?;
+        println!("{summary}");
+    }
+    Ok(())
+}
+
+fn print_result(outcome: &MotionCalOutcome, dir: &std::path::Path) {
+    let fit = &outcome.fit;
+    let u = &fit.uncertainties;
+    println!();
+    println!(
+        "Readings: {} from {} lines ({} unreadable), {:.1} s of the sketch; {} positions, {} of 26 \
+         magnetometer directions",
+        outcome.readings,
+        if outcome.unified_lines { "Uni:" } else { "Raw:" },
+        outcome.malformed_lines,
+        outcome.session_seconds,
+        outcome.poses.len(),
+        outcome.coverage.covered(1)
+    );
+    println!(
+        "imucal's fit: |a| expected error {:.3} mg, |m| {:.3} %, verdict {:?}{}",
+        u.accel_norm_mg,
+        u.mag_norm_pct,
+        fit.verdict.level,
+        if fit.verdict.reasons.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", fit.verdict.reasons.join("; "))
+        }
+    );
+    print!("{}", outcome.limitations.describe());
+    let cal = &outcome.conversion.calibration;
+    println!(
+        "Sent to the board: accel offsets {:?} m/s², gyro offsets {:?} rad/s, hard iron {:?} µT, \
+         field {:.2} µT",
+        cal.accel_zerog, cal.gyro_zerorate, cal.mag_hardiron, cal.mag_field
+    );
+    match &outcome.echo {
+        Some(echo) => println!(
+            "The board echoed Cal1:/Cal2: matching the packet (largest difference {:.2e}, within \
+             its print precision)",
+            echo.max_difference
+        ),
+        None => println!("Not sent: the board keeps its previous calibration."),
+    }
+    println!(
+        "Saved {} (motioncal.bin is the packet; params.json the full model for `imucal export`)",
+        dir.display()
+    );
+}
+
+/// The simulated sketch board of `--sim --sim-protocol motioncal`.
+#[cfg(feature = "sim")]
+struct SimulatedSketch {
+    handle: imucal_hil_sim::motioncal_serve::MotionCalHandle,
+}
+
+#[cfg(feature = "sim")]
+impl SimulatedSketch {
+    fn start(args: &CalibrateArgs) -> anyhow::Result<Self> {
+        let handle =
+            imucal_hil_sim::motioncal_serve::MotionCalHandle::start(args.sim_seed, args.speed)
+                .context("the simulated sketch board could not start")?;
+        Ok(Self { handle })
+    }
+
+    fn port(&self) -> String {
+        self.handle.port_path().to_string()
+    }
+
+    /// What the simulated board's EEPROM holds, as JSON (null when nothing was stored).
+    fn save_eeprom(&self, path: &std::path::Path) -> anyhow::Result<()> {
+        let value = self.handle.eeprom().map(|e| {
+            serde_json::json!({
+                "accel_zerog": e.accel_zerog,
+                "gyro_zerorate": e.gyro_zerorate,
+                "mag_hardiron": e.mag_hardiron,
+                "mag_field": e.mag_field,
+                "mag_softiron": e.mag_softiron,
+                "stored_count": self.handle.stored_count(),
+            })
+        });
+        let text =
+            serde_json::to_string_pretty(&value).context("the EEPROM could not be encoded")?;
+        std::fs::write(path, text).with_context(|| format!("could not write `{}`", path.display()))
+    }
+}
+
+/// Without the simulator there is no simulated board (`start` explains).
+#[cfg(not(feature = "sim"))]
+enum SimulatedSketch {}
+
+#[cfg(not(feature = "sim"))]
+impl SimulatedSketch {
+    fn start(_args: &CalibrateArgs) -> anyhow::Result<Self> {
+        anyhow::bail!(
+            "this imucal was built without the simulator; rebuild with the default features \
+             (cargo build -p imucal) to use --sim, or give --port"
+        )
+    }
+
+    fn port(&self) -> String {
+        match *self {}
+    }
+
+    fn save_eeprom(&self, _path: &std::path::Path) -> anyhow::Result<()> {
+        match *self {}
+    }
+}

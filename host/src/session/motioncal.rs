@@ -1,0 +1,476 @@
+//! The guided session on a board that runs a MotionCal-compatible sketch (Adafruit's
+//! `calibration.ino` or PJRC's): such a board only prints readings and stores the 68-byte packet,
+//! so the host does what imucal's firmware would. It watches the streamed readings for stillness
+//! ([`MotionMonitor`], as the main session does), averages a hold in one of the twelve positions
+//! itself ([`pose_stats`]), collects the tumble until the magnetometer's sphere is covered, fits
+//! with the library's default methods ([`fit_session`]), puts the result in the symmetric gauge
+//! the packet carries ([`AdafruitCalibration::from_set`]), says what the Adafruit library cannot
+//! apply and what that costs on the captured poses ([`limitations`]), and sends the packet,
+//! checking the board's `Cal1:`/`Cal2:` echo against what was sent.
+//!
+//! The sketch's readings carry no time stamp, so time is the reading index over the sketch's
+//! nominal rate ([`MotionCalOptions::sample_rate_hz`]); no temperature either, so poses carry
+//! [`UNKNOWN_TEMPERATURE_C`] and the set has no temperature terms.
+
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+use imucal_protocol::PoseStats;
+use thiserror::Error;
+
+use super::coverage::{sphere_centre, Coverage, REGIONS};
+use super::events::{SessionEvent, SessionObserver};
+use super::motion::MotionMonitor;
+use super::options::SessionOptions;
+use super::runner::unix_now;
+use super::solve::{fit_session, thin, CapturedPose, SessionFit, VerdictLevel};
+use super::targets::{target_at, twelve_positions, Target};
+use crate::compat::adafruit::{limitations, AdafruitLimitations, Conversion};
+use crate::compat::{AdafruitCalibration, CompatError, EchoCheck, MotionCalClient, MotionCalError};
+use crate::device::UnitSample;
+use crate::fit::{FitError, Vec3};
+
+/// Temperature given to poses: the sketch prints none, and the set carries no temperature terms,
+/// so it only labels the poses.
+pub const UNKNOWN_TEMPERATURE_C: f64 = 25.0;
+/// Readings between two magnetometer coverage reports.
+const COVERAGE_EVERY: usize = 50;
+
+/// How to run the session on a sketch board.
+#[derive(Debug, Clone)]
+pub struct MotionCalOptions {
+    /// The options shared with the main session (stillness, hold, budgets, timeouts).
+    pub session: SessionOptions,
+    /// Readings per second the sketch prints (Adafruit's `calibration.ino`: one per 10 ms loop).
+    pub sample_rate_hz: f64,
+    /// Write even when the verdict is poor.
+    pub accept_poor: bool,
+    /// Longest wait for the board's `Cal1:`/`Cal2:` echo after the packet.
+    pub echo_timeout: Duration,
+}
+
+impl Default for MotionCalOptions {
+    fn default() -> Self {
+        Self {
+            session: SessionOptions::default(),
+            sample_rate_hz: 100.0,
+            accept_poor: false,
+            echo_timeout: Duration::from_secs(10),
+        }
+    }
+}
+
+/// Why the session on a sketch board stopped.
+#[derive(Debug, Error)]
+pub enum MotionCalSessionError {
+    /// Talking to the board failed.
+    #[error(transparent)]
+    Board(#[from] MotionCalError),
+    /// The data could not be fitted.
+    #[error("the calibration could not be fitted: {0}")]
+    Fit(#[from] FitError),
+    /// The fit has no form the packet can carry.
+    #[error(transparent)]
+    Compat(#[from] CompatError),
+    /// An option is out of range.
+    #[error("{0}")]
+    Options(String),
+    /// The positions were not all held before the time ran out.
+    #[error(
+        "only {captured} of {total} positions were held still within {seconds:.0} s (missing: \
+         {missing}); hold each one still for a moment, or give a longer --pose-timeout"
+    )]
+    PositionsMissing {
+        /// Positions held.
+        captured: usize,
+        /// Positions wanted.
+        total: usize,
+        /// Names of those not held.
+        missing: String,
+        /// Time allowed, s.
+        seconds: f64,
+    },
+}
+
+/// Everything the session on a sketch board produced.
+#[derive(Debug, Clone)]
+pub struct MotionCalOutcome {
+    /// Every captured pose, in capture order.
+    pub poses: Vec<CapturedPose>,
+    /// Raw magnetometer readings while the board moved, µT.
+    pub mag_points: Vec<Vec3>,
+    /// Coverage of the magnetometer's sphere when the session stopped collecting.
+    pub coverage: Coverage,
+    /// The fit (imucal's full model).
+    pub fit: SessionFit,
+    /// What the Adafruit library stores of it.
+    pub conversion: Conversion,
+    /// What the library cannot apply and its cost on the poses.
+    pub limitations: AdafruitLimitations,
+    /// The board's echo of the packet, when it was sent.
+    pub echo: Option<EchoCheck>,
+    /// Readings streamed.
+    pub readings: usize,
+    /// Whether the readings came from `Uni:` lines (else `Raw:`).
+    pub unified_lines: bool,
+    /// Lines that started with a known tag but could not be read.
+    pub malformed_lines: u64,
+    /// Sketch time from the first reading to the end of collection, s.
+    pub session_seconds: f64,
+    /// Wall time of the whole session, s.
+    pub wall_seconds: f64,
+}
+
+/// Mean and variance of a hold, as imucal's firmware reports a pose.
+pub fn pose_stats(samples: &[UnitSample]) -> PoseStats {
+    let n = samples.len().max(1) as f64;
+    let moments = |pick: fn(&UnitSample) -> [f64; 3]| {
+        let mean = [0, 1, 2].map(|i| samples.iter().map(|s| pick(s)[i]).sum::<f64>() / n);
+        let var = [0, 1, 2].map(|i| {
+            let sum: f64 = samples.iter().map(|s| (pick(s)[i] - mean[i]).powi(2)).sum();
+            sum / (n - 1.0).max(1.0)
+        });
+        (mean.map(|v| v as f32), var.map(|v| v as f32))
+    };
+    let (accel_mean, accel_var) = moments(|s| s.accel);
+    let (gyro_mean, gyro_var) = moments(|s| s.gyro);
+    let (mag_mean, mag_var) = moments(|s| s.mag);
+    let temps = samples.iter().map(|s| s.temp_c as f32);
+    PoseStats {
+        n: u32::try_from(samples.len()).unwrap_or(u32::MAX),
+        accel_mean,
+        accel_var,
+        gyro_mean,
+        gyro_var,
+        mag_mean,
+        mag_var,
+        temp_mean_c: (samples.iter().map(|s| s.temp_c).sum::<f64>() / n) as f32,
+        temp_min_c: temps.clone().fold(f32::INFINITY, f32::min),
+        temp_max_c: temps.fold(f32::NEG_INFINITY, f32::max),
+        duration_ms: match (samples.first(), samples.last()) {
+            (Some(first), Some(last)) => ((last.t_s - first.t_s) * 1e3).round() as u32,
+            _ => 0,
+        },
+    }
+}
+
+/// The positions and the tumble, watched from the stream.
+struct Collector<'a> {
+    options: &'a MotionCalOptions,
+    twelve: Vec<Target>,
+    monitor: MotionMonitor,
+    poses: Vec<CapturedPose>,
+    hold: Vec<UnitSample>,
+    hold_target: Option<usize>,
+    mag_points: Vec<Vec3>,
+    prompted: Option<usize>,
+}
+
+impl<'a> Collector<'a> {
+    fn new(options: &'a MotionCalOptions) -> Self {
+        let session = &options.session;
+        Self {
+            options,
+            twelve: twelve_positions(),
+            monitor: MotionMonitor::new(session.window_s, session.thresholds),
+            poses: Vec::new(),
+            hold: Vec::new(),
+            hold_target: None,
+            mag_points: Vec::new(),
+            prompted: None,
+        }
+    }
+
+    fn needed(&self) -> Vec<&Target> {
+        self.twelve
+            .iter()
+            .filter(|t| !self.poses.iter().any(|p| p.target.index == t.index))
+            .collect()
+    }
+
+    fn positions_done(&self) -> bool {
+        self.needed().is_empty()
+    }
+
+    /// Coverage of every moving magnetometer reading so far.
+    fn coverage(&self) -> Coverage {
+        let centre = sphere_centre(&self.mag_points).unwrap_or_else(Vec3::zeros);
+        Coverage::of(&self.mag_points, &centre)
+    }
+
+    fn mag_done(&self, coverage: &Coverage) -> bool {
+        let session = &self.options.session;
+        let wanted = (session.mag_accept_fraction * REGIONS as f64).ceil() as usize;
+        self.mag_points.len() >= session.mag_min_samples
+            && coverage.covered(session.mag_min_per_region) >= wanted
+    }
+
+    /// Take one reading; a finished hold becomes a pose.
+    fn push(&mut self, sample: UnitSample, observer: &mut dyn SessionObserver) {
+        let state = self.monitor.push(&sample);
+        let still = state.as_ref().is_some_and(|s| s.still);
+        if !still {
+            self.mag_points.push(Vec3::from(sample.mag));
+        }
+        if self.positions_done() {
+            self.hold.clear();
+            return;
+        }
+        if self.prompted.is_none() {
+            self.prompt(observer);
+        }
+        let Some(state) = state else { return };
+        let at = target_at(&self.twelve, &state.up).map(|t| t.index);
+        let needed = at.is_some_and(|i| self.needed().iter().any(|t| t.index == i));
+        if !(state.still && needed && state.still_for_s >= self.options.session.settle_s) {
+            self.hold.clear();
+            self.hold_target = None;
+            return;
+        }
+        if self.hold_target != at {
+            self.hold.clear();
+            self.hold_target = at;
+        }
+        self.hold.push(sample);
+        let span = self.hold.last().map_or(0.0, |l| l.t_s) - self.hold[0].t_s;
+        if span >= self.options.session.hold.as_secs_f64() {
+            self.finish_hold(observer);
+        }
+    }
+
+    fn finish_hold(&mut self, observer: &mut dyn SessionObserver) {
+        let samples = std::mem::take(&mut self.hold);
+        let Some(target) = self
+            .hold_target
+            .take()
+            .and_then(|i| self.twelve.iter().find(|t| t.index == i))
+        else {
+            return;
+        };
+        let t_s = (samples[0].t_s + samples[samples.len() - 1].t_s) / 2.0;
+        self.poses.push(CapturedPose {
+            target: target.clone(),
+            stats: pose_stats(&samples),
+            t_s,
+        });
+        observer.event(&SessionEvent::Captured {
+            target,
+            samples: u32::try_from(samples.len()).unwrap_or(u32::MAX),
+            captured: self.poses.len(),
+            total: self.twelve.len(),
+        });
+        self.prompt(observer);
+    }
+
+    /// Name the next position, or start the tumble once all are held.
+    fn prompt(&mut self, observer: &mut dyn SessionObserver) {
+        let next = self.needed().first().map(|t| (*t).clone());
+        match next {
+            Some(target) => {
+                self.prompted = Some(target.index);
+                observer.event(&SessionEvent::Prompt {
+                    target: &target,
+                    captured: self.poses.len(),
+                    total: self.twelve.len(),
+                });
+            }
+            None => observer.event(&SessionEvent::MagPrompt),
+        }
+    }
+}
+
+/// Read the board until the twelve positions are held and the sphere is covered.
+fn collect<'a, L: Read + Write>(
+    client: &mut MotionCalClient<L>,
+    options: &'a MotionCalOptions,
+    observer: &mut dyn SessionObserver,
+) -> Result<(Collector<'a>, usize), MotionCalSessionError> {
+    let session = &options.session;
+    let mut collector = Collector::new(options);
+    let pose_limit_s = session.pose_timeout.as_secs_f64();
+    let mut mag_started_s = None;
+    let mut index = 0usize;
+    loop {
+        let reading =
+            client
+                .next_reading(session.read_timeout)?
+                .ok_or(MotionCalError::Timeout {
+                    what: "sensor readings",
+                    seconds: session.read_timeout.as_secs_f64(),
+                })?;
+        let t_s = index as f64 / options.sample_rate_hz;
+        index += 1;
+        let sample = UnitSample {
+            t_s,
+            accel: reading.accel,
+            gyro: reading.gyro,
+            mag: reading.mag,
+            temp_c: UNKNOWN_TEMPERATURE_C,
+        };
+        collector.push(sample, observer);
+        if !collector.positions_done() {
+            if t_s > pose_limit_s {
+                let missing: Vec<String> =
+                    collector.needed().iter().map(|t| t.name.clone()).collect();
+                return Err(MotionCalSessionError::PositionsMissing {
+                    captured: collector.poses.len(),
+                    total: collector.twelve.len(),
+                    missing: missing.join(", "),
+                    seconds: pose_limit_s,
+                });
+            }
+            continue;
+        }
+        let started = *mag_started_s.get_or_insert(t_s);
+        if index % COVERAGE_EVERY == 0 {
+            let coverage = collector.coverage();
+            observer.event(&SessionEvent::MagCoverage {
+                covered: coverage.covered(session.mag_min_per_region),
+                regions: REGIONS,
+                samples: collector.mag_points.len(),
+                empty: coverage.empty_regions(session.mag_min_per_region),
+            });
+            if collector.mag_done(&coverage) {
+                return Ok((collector, index));
+            }
+        }
+        if t_s - started > session.mag_timeout.as_secs_f64() {
+            observer.event(&SessionEvent::Note(format!(
+                "the magnetometer phase reached its {:.0} s limit; fitting the readings so far",
+                session.mag_timeout.as_secs_f64()
+            )));
+            return Ok((collector, index));
+        }
+    }
+}
+
+/// Run the guided session on a sketch board: collect, fit, explain, send and check the echo.
+pub fn run_motioncal_session<L: Read + Write>(
+    client: &mut MotionCalClient<L>,
+    options: &MotionCalOptions,
+    observer: &mut dyn SessionObserver,
+) -> Result<MotionCalOutcome, MotionCalSessionError> {
+    options
+        .session
+        .validate()
+        .map_err(|e| MotionCalSessionError::Options(e.to_string()))?;
+    if !(options.sample_rate_hz.is_finite() && options.sample_rate_hz > 0.0) {
+        return Err(MotionCalSessionError::Options(format!(
+            "the sketch's reading rate is {} Hz, but it must be a positive number",
+            options.sample_rate_hz
+        )));
+    }
+    let wall_start = Instant::now();
+    let (collector, readings) = collect(client, options, observer)?;
+    let coverage = collector.coverage();
+    let session = &options.session;
+    let fit = fit_session(
+        &collector.poses,
+        &thin(&collector.mag_points, session.mag_max_fit_samples),
+        session.gravity_mps2,
+        session.field_ut,
+        session.budgets,
+        unix_now(),
+    )?;
+    observer.event(&SessionEvent::Fitted(&fit));
+    let conversion = AdafruitCalibration::from_set(&fit.set)?;
+    let pose_means: Vec<UnitSample> = collector
+        .poses
+        .iter()
+        .map(|p| UnitSample {
+            t_s: p.t_s,
+            accel: p.stats.accel_mean.map(f64::from),
+            gyro: p.stats.gyro_mean.map(f64::from),
+            mag: p.stats.mag_mean.map(f64::from),
+            temp_c: f64::from(p.stats.temp_mean_c),
+        })
+        .collect();
+    let limits = limitations(&fit.set, &pose_means)?;
+    let poor = fit.verdict.level == VerdictLevel::Poor;
+    let echo = if poor && !options.accept_poor {
+        observer.event(&SessionEvent::Note(format!(
+            "the verdict is poor ({}); the packet was not sent (--accept-poor sends it anyway)",
+            fit.verdict.reasons.join("; ")
+        )));
+        None
+    } else if observer.confirm_write(&fit) {
+        Some(client.send_calibration(&conversion.calibration, options.echo_timeout)?)
+    } else {
+        None
+    };
+    Ok(MotionCalOutcome {
+        poses: collector.poses,
+        mag_points: collector.mag_points,
+        coverage,
+        fit,
+        conversion,
+        limitations: limits,
+        echo,
+        readings,
+        unified_lines: client.has_unified_lines(),
+        malformed_lines: client.malformed_lines(),
+        session_seconds: readings as f64 / options.sample_rate_hz,
+        wall_seconds: wall_start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Write the session directory: `params.json` (imucal's full model, for `imucal export`),
+/// `motioncal.bin` (the packet as sent), `sensor_calib.json` (the library's flash file),
+/// `poses.json` and `motioncal.json` (limitations, echo, verdict). Returns the files written.
+pub fn save_motioncal_session(
+    outcome: &MotionCalOutcome,
+    dir: &std::path::Path,
+) -> std::io::Result<Vec<std::path::PathBuf>> {
+    use crate::device::ParamsFile;
+    std::fs::create_dir_all(dir)?;
+    let mut written = Vec::new();
+    let mut write = |name: &str, bytes: &[u8]| -> std::io::Result<()> {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes)?;
+        written.push(path);
+        Ok(())
+    };
+    write(
+        "params.json",
+        ParamsFile::from(&outcome.fit.set).to_json().as_bytes(),
+    )?;
+    let cal = &outcome.conversion.calibration;
+    let packet = crate::compat::encode_packet(cal).map_err(std::io::Error::other)?;
+    write("motioncal.bin", &packet)?;
+    write("sensor_calib.json", cal.to_sensor_calib_json().as_bytes())?;
+    let poses: Vec<serde_json::Value> = outcome
+        .poses
+        .iter()
+        .map(|p| {
+            serde_json::json!({
+                "target": p.target.name, "target_index": p.target.index, "t_s": p.t_s,
+                "stats": p.stats,
+            })
+        })
+        .collect();
+    let text = |v: &serde_json::Value| serde_json::to_string_pretty(v).unwrap_or_default();
+    write(
+        "poses.json",
+        text(&serde_json::Value::from(poses)).as_bytes(),
+    )?;
+    let limits = &outcome.limitations;
+    let summary = serde_json::json!({
+        "verdict": outcome.fit.verdict,
+        "readings": outcome.readings,
+        "unified_lines": outcome.unified_lines,
+        "malformed_lines": outcome.malformed_lines,
+        "session_seconds": outcome.session_seconds,
+        "poses": outcome.poses.len(),
+        "magnetometer_regions_covered": outcome.coverage.covered(1),
+        "adafruit": cal,
+        "not_applied": limits.unapplied.iter().map(|t| format!("{}: {}", t.sensor, t.term)).collect::<Vec<_>>(),
+        "cost_accel_mg": limits.accel_error_mg,
+        "cost_gyro_dps": limits.gyro_error_dps,
+        "cost_mag_pct_of_field": limits.mag_error_pct_of_field,
+        "mag_rotation_deg": limits.mag_rotation_deg,
+        "sent": outcome.echo.is_some(),
+        "echo_max_difference": outcome.echo.as_ref().map(|e| e.max_difference),
+    });
+    write("motioncal.json", text(&summary).as_bytes())?;
+    Ok(written)
+}
