@@ -9,6 +9,7 @@
 //! ([`from_session_dir`]) or from any recording and its fits ([`ReportData`] filled by the
 //! caller), then rendered with [`render_html`].
 
+pub mod gain;
 pub mod plots;
 pub mod recording;
 
@@ -19,6 +20,10 @@ use serde_json::Value;
 use crate::device::ParamsFile;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
 use imucal_protocol::apply_sensor;
+
+/// File of a session directory holding the `--analyze` residual analysis as text, with the
+/// extended terms it added; the report shows it when present.
+pub const ANALYSIS_TEXT_FILE: &str = "analysis.txt";
 
 /// Why a report could not be built or written.
 #[derive(Debug, thiserror::Error)]
@@ -73,6 +78,9 @@ pub struct SensorParameters {
     pub b: Vec3,
     /// One-sigma uncertainties of each entry, where the fit gives them.
     pub std: Option<CalibrationStd>,
+    /// Output units per input unit at nominal sensitivity, when known: with it the table shows
+    /// the scale errors and axis angles with the unit conversion taken out ([`gain::gain`]).
+    pub to_nominal: Option<f64>,
 }
 
 /// Accelerometer still poses.
@@ -128,6 +136,8 @@ pub struct ReportData {
     pub verdict: Vec<String>,
     /// Other remarks (local field check, thinning, method choices).
     pub notes: Vec<String>,
+    /// The residual analysis and the extended terms it added (`calibrate --analyze`), as text.
+    pub analysis: Option<String>,
     /// The board's parameters over time from the calibration history, `(title, SVG)` per
     /// figure (see `history::plot::parameters_over_time`); empty when there is no history.
     pub history: Vec<(String, String)>,
@@ -303,8 +313,10 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
             a: mat3_of(&s.a),
             b: Vec3::from(s.b),
             std: None,
+            to_nominal: Some(1.0),
         })
         .collect(),
+        analysis: std::fs::read_to_string(dir.join(ANALYSIS_TEXT_FILE)).ok(),
         ..ReportData::default()
     };
     let summary_path = dir.join("summary.json");
@@ -412,12 +424,55 @@ fn parameter_table(p: &SensorParameters) -> String {
         rows.push_str(&cell(p.b[r], p.std.map(|s| s.b[r])));
         rows.push_str("</tr>");
     }
+    let readable = p
+        .to_nominal
+        .and_then(|k| gain::gain(&p.a, k))
+        .map_or(String::new(), |g| {
+            format!("<p>{}</p>", escape(&gain::gain_text(&g, 3)))
+        });
     format!(
-        "<h3>{}</h3><p class=small>y = A·(x − b); x in {}, y in {}</p><table><tr><th></th><th colspan=3>A</th><th>b</th></tr>{rows}</table>",
+        "<h3>{}</h3><p class=small>y = A·(x − b); x in {}, y in {}</p><table><tr><th></th><th colspan=3>A</th><th>b</th></tr>{rows}</table>{readable}",
         escape(&p.name),
         escape(&p.unit_in),
         escape(&p.unit_out)
     )
+}
+
+/// Coverage counted as the guided session's screen counts it: the raw samples' directions from
+/// their sphere centre in the 26 regions, each covered with the session's minimum of samples.
+fn session_regions_text(raw: &[Vec3]) -> String {
+    use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
+    let Some(centre) = sphere_centre(raw) else {
+        return "directions not countable (no sphere centre)".to_string();
+    };
+    let min = crate::session::SessionOptions::default().mag_min_per_region;
+    let cover = Coverage::of(raw, &centre);
+    let empty = cover.empty_regions(min);
+    let missing = if empty.is_empty() {
+        String::new()
+    } else {
+        format!(" (empty: {})", empty.join(" "))
+    };
+    format!(
+        "{} of {REGIONS} directions reached, as counted on the session's screen{missing}",
+        cover.covered(min)
+    )
+}
+
+/// Smallest temperature span worth an axis, °C: below it a plot against temperature is a
+/// vertical stripe. Die temperature sensors of consumer IMUs resolve 0.003–0.06 °C, and a
+/// temperature coefficient only shows over a span many times that.
+const MIN_TEMPERATURE_SPAN_C: f64 = 0.5;
+
+/// Whether `temps` span enough to plot against.
+fn temperature_varies(temps: &[f64]) -> bool {
+    let (lo, hi) = temps
+        .iter()
+        .filter(|t| t.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(*t), hi.max(*t))
+        });
+    hi - lo >= MIN_TEMPERATURE_SPAN_C
 }
 
 fn figure(svg: &str) -> String {
@@ -507,7 +562,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             &pairs(&mag.time_s, &before),
             &pairs(&mag.time_s, &after),
         )?));
-        if let Some(temp) = &mag.temp_c {
+        if let Some(temp) = mag.temp_c.as_ref().filter(|t| temperature_varies(t)) {
             body.push_str(&figure(&plots::residual_against(
                 "magnetometer norm error against temperature",
                 "temperature (°C)",
@@ -525,7 +580,10 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             .count();
         summary_rows.push((
             "sphere coverage".to_string(),
-            format!("{empty} of 288 cells (15° × 15°) never sampled"),
+            format!(
+                "{}; {empty} of 288 cells (15° × 15°) never sampled",
+                session_regions_text(&mag.raw)
+            ),
         ));
     }
 
@@ -549,15 +607,32 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
                 after.len()
             ),
         ));
-        body.push_str("<h2>Accelerometer</h2>");
-        body.push_str(&figure(&plots::pose_bars(&before, &after)?));
+        body.push_str("<h2>Accelerometer</h2><p>Error of |a| against local gravity per pose, before and after calibration, each on its own scale.</p>");
+        let labels: Vec<String> = accel
+            .calibrated
+            .iter()
+            .map(|v| crate::session::targets::direction_name(&v.normalize()))
+            .collect();
+        body.push_str(&figure(&plots::pose_bars(
+            "accelerometer before calibration: |a| − g per pose",
+            &before,
+            &labels,
+            false,
+        )?));
+        body.push_str(&figure(&plots::pose_bars(
+            "accelerometer after calibration: |a| − g per pose",
+            &after,
+            &labels,
+            true,
+        )?));
         let with_temp: Vec<(f64, f64, f64)> = accel
             .temp_c
             .iter()
             .zip(before.iter().zip(&after))
             .filter_map(|(t, (b, a))| t.map(|t| (t, *b, *a)))
             .collect();
-        if !with_temp.is_empty() {
+        let temps: Vec<f64> = with_temp.iter().map(|p| p.0).collect();
+        if temperature_varies(&temps) {
             body.push_str(&figure(&plots::residual_against(
                 "accelerometer |a| error against pose temperature",
                 "temperature (°C)",
@@ -619,6 +694,14 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
     } else {
         format!("<h3>Notes</h3><ul>{notes}</ul>")
     };
+    if let Some(analysis) = &data.analysis {
+        body.push_str(&format!(
+            "<h2>Residual analysis and extended terms</h2><p>What the residuals of the poses \
+             show beyond the base model, and the terms written for it (the parameter tables \
+             below are the set on the board).</p><pre>{}</pre>",
+            escape(analysis)
+        ));
+    }
     if !data.history.is_empty() {
         body.push_str("<h2>Calibration history</h2><p>This board's parameters in every recorded calibration.</p><div class=row>");
         for (_, svg) in &data.history {
