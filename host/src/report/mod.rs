@@ -136,6 +136,9 @@ pub struct ReportData {
     pub verdict: Vec<String>,
     /// Other remarks (local field check, thinning, method choices).
     pub notes: Vec<String>,
+    /// Directions (of the 26 regions) the session's screen counted as reached, when the input
+    /// is a session directory: it includes the field seen during the moves between positions.
+    pub session_regions_covered: Option<u64>,
     /// The residual analysis and the extended terms it added (`calibrate --analyze`), as text.
     pub analysis: Option<String>,
     /// The board's parameters over time from the calibration history, `(title, SVG)` per
@@ -317,6 +320,10 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         })
         .collect(),
         analysis: std::fs::read_to_string(dir.join(ANALYSIS_TEXT_FILE)).ok(),
+        session_regions_covered: std::fs::read_to_string(dir.join("summary.json"))
+            .ok()
+            .and_then(|text| serde_json::from_str::<Value>(&text).ok())
+            .and_then(|summary| summary["mag_regions_covered"].as_u64()),
         ..ReportData::default()
     };
     let summary_path = dir.join("summary.json");
@@ -438,25 +445,33 @@ fn parameter_table(p: &SensorParameters) -> String {
     )
 }
 
-/// Coverage counted as the guided session's screen counts it: the raw samples' directions from
-/// their sphere centre in the 26 regions, each covered with the session's minimum of samples.
-fn session_regions_text(raw: &[Vec3]) -> String {
+/// Coverage in the 26 regions of the session's screen: the count the session showed, when known
+/// (it includes the field seen during the moves between positions), and the count of the
+/// plotted samples alone, from their sphere centre with the session's minimum per region.
+fn session_regions_text(raw: &[Vec3], on_screen: Option<u64>) -> String {
     use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
-    let Some(centre) = sphere_centre(raw) else {
-        return "directions not countable (no sphere centre)".to_string();
+    let plotted = sphere_centre(raw).map(|centre| {
+        let min = crate::session::SessionOptions::default().mag_min_per_region;
+        let cover = Coverage::of(raw, &centre);
+        (cover.covered(min), cover.empty_regions(min))
+    });
+    let plotted_text = match &plotted {
+        None => "the plotted samples' directions are not countable (no sphere centre)".to_string(),
+        Some((covered, empty)) if empty.is_empty() => {
+            format!("the plotted samples reach {covered} of {REGIONS} directions")
+        }
+        Some((covered, empty)) => format!(
+            "the plotted samples reach {covered} of {REGIONS} directions (empty: {})",
+            empty.join(" ")
+        ),
     };
-    let min = crate::session::SessionOptions::default().mag_min_per_region;
-    let cover = Coverage::of(raw, &centre);
-    let empty = cover.empty_regions(min);
-    let missing = if empty.is_empty() {
-        String::new()
-    } else {
-        format!(" (empty: {})", empty.join(" "))
-    };
-    format!(
-        "{} of {REGIONS} directions reached, as counted on the session's screen{missing}",
-        cover.covered(min)
-    )
+    match on_screen {
+        Some(n) => format!(
+            "{n} of {REGIONS} directions reached in the session, as its screen showed (moves \
+             between positions included); {plotted_text}"
+        ),
+        None => plotted_text,
+    }
 }
 
 /// Smallest temperature span worth an axis, °C: below it a plot against temperature is a
@@ -582,7 +597,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             "sphere coverage".to_string(),
             format!(
                 "{}; {empty} of 288 cells (15° × 15°) never sampled",
-                session_regions_text(&mag.raw)
+                session_regions_text(&mag.raw, data.session_regions_covered)
             ),
         ));
     }
