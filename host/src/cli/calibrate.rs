@@ -237,14 +237,16 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     } else {
         println!();
-        print!("{}", before_after_table(&outcome));
-        if let Some(Ok(Some(extended))) = &closed {
-            println!(
-                "With the extended set at rest: |a| error {:.3} mg, |m| error {:.3} %, gyro rate \
-                 {:.4} °/s",
-                extended.accel_error_mg, extended.mag_error_pct, extended.gyro_rate_dps
-            );
-        }
+        print!(
+            "{}",
+            before_after_table(
+                &outcome,
+                closed
+                    .as_ref()
+                    .and_then(|c| c.as_ref().ok())
+                    .and_then(Option::as_ref)
+            )
+        );
         println!(
             "Session: {:.1} s {} ({:.1} s wall), {} positions, {} of 26 magnetometer \
              directions; verified: {}",
@@ -256,7 +258,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             },
             outcome.wall_seconds,
             outcome.poses.len(),
-            outcome.coverage.covered(1),
+            outcome.coverage.covered(options.mag_min_per_region),
             if outcome.verified {
                 "yes"
             } else {

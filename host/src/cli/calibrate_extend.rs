@@ -32,14 +32,29 @@ pub(super) fn close_the_loop(
         serde_json::to_string_pretty(&report::to_json(&analysis))?,
     )
     .with_context(|| format!("could not write {}", dir.join("analysis.json").display()))?;
+    let text = report::to_text(&analysis);
     if !json {
         eprintln!(
-            "\nResidual analysis of the {} poses:\n{}",
-            outcome.poses.len(),
-            report::to_text(&analysis)
+            "\nResidual analysis of the {} poses:\n{text}",
+            outcome.poses.len()
         );
     }
     let extended = extend_set(&outcome.fit.set, &analysis);
+    // The report shows the analysis and the terms it added as the session screen did.
+    let mut shown = text;
+    shown.push_str(&if extended.extended() {
+        format!("Extended terms added: {}\n", extended.added.join(", "))
+    } else {
+        "The analysis accepted no effect the firmware applies; the base set stays.\n".to_string()
+    });
+    for effect in &extended.left_out {
+        shown.push_str(&format!(
+            "{effect} was accepted but the firmware has no term for it; not written\n"
+        ));
+    }
+    let text_path = dir.join(imucal::report::ANALYSIS_TEXT_FILE);
+    std::fs::write(&text_path, shown)
+        .with_context(|| format!("could not write {}", text_path.display()))?;
     for effect in &extended.left_out {
         eprintln!("Note: {effect} was accepted but the firmware has no term for it; not written");
     }

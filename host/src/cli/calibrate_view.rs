@@ -5,7 +5,11 @@
 use std::time::{Duration, Instant};
 
 use super::write_policy::{WriteDecision, WritePolicy};
-use imucal::session::{SessionEvent, SessionFit, SessionObserver, SessionOutcome, VerdictLevel};
+use imucal::device::PoseProgress;
+use imucal::report::gain::{gain, gain_text};
+use imucal::session::{
+    RestErrors, SessionEvent, SessionFit, SessionObserver, SessionOutcome, VerdictLevel,
+};
 use imucal_protocol::StreamKind;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -64,6 +68,15 @@ impl Terminal {
         }
     }
 
+    /// Empties the bar so a finished step's message does not linger under the next prompt.
+    fn clear_bar(&self) {
+        if !self.plain {
+            self.bar.set_position(0);
+            self.bar.set_prefix("");
+            self.bar.set_message("");
+        }
+    }
+
     fn bar(&mut self, prefix: &str, length: u64, position: u64, message: String) {
         if self.plain {
             self.throttled(&format!("  {prefix}: {message}"));
@@ -76,12 +89,52 @@ impl Terminal {
     }
 }
 
-fn stillness_text(still: bool, accel_std: f64, gyro_std: f64) -> String {
+/// What a person does to fill the coverage region named `region` (e.g. `+X-Z`): the field must
+/// point along that direction of the board, and the Earth's field points north and, away from
+/// the equator, steeply down in the northern hemisphere (up in the southern).
+fn pointing_hint(region: &str) -> String {
+    let parts: Vec<String> = region
+        .as_bytes()
+        .chunks(2)
+        .filter_map(|pair| match pair {
+            [b'+', b'Z'] => Some("the top face (+Z)".to_string()),
+            [b'-', b'Z'] => Some("the bottom face (-Z)".to_string()),
+            [sign, axis] => Some(format!("the {}{} end", *sign as char, *axis as char)),
+            _ => None,
+        })
+        .collect();
+    let side = match parts.as_slice() {
+        [one] => one.clone(),
+        [first @ .., last] => format!("{} and {last}", first.join(", ")),
+        [] => region.to_string(),
+    };
+    format!("turn the board so {side} points north and down (south of the equator: north and up)")
+}
+
+/// Stillness in the units of the summary: accelerometer σ in mg, gyroscope σ in °/s.
+fn stillness_text(still: bool, accel_std_mps2: f64, gyro_std_rads: f64) -> String {
+    let mg = 1000.0 / imucal::session::solve::STANDARD_GRAVITY;
     format!(
-        "{} (accel σ {:.3} m/s², gyro σ {:.4} rad/s)",
+        "{} (accel σ {:.1} mg, gyro σ {:.3} °/s)",
         if still { "still " } else { "moving" },
-        accel_std,
-        gyro_std
+        accel_std_mps2 * mg,
+        gyro_std_rads.to_degrees()
+    )
+}
+
+/// Bar position (0–99, the capture ends the bar) and message of a hold: still time toward the
+/// `hold_s` seconds this capture averages. The time since the request bounds the still time the
+/// board has gathered from above, so the bar never runs ahead of the capture.
+fn hold_progress(name: &str, progress: &PoseProgress, hold_s: f64) -> (u64, String) {
+    let held_s = progress.elapsed.as_secs_f64().min(hold_s);
+    let fraction = if hold_s > 0.0 { held_s / hold_s } else { 0.0 };
+    let state = match progress.still {
+        Some(true) | None => "keep it there",
+        Some(false) => "moving: hold it steady, the average restarts",
+    };
+    (
+        ((fraction * 100.0) as u64).min(99),
+        format!("averaging {name}: {held_s:.1} of {hold_s:.1} s; {state}"),
     )
 }
 
@@ -135,8 +188,11 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
             sigmas(u.gyro_bias_dps, 4)
         ),
         format!(
-            "                 scale  {} (diagonal of A; 1 = nominal)",
-            triple([0, 1, 2].map(|i| fit.gyro.cal.a[(i, i)]), 4)
+            "                 {}",
+            gain(&fit.gyro.cal.a, 1.0).map_or_else(
+                || "scale: the fitted matrix is singular".to_string(),
+                |g| gain_text(&g, 3)
+            )
         ),
         format!(
             "  magnetometer   offset {} µT ± {}",
@@ -168,6 +224,7 @@ impl SessionObserver for Terminal {
                 total,
             } => {
                 self.last_line = None;
+                self.clear_bar();
                 self.line(&format!(
                     "\nPosition {}/{total}: hold the board {} (any order is fine)",
                     captured + 1,
@@ -201,35 +258,34 @@ impl SessionObserver for Terminal {
                     ),
                 );
             }
-            SessionEvent::Capturing { target, progress } => {
-                let fraction = progress.elapsed.as_secs_f64() / progress.timeout.as_secs_f64();
-                let still = match progress.still {
-                    Some(true) => "still",
-                    Some(false) => "moving",
-                    None => "waiting",
-                };
-                self.bar(
-                    "holding",
-                    100,
-                    (fraction * 100.0) as u64,
-                    format!("averaging {} ({still}), keep it there", target.name),
-                );
+            SessionEvent::Capturing {
+                target,
+                progress,
+                hold_s,
+            } => {
+                let (position, message) = hold_progress(target.name.as_str(), progress, *hold_s);
+                self.bar("holding", 100, position, message);
             }
             SessionEvent::Captured {
                 target,
                 samples,
                 captured,
                 total,
-            } => self.line(&format!(
-                "  captured {} ({samples} samples) — {captured}/{total}",
-                target.name
-            )),
+            } => {
+                self.clear_bar();
+                self.line(&format!(
+                    "  captured {} ({samples} samples) — {captured}/{total}",
+                    target.name
+                ));
+            }
             SessionEvent::CaptureFailed { target, reason } => {
+                self.clear_bar();
                 self.line(&format!("  {} not captured: {reason}", target.name));
             }
             SessionEvent::Note(text) => self.line(&format!("Note: {text}")),
             SessionEvent::MagPrompt => {
                 self.last_line = None;
+                self.clear_bar();
                 self.line(
                     "\nMagnetometer: turn the board slowly through all directions (roll, pitch \
                      and yaw), away from steel, magnets and cables.",
@@ -241,14 +297,14 @@ impl SessionObserver for Terminal {
                 samples,
                 empty,
             } => {
-                let shown: Vec<&str> = empty.iter().take(6).map(String::as_str).collect();
-                let more = empty.len().saturating_sub(shown.len());
-                let missing = if empty.is_empty() {
-                    "every direction reached".to_string()
-                } else if more > 0 {
-                    format!("still empty: {} and {more} more", shown.join(" "))
-                } else {
-                    format!("still empty: {}", shown.join(" "))
+                let missing = match empty.first() {
+                    None => "every direction reached".to_string(),
+                    Some(next) => format!(
+                        "next: {} ({} direction{} still empty)",
+                        pointing_hint(next),
+                        empty.len(),
+                        if empty.len() == 1 { "" } else { "s" }
+                    ),
                 };
                 let message = format!("{covered}/{regions} directions, {samples} samples; {missing}");
                 if self.plain && *covered != self.last_coverage {
@@ -259,6 +315,7 @@ impl SessionObserver for Terminal {
             }
             SessionEvent::RestPrompt => {
                 self.last_line = None;
+                self.clear_bar();
                 self.line("\nPut the board down and leave it still for the final check.");
             }
             SessionEvent::Resting {
@@ -298,49 +355,82 @@ impl SessionObserver for Terminal {
     }
 }
 
-pub(super) fn before_after_table(outcome: &SessionOutcome) -> String {
-    let before = &outcome.before;
-    let after = outcome.after.as_ref();
+/// The at-rest errors before and after. With `extended` (the set `--analyze` wrote) the
+/// "after" column is that set, the one on the board now, and the base set's column sits
+/// beside it for comparison.
+pub(super) fn before_after_table(
+    outcome: &SessionOutcome,
+    extended: Option<&RestErrors>,
+) -> String {
     let show = |value: Option<f64>, unit: &str, precision: usize| {
         value.map_or("—".to_string(), |v| format!("{v:.precision$} {unit}"))
     };
-    let mut text = String::new();
-    text.push_str(&format!(
-        "{:<16}{:>14}{:>14}{:>12}\n",
-        "at rest", "before", "after", "target"
-    ));
-    let rows = [
-        (
-            "|a| error",
-            Some(before.accel_error_mg),
-            after.map(|a| a.accel_error_mg),
-            "mg",
-            2,
-            "< 2 mg",
-        ),
-        (
-            "|m| error",
-            Some(before.mag_error_pct),
-            after.map(|a| a.mag_error_pct),
-            "%",
-            2,
-            "< 0.5 %",
-        ),
-        (
-            "gyro rate",
-            Some(before.gyro_rate_dps),
-            after.map(|a| a.gyro_rate_dps),
-            "°/s",
-            3,
-            "",
-        ),
+    let mut columns: Vec<(&str, Option<&RestErrors>)> = vec![("before", Some(&outcome.before))];
+    match extended {
+        Some(set) => {
+            columns.push(("base set", outcome.after.as_ref()));
+            columns.push(("on the board", Some(set)));
+        }
+        None => columns.push(("after", outcome.after.as_ref())),
+    }
+    let mut text = format!("{:<16}", "at rest");
+    for (name, _) in &columns {
+        text.push_str(&format!("{name:>14}"));
+    }
+    text.push_str(&format!("{:>12}\n", "target"));
+    type Row = (
+        &'static str,
+        fn(&RestErrors) -> f64,
+        &'static str,
+        usize,
+        &'static str,
+    );
+    let rows: [Row; 3] = [
+        ("|a| error", |e| e.accel_error_mg, "mg", 2, "< 2 mg"),
+        ("|m| error", |e| e.mag_error_pct, "%", 2, "< 0.5 %"),
+        ("gyro rate", |e| e.gyro_rate_dps, "°/s", 3, ""),
     ];
-    for (name, was, now, unit, precision, target) in rows {
-        text.push_str(&format!(
-            "{name:<16}{:>14}{:>14}{target:>12}\n",
-            show(was, unit, precision),
-            show(now, unit, precision + 1),
-        ));
+    for (name, value, unit, precision, target) in rows {
+        text.push_str(&format!("{name:<16}"));
+        for (k, (_, errors)) in columns.iter().enumerate() {
+            // Calibrated values are small: one more decimal.
+            let digits = if k == 0 { precision } else { precision + 1 };
+            text.push_str(&format!("{:>14}", show(errors.map(value), unit, digits)));
+        }
+        text.push_str(&format!("{target:>12}\n"));
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_hold_bar_counts_toward_this_capture_and_never_completes_before_it() {
+        let progress = |elapsed_s: f64| PoseProgress {
+            elapsed: Duration::from_secs_f64(elapsed_s),
+            timeout: Duration::from_secs(20),
+            still: Some(true),
+        };
+        // Half of a 1.2 s hold is half the bar, whatever the 20 s timeout.
+        let (half, text) = hold_progress("+Z up", &progress(0.6), 1.2);
+        assert_eq!(half, 50);
+        assert!(text.contains("0.6 of 1.2 s"), "{text}");
+        // Past the hold the bar waits at 99 % for the board's answer.
+        assert_eq!(hold_progress("+Z up", &progress(5.0), 1.2).0, 99);
+    }
+
+    #[test]
+    fn stillness_is_shown_in_the_summary_units() {
+        let text = stillness_text(true, 0.0098_0665, 1.0_f64.to_radians());
+        assert!(text.contains("accel σ 1.0 mg"), "{text}");
+        assert!(text.contains("gyro σ 1.000 °/s"), "{text}");
+    }
+
+    #[test]
+    fn coverage_hints_name_sides_of_the_board() {
+        assert!(pointing_hint("-Z").contains("the bottom face (-Z) points north and down"));
+        assert!(pointing_hint("+X-Z").contains("the +X end and the bottom face (-Z)"));
+    }
 }

@@ -28,6 +28,8 @@ use imucal::recording::{Recording, Sensor};
 use nalgebra::Rotation3;
 use serde_json::{json, Value};
 
+use imucal::report::gain::{gain, gain_text};
+
 use super::args::{FitArgs, SensorChoice};
 
 /// A 3×3 matrix as rows, the layout of the parameter file.
@@ -221,6 +223,13 @@ fn print_table(calibration: &RecordingCalibration) {
                 a.join(" "),
                 with_std(fit.cal.b[r], fit.std.map(|s| s.b[r]))
             );
+        }
+        if let Some(g) = result
+            .to_nominal
+            .filter(|_| !result.output_unit.contains("field"))
+            .and_then(|k| gain(&fit.cal.a, k))
+        {
+            println!("  {}", gain_text(&g, 3));
         }
         let loo = fit
             .loo_rms

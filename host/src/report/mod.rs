@@ -9,6 +9,7 @@
 //! ([`from_session_dir`]) or from any recording and its fits ([`ReportData`] filled by the
 //! caller), then rendered with [`render_html`].
 
+pub mod gain;
 pub mod plots;
 pub mod recording;
 
@@ -19,6 +20,10 @@ use serde_json::Value;
 use crate::device::ParamsFile;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
 use imucal_protocol::apply_sensor;
+
+/// File of a session directory holding the `--analyze` residual analysis as text, with the
+/// extended terms it added; the report shows it when present.
+pub const ANALYSIS_TEXT_FILE: &str = "analysis.txt";
 
 /// Why a report could not be built or written.
 #[derive(Debug, thiserror::Error)]
@@ -73,6 +78,9 @@ pub struct SensorParameters {
     pub b: Vec3,
     /// One-sigma uncertainties of each entry, where the fit gives them.
     pub std: Option<CalibrationStd>,
+    /// Output units per input unit at nominal sensitivity, when known: with it the table shows
+    /// the scale errors and axis angles with the unit conversion taken out ([`gain::gain`]).
+    pub to_nominal: Option<f64>,
 }
 
 /// Accelerometer still poses.
@@ -128,6 +136,11 @@ pub struct ReportData {
     pub verdict: Vec<String>,
     /// Other remarks (local field check, thinning, method choices).
     pub notes: Vec<String>,
+    /// Directions (of the 26 regions) the session's screen counted as reached, when the input
+    /// is a session directory: it includes the field seen during the moves between positions.
+    pub session_regions_covered: Option<u64>,
+    /// The residual analysis and the extended terms it added (`calibrate --analyze`), as text.
+    pub analysis: Option<String>,
     /// The board's parameters over time from the calibration history, `(title, SVG)` per
     /// figure (see `history::plot::parameters_over_time`); empty when there is no history.
     pub history: Vec<(String, String)>,
@@ -303,8 +316,14 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
             a: mat3_of(&s.a),
             b: Vec3::from(s.b),
             std: None,
+            to_nominal: Some(1.0),
         })
         .collect(),
+        analysis: std::fs::read_to_string(dir.join(ANALYSIS_TEXT_FILE)).ok(),
+        session_regions_covered: std::fs::read_to_string(dir.join("summary.json"))
+            .ok()
+            .and_then(|text| serde_json::from_str::<Value>(&text).ok())
+            .and_then(|summary| summary["mag_regions_covered"].as_u64()),
         ..ReportData::default()
     };
     let summary_path = dir.join("summary.json");
@@ -412,12 +431,63 @@ fn parameter_table(p: &SensorParameters) -> String {
         rows.push_str(&cell(p.b[r], p.std.map(|s| s.b[r])));
         rows.push_str("</tr>");
     }
+    let readable = p
+        .to_nominal
+        .and_then(|k| gain::gain(&p.a, k))
+        .map_or(String::new(), |g| {
+            format!("<p>{}</p>", escape(&gain::gain_text(&g, 3)))
+        });
     format!(
-        "<h3>{}</h3><p class=small>y = A·(x − b); x in {}, y in {}</p><table><tr><th></th><th colspan=3>A</th><th>b</th></tr>{rows}</table>",
+        "<h3>{}</h3><p class=small>y = A·(x − b); x in {}, y in {}</p><table><tr><th></th><th colspan=3>A</th><th>b</th></tr>{rows}</table>{readable}",
         escape(&p.name),
         escape(&p.unit_in),
         escape(&p.unit_out)
     )
+}
+
+/// Coverage in the 26 regions of the session's screen: the count the session showed, when known
+/// (it includes the field seen during the moves between positions), and the count of the
+/// plotted samples alone, from their sphere centre with the session's minimum per region.
+fn session_regions_text(raw: &[Vec3], on_screen: Option<u64>) -> String {
+    use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
+    let plotted = sphere_centre(raw).map(|centre| {
+        let min = crate::session::SessionOptions::default().mag_min_per_region;
+        let cover = Coverage::of(raw, &centre);
+        (cover.covered(min), cover.empty_regions(min))
+    });
+    let plotted_text = match &plotted {
+        None => "the plotted samples' directions are not countable (no sphere centre)".to_string(),
+        Some((covered, empty)) if empty.is_empty() => {
+            format!("the plotted samples reach {covered} of {REGIONS} directions")
+        }
+        Some((covered, empty)) => format!(
+            "the plotted samples reach {covered} of {REGIONS} directions (empty: {})",
+            empty.join(" ")
+        ),
+    };
+    match on_screen {
+        Some(n) => format!(
+            "{n} of {REGIONS} directions reached in the session, as its screen showed (moves \
+             between positions included); {plotted_text}"
+        ),
+        None => plotted_text,
+    }
+}
+
+/// Smallest temperature span worth an axis, °C: below it a plot against temperature is a
+/// vertical stripe. Die temperature sensors of consumer IMUs resolve 0.003–0.06 °C, and a
+/// temperature coefficient only shows over a span many times that.
+const MIN_TEMPERATURE_SPAN_C: f64 = 0.5;
+
+/// Whether `temps` span enough to plot against.
+fn temperature_varies(temps: &[f64]) -> bool {
+    let (lo, hi) = temps
+        .iter()
+        .filter(|t| t.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(*t), hi.max(*t))
+        });
+    hi - lo >= MIN_TEMPERATURE_SPAN_C
 }
 
 fn figure(svg: &str) -> String {
@@ -507,7 +577,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             &pairs(&mag.time_s, &before),
             &pairs(&mag.time_s, &after),
         )?));
-        if let Some(temp) = &mag.temp_c {
+        if let Some(temp) = mag.temp_c.as_ref().filter(|t| temperature_varies(t)) {
             body.push_str(&figure(&plots::residual_against(
                 "magnetometer norm error against temperature",
                 "temperature (°C)",
@@ -525,7 +595,10 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             .count();
         summary_rows.push((
             "sphere coverage".to_string(),
-            format!("{empty} of 288 cells (15° × 15°) never sampled"),
+            format!(
+                "{}; {empty} of 288 cells (15° × 15°) never sampled",
+                session_regions_text(&mag.raw, data.session_regions_covered)
+            ),
         ));
     }
 
@@ -549,15 +622,32 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
                 after.len()
             ),
         ));
-        body.push_str("<h2>Accelerometer</h2>");
-        body.push_str(&figure(&plots::pose_bars(&before, &after)?));
+        body.push_str("<h2>Accelerometer</h2><p>Error of |a| against local gravity per pose, before and after calibration, each on its own scale.</p>");
+        let labels: Vec<String> = accel
+            .calibrated
+            .iter()
+            .map(|v| crate::session::targets::direction_name(&v.normalize()))
+            .collect();
+        body.push_str(&figure(&plots::pose_bars(
+            "accelerometer before calibration: |a| − g per pose",
+            &before,
+            &labels,
+            false,
+        )?));
+        body.push_str(&figure(&plots::pose_bars(
+            "accelerometer after calibration: |a| − g per pose",
+            &after,
+            &labels,
+            true,
+        )?));
         let with_temp: Vec<(f64, f64, f64)> = accel
             .temp_c
             .iter()
             .zip(before.iter().zip(&after))
             .filter_map(|(t, (b, a))| t.map(|t| (t, *b, *a)))
             .collect();
-        if !with_temp.is_empty() {
+        let temps: Vec<f64> = with_temp.iter().map(|p| p.0).collect();
+        if temperature_varies(&temps) {
             body.push_str(&figure(&plots::residual_against(
                 "accelerometer |a| error against pose temperature",
                 "temperature (°C)",
@@ -619,6 +709,14 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
     } else {
         format!("<h3>Notes</h3><ul>{notes}</ul>")
     };
+    if let Some(analysis) = &data.analysis {
+        body.push_str(&format!(
+            "<h2>Residual analysis and extended terms</h2><p>What the residuals of the poses \
+             show beyond the base model, and the terms written for it (the parameter tables \
+             below are the set on the board).</p><pre>{}</pre>",
+            escape(analysis)
+        ));
+    }
     if !data.history.is_empty() {
         body.push_str("<h2>Calibration history</h2><p>This board's parameters in every recorded calibration.</p><div class=row>");
         for (_, svg) in &data.history {

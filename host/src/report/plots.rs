@@ -143,46 +143,70 @@ pub fn projection(
     Ok(svg)
 }
 
-/// Bars per pose: the error of `|a|` before and after calibration, in mg.
-pub fn pose_bars(before_mg: &[f64], after_mg: &[f64]) -> Result<String, PlotError> {
+/// Error of `|a|` per pose, mg, as bars on their own scale (so the small "after" errors are as
+/// readable as the large "before" ones), each bar labelled with its pose's orientation.
+pub fn pose_bars(
+    title: &str,
+    values_mg: &[f64],
+    labels: &[String],
+    after: bool,
+) -> Result<String, PlotError> {
     const FIGURE: &str = "accelerometer residual per pose";
-    let n = before_mg.len().max(after_mg.len());
-    let yr = padded(before_mg.iter().chain(after_mg).copied().chain([0.0]));
+    let n = values_mg.len();
+    let yr = padded(values_mg.iter().copied().chain([0.0]));
+    let colour = if after { AFTER } else { BEFORE };
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1020, 320)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1020, 300)).into_drawing_area();
         root.fill(&WHITE).map_err(plot_error(FIGURE))?;
         let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "accelerometer: |a| − g per pose (red before, blue after calibration)",
-                ("sans-serif", 15),
-            )
+            .caption(title, ("sans-serif", 15))
             .margin(8)
-            .x_label_area_size(32)
+            .x_label_area_size(44)
             .y_label_area_size(60)
             .build_cartesian_2d(-0.5..(n as f64 - 0.5), yr)
             .map_err(plot_error(FIGURE))?;
         chart
             .configure_mesh()
-            .x_desc("pose")
+            .x_desc("pose (the axis that points up)")
             .y_desc("error of |a| (mg)")
-            .x_labels(n.clamp(2, 30))
-            .x_label_formatter(&|v| format!("{}", v.round() as i64 + 1))
+            .x_labels(n.clamp(2, 40))
+            .x_label_formatter(&|v| {
+                let k = v.round();
+                if (v - k).abs() > 0.01 || k < 0.0 {
+                    return String::new();
+                }
+                labels
+                    .get(k as usize)
+                    .cloned()
+                    .unwrap_or_else(|| format!("{}", k as i64 + 1))
+            })
             .draw()
             .map_err(plot_error(FIGURE))?;
-        for (values, colour, shift) in [(before_mg, BEFORE, -0.2), (after_mg, AFTER, 0.2)] {
-            chart
-                .draw_series(values.iter().enumerate().map(|(k, v)| {
-                    let x = k as f64 + shift;
-                    Rectangle::new([(x - 0.18, 0.0), (x + 0.18, *v)], colour.filled())
-                }))
-                .map_err(plot_error(FIGURE))?;
-        }
+        chart
+            .draw_series(values_mg.iter().enumerate().map(|(k, v)| {
+                let x = k as f64;
+                Rectangle::new([(x - 0.3, 0.0), (x + 0.3, *v)], colour.filled())
+            }))
+            .map_err(plot_error(FIGURE))?
+            .label(if after {
+                "after calibration"
+            } else {
+                "before calibration"
+            })
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled()));
         chart
             .draw_series(LineSeries::new(
                 [(-0.5, 0.0), (n as f64 - 0.5, 0.0)],
                 SHAPE.stroke_width(1),
             ))
+            .map_err(plot_error(FIGURE))?;
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
             .map_err(plot_error(FIGURE))?;
         root.present().map_err(plot_error(FIGURE))?;
     }
@@ -238,7 +262,9 @@ pub fn histogram(
     Ok(svg)
 }
 
-/// Residual (percent or mg) against a variable (time or temperature), before and after.
+/// Residual against a variable (time, temperature): "before" in the upper panel and "after" in
+/// the lower one, each on its own vertical scale so the small calibrated residual stays
+/// readable; both share the horizontal axis.
 pub fn residual_against(
     title: &str,
     x_desc: &str,
@@ -250,40 +276,56 @@ pub fn residual_against(
     let before = thinned(before, MAX_POINTS);
     let after = thinned(after, MAX_POINTS);
     let xr = padded(before.iter().chain(&after).map(|p| p.0));
-    let yr = padded(before.iter().chain(&after).map(|p| p.1).chain([0.0]));
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (500, 300)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (500, 440)).into_drawing_area();
         root.fill(&WHITE).map_err(plot_error(FIGURE))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 15))
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(56)
-            .build_cartesian_2d(xr.clone(), yr)
+        let root = root
+            .titled(title, ("sans-serif", 15))
             .map_err(plot_error(FIGURE))?;
-        chart
-            .configure_mesh()
-            .x_desc(x_desc)
-            .y_desc(y_desc)
-            .x_labels(6)
-            .draw()
-            .map_err(plot_error(FIGURE))?;
-        for (points, colour) in [(&before, BEFORE), (&after, AFTER)] {
+        let panels = root.split_evenly((2, 1));
+        for (area, points, colour, label) in [
+            (&panels[0], &before, BEFORE, "before calibration"),
+            (&panels[1], &after, AFTER, "after calibration"),
+        ] {
+            let yr = padded(points.iter().map(|p| p.1).chain([0.0]));
+            let mut chart = ChartBuilder::on(area)
+                .margin(6)
+                .x_label_area_size(30)
+                .y_label_area_size(56)
+                .build_cartesian_2d(xr.clone(), yr)
+                .map_err(plot_error(FIGURE))?;
+            chart
+                .configure_mesh()
+                .x_desc(x_desc)
+                .y_desc(y_desc)
+                .x_labels(6)
+                .y_labels(5)
+                .draw()
+                .map_err(plot_error(FIGURE))?;
             chart
                 .draw_series(
                     points
                         .iter()
                         .map(|p| Circle::new(*p, 2, colour.mix(0.5).filled())),
                 )
+                .map_err(plot_error(FIGURE))?
+                .label(label)
+                .legend(move |(x, y)| Circle::new((x + 5, y), 3, colour.filled()));
+            chart
+                .draw_series(LineSeries::new(
+                    [(xr.start, 0.0), (xr.end, 0.0)],
+                    SHAPE.stroke_width(1),
+                ))
+                .map_err(plot_error(FIGURE))?;
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::UpperRight)
+                .draw()
                 .map_err(plot_error(FIGURE))?;
         }
-        chart
-            .draw_series(LineSeries::new(
-                [(xr.start, 0.0), (xr.end, 0.0)],
-                SHAPE.stroke_width(1),
-            ))
-            .map_err(plot_error(FIGURE))?;
         root.present().map_err(plot_error(FIGURE))?;
     }
     Ok(svg)

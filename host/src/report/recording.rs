@@ -18,6 +18,9 @@ fn parameters(name: &str, outcome: &SensorOutcome, fit: &Fit) -> SensorParameter
         a: fit.cal.a,
         b: fit.cal.b,
         std: fit.std.filter(|_| outcome.a_std_applies()),
+        to_nominal: outcome
+            .to_nominal
+            .filter(|_| !outcome.output_unit.contains("field")),
     }
 }
 

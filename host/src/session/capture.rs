@@ -120,10 +120,12 @@ impl<L: Read + Write> Runner<'_, L> {
             };
             self.finish_move();
             let observer = &mut *self.observer;
+            let hold_s = request.min_still.as_secs_f64();
             let result = self.client.capture_pose(&request, &mut |progress| {
                 observer.event(&SessionEvent::Capturing {
                     target,
                     progress: *progress,
+                    hold_s,
                 });
             });
             match result {

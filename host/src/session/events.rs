@@ -74,6 +74,8 @@ pub enum SessionEvent<'a> {
         target: &'a Target,
         /// Progress reported by the device client.
         progress: PoseProgress,
+        /// Still data this capture averages, s (the adaptive hold length).
+        hold_s: f64,
     },
     /// A pose was captured.
     Captured {

@@ -32,8 +32,8 @@ fn axis_name(index: usize) -> char {
     }
 }
 
-/// Name of an up direction from its signed components, e.g. `+X−Y`.
-fn direction_name(up: &Vec3) -> String {
+/// Name of an up direction from its signed components above 0.3, e.g. `+X-Y`.
+pub fn direction_name(up: &Vec3) -> String {
     let mut name = String::new();
     for (i, v) in up.iter().enumerate() {
         if v.abs() > 0.3 {
@@ -56,40 +56,86 @@ impl Target {
         Self { index, up, name }
     }
 
-    /// A five-line picture of how to hold the board for this target.
+    /// A five-line picture of how to hold the board for this target. Each tilt names the edges
+    /// that rise, so no two targets share a picture.
     pub fn picture(&self) -> [String; 5] {
         let label = direction_name(&self.up);
-        let flat = self.up.z.abs() > 0.9;
-        let edge = self.up.x.abs() > 0.9 || self.up.y.abs() > 0.9;
-        if flat {
-            let side = if self.up.z > 0.0 {
-                "lying flat, components up"
-            } else {
-                "lying flat, upside down"
-            };
-            [
-                format!("        ^ {label} up"),
-                "    +----------+".to_string(),
-                format!("    |   IMU    |   {side}"),
-                "    +----------+".to_string(),
-                String::new(),
-            ]
-        } else if edge {
-            [
+        let raised: Vec<(usize, f64)> = (0..3)
+            .filter(|&i| self.up[i].abs() > 0.3)
+            .map(|i| (i, self.up[i]))
+            .collect();
+        let edge =
+            |(i, v): (usize, f64)| format!("{}{}", if v > 0.0 { '+' } else { '-' }, axis_name(i));
+        match raised.as_slice() {
+            [(2, z)] => {
+                let side = if *z > 0.0 {
+                    "lying flat, components up"
+                } else {
+                    "lying flat, upside down"
+                };
+                [
+                    format!("        ^ {label} up"),
+                    "    +----------+".to_string(),
+                    format!("    |   IMU    |   {side}"),
+                    "    +----------+".to_string(),
+                    String::new(),
+                ]
+            }
+            [_] => [
                 format!("        ^ {label} up"),
                 "       +--+".to_string(),
                 format!("       |  |   standing on its edge, the {label} edge at the top"),
                 "       |  |".to_string(),
                 "       +--+".to_string(),
-            ]
-        } else {
-            [
+            ],
+            [first, (2, z)] => {
+                let face = if *z > 0.0 {
+                    "components up"
+                } else {
+                    "upside down"
+                };
+                let rising = edge(*first);
+                // Side view: the raised edge on the right for +, on the left for -.
+                let (slope, indents) = if first.1 > 0.0 {
+                    ("/", [12, 11, 10])
+                } else {
+                    ("\\", [10, 11, 12])
+                };
+                let line = |k: usize, text: &str| {
+                    format!(
+                        "{}{slope}{}{text}",
+                        " ".repeat(indents[k]),
+                        " ".repeat(16 - indents[k])
+                    )
+                };
+                [
+                    format!("        ^ {label} up"),
+                    line(0, &format!("the {rising} edge raised 45°,")),
+                    line(1, &format!("{face}, resting on the opposite edge")),
+                    line(2, "(side view)"),
+                    "    ------------------ table".to_string(),
+                ]
+            }
+            [first, second] => [
                 format!("        ^ {label} up"),
                 "          /\\".to_string(),
-                format!("         /  \\   tilted 45°, the {label} corner highest"),
+                format!(
+                    "         /  \\   on a corner of its side: the {} and {} edges both 45° up",
+                    edge(*first),
+                    edge(*second)
+                ),
+                "         \\  /".to_string(),
+                "          \\/".to_string(),
+            ],
+            _ => [
+                format!("        ^ {label} up"),
+                "          /\\".to_string(),
+                format!(
+                    "         /  \\   balanced on the corner opposite {label}, that corner highest"
+                ),
                 "        /  /".to_string(),
                 "        \\ /".to_string(),
-            ]
+            ],
         }
     }
 }
@@ -177,5 +223,21 @@ mod tests {
         assert!(targets[1].picture()[0].contains("-Z up"));
         assert!(targets[6].picture()[0].contains("+X+Y up"));
         assert_eq!(targets[6].name, "+X+Y up (45° tilt)");
+    }
+
+    #[test]
+    fn every_target_has_its_own_picture() {
+        let mut targets = twelve_positions();
+        targets.extend(corner_positions(targets.len()));
+        let pictures: Vec<[String; 5]> = targets.iter().map(Target::picture).collect();
+        for (i, a) in pictures.iter().enumerate() {
+            for b in &pictures[i + 1..] {
+                assert_ne!(a, b, "two targets share a picture: {a:?}");
+            }
+        }
+        // The +X+Z tilt raises the +X edge with the components up; its mirror the -X edge.
+        assert!(pictures[10].join("\n").contains("+X edge raised 45°"));
+        assert!(pictures[11].join("\n").contains("-X edge raised 45°"));
+        assert!(pictures[10].join("\n").contains("components up"));
     }
 }

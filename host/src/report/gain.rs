@@ -1,0 +1,98 @@
+//! Calibration matrices in a form a person can read: each axis' sensitivity against nominal and
+//! the angles between the sensing axes, with the unit conversion taken out (an `A` of 9.675 for
+//! data in g is a 1.3 % scale error, which the bare number hides). For `y = A·(x − b)` the rows
+//! of `M = A⁻¹` are the sensing axes expressed in the data's unit: `|Mᵢ|·k` (with `k` the factor
+//! from the data's unit to the output unit) is axis i's sensitivity relative to nominal, and the
+//! angle between rows i and j departs from 90° by their non-orthogonality.
+
+use crate::fit::Mat3;
+
+/// Sensitivities and axis non-orthogonality of one calibration matrix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gain {
+    /// Sensitivity of x, y, z relative to nominal (1 = nominal).
+    pub scale: [f64; 3],
+    /// Departure from 90° of the angles between the axis pairs yz, xz, xy, degrees.
+    pub skew_deg: [f64; 3],
+}
+
+/// The axis pairs of [`Gain::skew_deg`].
+const PAIRS: [(usize, usize); 3] = [(1, 2), (0, 2), (0, 1)];
+
+/// Sensitivities and non-orthogonality of `a`, whose input is `to_nominal` output units per data
+/// unit; `None` when `a` is singular or not finite.
+pub fn gain(a: &Mat3, to_nominal: f64) -> Option<Gain> {
+    let m = a
+        .try_inverse()
+        .filter(|m| m.iter().all(|v| v.is_finite()))?;
+    let rows = [0, 1, 2].map(|i| m.row(i).transpose());
+    let norms = rows.map(|r| r.norm());
+    if norms.iter().any(|n| *n <= 0.0) {
+        return None;
+    }
+    let skew_deg = PAIRS.map(|(i, j)| {
+        let cos = (rows[i].dot(&rows[j]) / (norms[i] * norms[j])).clamp(-1.0, 1.0);
+        90.0 - cos.acos().to_degrees()
+    });
+    Some(Gain {
+        scale: norms.map(|n| n * to_nominal),
+        skew_deg,
+    })
+}
+
+/// `scale [+1.300 %, …]; axes off 90° by yz …°, xz …°, xy …°` with `digits` decimals of percent.
+pub fn gain_text(gain: &Gain, digits: usize) -> String {
+    let scale: Vec<String> = gain
+        .scale
+        .iter()
+        .map(|s| format!("{:+.digits$} %", (s - 1.0) * 100.0))
+        .collect();
+    let skew: Vec<String> = ["yz", "xz", "xy"]
+        .iter()
+        .zip(gain.skew_deg)
+        .map(|(pair, d)| format!("{pair} {d:+.3}°"))
+        .collect();
+    format!(
+        "scale error [{}] of nominal; axes off 90° by {}",
+        scale.join(", "),
+        skew.join(", ")
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::Vec3;
+
+    #[test]
+    fn unit_conversion_is_removed_and_a_scale_error_shows_in_percent() {
+        // Data in g read 1.3 % high on x: A = diag(9.80665 / 1.013, 9.80665, 9.80665).
+        let g = 9.80665;
+        let a = Mat3::from_diagonal(&Vec3::new(g / 1.013, g, g));
+        let found = gain(&a, g).expect("invertible");
+        assert!((found.scale[0] - 1.013).abs() < 1e-12, "{:?}", found.scale);
+        assert!((found.scale[1] - 1.0).abs() < 1e-12);
+        assert!(found.skew_deg.iter().all(|d| d.abs() < 1e-9));
+        assert!(gain_text(&found, 3).contains("+1.300 %"));
+    }
+
+    #[test]
+    fn a_sheared_axis_shows_its_angle_to_the_others() {
+        // x senses 0.1° towards y: rows of M = A⁻¹ are x' = (cos, sin, 0), y, z.
+        let t = 0.1_f64.to_radians();
+        let m = Mat3::new(t.cos(), t.sin(), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        let a = m.try_inverse().expect("invertible");
+        let found = gain(&a, 1.0).expect("invertible");
+        assert!(
+            (found.skew_deg[2] - 0.1).abs() < 1e-9,
+            "{:?}",
+            found.skew_deg
+        );
+        assert!(found.skew_deg[0].abs() < 1e-9 && found.skew_deg[1].abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_singular_matrix_has_no_gain() {
+        assert_eq!(gain(&Mat3::zeros(), 1.0), None);
+    }
+}
