@@ -3,6 +3,7 @@
 //! data support, and report what is left.
 //!
 //! - [`dataset`]: observations (pose means with standard errors, temperature, time, force);
+//! - [`earth_rate`]: the Earth's rotation removed from the gyroscope's rest readings;
 //! - [`noise`]: the floor and the chi-square test;
 //! - [`effects`]: the candidate families and their parameters;
 //! - [`extended_fit`]: the base model plus effects, fitted jointly;
@@ -21,6 +22,7 @@
 
 pub mod crossval;
 pub mod dataset;
+pub mod earth_rate;
 pub mod effects;
 pub mod extended_fit;
 pub mod report;
