@@ -69,6 +69,14 @@ fn coefficients(
         .collect()
 }
 
+/// Whether `kind` depends on time or temperature (the pair that warm-up confounds).
+fn is_time_or_temperature(kind: EffectKind) -> bool {
+    matches!(
+        kind,
+        EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
+    )
+}
+
 /// The verdict for a candidate whose model (with `unknowns` parameters) could not be fitted on
 /// `n` observations of `components` residuals each.
 fn not_fittable(kind: EffectKind, unknowns: usize, n: usize, components: usize) -> EffectResult {
@@ -198,6 +206,7 @@ pub fn analyse_observations(
     let mut confounded_found = false;
     let mut wrong_form: Vec<(&'static str, String)> = Vec::new();
     let mut unfittable: Vec<(EffectKind, usize)> = Vec::new();
+    let mut provisional: Vec<&'static str> = Vec::new();
     while !remaining.is_empty() {
         let m = remaining.len();
         let mut round: Vec<(EffectKind, Comparison, ExtendedFit, HeldOut)> = Vec::new();
@@ -252,23 +261,26 @@ pub fn analyse_observations(
             last.push((*k, c.clone(), f.clone()));
         }
         let Some(w) = winner else { break };
-        let (kind, _, fit, ho) = round.swap_remove(w);
-        let time_or_temp = matches!(
-            kind,
-            EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
-        );
+        let time_or_temp = is_time_or_temperature(round[w].0);
         if confounded && time_or_temp {
             confounded_found = true;
-            remaining.retain(|r| {
-                !matches!(
-                    r,
-                    EffectKind::BiasDrift
-                        | EffectKind::BiasTemperature(_)
-                        | EffectKind::ScaleTemperature
-                )
-            });
+            remaining.retain(|r| !is_time_or_temperature(*r));
+            // The firmware can only apply a temperature term: keep the best temperature
+            // candidate that passes, marked provisional, rather than nothing.
+            let temperature_winner = round
+                .iter()
+                .enumerate()
+                .filter(|(_, (k, c, _, _))| k.needs_temperature() && c.passes(m))
+                .min_by(|a, b| a.1 .1.p_value.total_cmp(&b.1 .1.p_value))
+                .map(|(i, _)| i);
+            if let Some(t) = temperature_winner {
+                let (kind, _, fit, ho) = round.swap_remove(t);
+                provisional.push(kind.name());
+                current = (fit, ho);
+            }
             continue;
         }
+        let (kind, _, fit, ho) = round.swap_remove(w);
         remaining.retain(|r| r.name() != kind.name());
         if time_or_temp {
             // Form check: a bias free in shape over the same variable must not predict better.
@@ -340,20 +352,28 @@ pub fn analyse_observations(
             p_value,
             gain,
             coefficients: coefficients(&problem, &final_fit, idx, unit, inflation),
-            note: format!(
-                "improves held-out error by {:.0} % (signed-rank p = {p_value:.1e})",
-                100.0 * score
-            ),
+            note: if provisional.contains(&kind.name()) {
+                format!(
+                    "provisional: confounded with time (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); improves held-out error by \
+                     {:.0} % (signed-rank p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
+                     applies temperature terms only; confirm with a recording where temperature does not follow time \
+                     (a cool-down, or a second warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
+                    temp_time_correlation.unwrap_or(f64::NAN),
+                    100.0 * score
+                )
+            } else {
+                format!(
+                    "improves held-out error by {:.0} % (signed-rank p = {p_value:.1e})",
+                    100.0 * score
+                )
+            },
         });
     }
     for (kind, cmp, fit) in &last {
         if final_fit.effects.iter().any(|k| k.name() == kind.name()) {
             continue;
         }
-        let time_or_temp = matches!(
-            kind,
-            EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
-        );
+        let time_or_temp = is_time_or_temperature(*kind);
         let status = if confounded_found && time_or_temp && cmp.passes(1) {
             EffectStatus::Confounded
         } else {
