@@ -33,7 +33,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
-use crate::physics::SensorKind;
+use crate::sensor_kind::SensorKind;
 
 /// The effects that can be switched on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

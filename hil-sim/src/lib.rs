@@ -17,6 +17,7 @@ pub mod motioncal_serve;
 pub mod physics;
 pub mod poser;
 pub mod recording;
+pub mod sensor_kind;
 pub mod serve;
 pub mod world;
 

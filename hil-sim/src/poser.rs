@@ -256,6 +256,68 @@ fn tumble_waypoints(count: usize, field: &EarthField) -> Vec<UnitQuaternion<f64>
         .collect()
 }
 
+/// A body-frame field direction counts as shown when one within this angle was, degrees: about
+/// a quarter of the ≈45° spacing of the 26 direction regions a host's coverage guidance names,
+/// so that a region only grazed by a turn still gets its own visit.
+pub const SEEN_ANGLE_DEG: f64 = 12.0;
+
+/// The 26 body-frame directions of a cube's faces, edges and corners (unit).
+fn cube_directions() -> Vec<Vector3<f64>> {
+    let mut out = Vec::with_capacity(26);
+    for x in [-1.0, 0.0, 1.0] {
+        for y in [-1.0, 0.0, 1.0] {
+            for z in [-1.0, 0.0, 1.0] {
+                if let Some(d) = Vector3::new(x, y, z).try_normalize(0.0) {
+                    out.push(d);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The orientations a person who follows "still missing" guidance turns through, starting at
+/// `from` (body to world): for each of the 26 cube directions more than [`SEEN_ANGLE_DEG`] from
+/// every body-frame field direction in `seen`, the smallest turn that shows the field
+/// (`field_world`, unit) along it, each time the nearest one next; then `waypoints` (the whole
+/// spiral, in case the host wants more).
+pub fn fill_in_tumble(
+    waypoints: &[UnitQuaternion<f64>],
+    seen: &[Vector3<f64>],
+    field_world: &Vector3<f64>,
+    from: &UnitQuaternion<f64>,
+) -> Vec<UnitQuaternion<f64>> {
+    let cos_seen = SEEN_ANGLE_DEG.to_radians().cos();
+    let mut missing: Vec<Vector3<f64>> = cube_directions()
+        .into_iter()
+        .filter(|d| seen.iter().all(|s| s.dot(d) < cos_seen))
+        .collect();
+    let mut plan = Vec::with_capacity(missing.len() + waypoints.len());
+    let mut here = *from;
+    while !missing.is_empty() {
+        let shown = here.inverse() * field_world;
+        let nearest = missing
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.dot(&shown).total_cmp(&b.1.dot(&shown)))
+            .map_or(0, |(i, _)| i);
+        let wanted = missing.swap_remove(nearest);
+        // q = here·r with r turning `wanted` onto `shown` gives q⁻¹·field = wanted.
+        let turn = UnitQuaternion::rotation_between(&wanted, &shown).unwrap_or_else(|| {
+            // Opposite directions: half a turn about any axis perpendicular to them.
+            let axis = wanted
+                .cross(&Vector3::x())
+                .try_normalize(1e-6)
+                .unwrap_or_else(Vector3::y);
+            UnitQuaternion::from_axis_angle(&Unit::new_normalize(axis), PI)
+        });
+        here *= turn;
+        plan.push(here);
+    }
+    plan.extend_from_slice(waypoints);
+    plan
+}
+
 /// Build the schedule `kind` with `seed`. `field` orients the tumble so that the field sweeps the
 /// body sphere.
 pub fn build_schedule(
@@ -320,6 +382,27 @@ pub fn build_schedule(
                     period_s,
                 },
             })
+        }
+    }
+}
+
+#[cfg(test)]
+mod fill_in_tests {
+    use super::*;
+
+    #[test]
+    fn every_missing_direction_is_shown_by_one_turn_of_the_plan() {
+        let field = Vector3::new(0.5, 0.0, -(3.0_f64.sqrt()) / 2.0);
+        // Only +Z and its neighbourhood seen so far.
+        let seen = vec![Vector3::z()];
+        let plan = fill_in_tumble(&[], &seen, &field, &UnitQuaternion::identity());
+        // 26 cube directions, of which +Z itself (0°) is seen and none other within 12°.
+        assert_eq!(plan.len(), 25);
+        for d in cube_directions().iter().filter(|d| d.z < 0.99) {
+            let shown = plan
+                .iter()
+                .any(|q| (q.inverse() * field).dot(d) > 1.0 - 1e-9);
+            assert!(shown, "{d:?} not shown");
         }
     }
 }

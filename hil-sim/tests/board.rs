@@ -6,7 +6,7 @@ use imucal_hil_sim::board::{BoardConfig, PersonPhase, PersonSchedule, SimBoard};
 use imucal_hil_sim::physics::{lsm9ds1_scales, SensorKind};
 use imucal_protocol::{
     encode_frame, CalibrationSet, DeviceMessage, Event, FrameDecoder, PoseStats, Request,
-    RequestBody, ResponseBody, StillThresholds, MAX_FRAME,
+    RequestBody, ResponseBody, StillThresholds, StreamKind, MAX_FRAME,
 };
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -73,6 +73,28 @@ impl Host {
         let seq = self.send(board, body);
         self.wait(board, seq, 1.0)
             .expect("the firmware answers within 1 s")
+    }
+
+    /// Show the next prompt as the guided session does: stream while the person reacts and
+    /// turns away, then stop the stream.
+    fn prompt_next(&mut self, board: &mut SimBoard) {
+        let seq = self.send(
+            board,
+            RequestBody::StartStream {
+                kind: StreamKind::Raw,
+                decimation: 1,
+            },
+        );
+        assert!(matches!(
+            self.wait(board, seq, 1.0),
+            Some(ResponseBody::Ack)
+        ));
+        board.run_for(1.0).unwrap();
+        let seq = self.send(board, RequestBody::StopStream);
+        assert!(matches!(
+            self.wait(board, seq, 1.0),
+            Some(ResponseBody::Ack)
+        ));
     }
 
     fn capture(&mut self, board: &mut SimBoard) -> PoseStats {
@@ -210,6 +232,10 @@ fn the_person_holds_each_position_until_captured_then_tumbles_and_rests() {
     let g = board.truth().world.gravity_mps2;
     for (index, q) in orientations.iter().enumerate() {
         let stats = host.capture(&mut board);
+        // After the last position no prompt follows: the person moves on by themselves.
+        if index + 1 < orientations.len() {
+            host.prompt_next(&mut board);
+        }
         let expected = true_reading(&board, q, SensorKind::Accel);
         let mean = Vector3::from(stats.accel_mean.map(f64::from));
         // Hand sway of up to 0.3° tilts gravity by up to g·sin 0.3° ≈ 0.05 m/s²; bound 0.1.

@@ -6,7 +6,9 @@
 use std::time::{Duration, Instant};
 
 use imucal::device::DeviceClient;
+use imucal::fit::Calibration;
 use imucal::fit::{Mat3, Vec3};
+use imucal::session::gyro_fit::full_turn_error_deg;
 use imucal::session::{run_session, SessionOptions, SessionOutcome, Unattended};
 use imucal_hil_sim::board::SensorChip;
 use imucal_hil_sim::physics::SensorTruth;
@@ -14,8 +16,9 @@ use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
 use imucal_protocol::StreamKind;
 
 /// Simulated seconds per wall second: fast enough for a modest test, slow enough that the
-/// serving loop keeps up on a shared two-core machine.
-const SPEED: f64 = 20.0;
+/// serving loop and an unoptimised host keep up with the full-rate stream on a shared two-core
+/// machine.
+const SPEED: f64 = 5.0;
 
 /// Tolerance in standard deviations of the fit's own covariance (a 5σ miss on one of the ~20
 /// compared numbers would happen by chance about once in 10⁵ runs).
@@ -75,6 +78,67 @@ fn assert_matches_truth(name: &str, fit: &imucal::fit::Fit, truth: &SensorTruth,
     }
 }
 
+/// The gyroscope's written `A` against the truth in the accelerometer's output frame
+/// (`Qᵀ·A_true`): scale within 0.1 % and misalignment within 0.05° (the product's targets), each
+/// within K_SIGMA of the fit's own σ, and a 360° turn about each axis within 0.2°. A gyroscope
+/// left at `A = I` fails: the board's true scale is 0.974.
+fn assert_gyro_matches_truth(outcome: &SessionOutcome, truth: &imucal_hil_sim::physics::ImuTruth) {
+    let gyro = outcome
+        .gyro_scale
+        .as_ref()
+        .expect("the gyroscope's scale was fitted");
+    let a = outcome.fit.gyro.cal.a;
+    assert!(
+        (a - Mat3::identity()).abs().max() > 0.01,
+        "the gyroscope's A stayed near identity: {a}"
+    );
+    let (q_accel, _) = upper_triangular_factor(&matrix(&truth.accel.a_true));
+    let expected = q_accel.transpose() * matrix(&truth.gyro.a_true);
+    let error = a * expected.try_inverse().expect("an invertible truth") - Mat3::identity();
+    for i in 0..3 {
+        let scale_pct = error[(i, i)].abs() * 100.0;
+        eprintln!(
+            "gyro scale {}: error {scale_pct:.4} % (1σ {:.4} %)",
+            i + 1,
+            gyro.scale_sigma_pct[i]
+        );
+        assert!(
+            scale_pct < 0.1,
+            "gyro scale {} off by {scale_pct:.3} %",
+            i + 1
+        );
+        assert!(scale_pct <= K_SIGMA * gyro.scale_sigma_pct[i]);
+        for j in (0..3).filter(|&j| j != i) {
+            let angle = error[(i, j)].abs().to_degrees();
+            assert!(
+                angle < 0.05,
+                "gyro misalignment {}{} {angle:.3}°",
+                i + 1,
+                j + 1
+            );
+            assert!(angle <= K_SIGMA * gyro.misalignment_sigma_deg);
+        }
+    }
+    let gyro_inverse = matrix(&truth.gyro.a_true)
+        .try_inverse()
+        .expect("an invertible truth");
+    let b_true = Vec3::from(truth.gyro.b_true);
+    let raw = |w: &Vec3| gyro_inverse * w + b_true;
+    for axis in 0..3 {
+        let before = full_turn_error_deg(&Calibration::identity(), raw, axis, 4.0, 119.0);
+        let after = full_turn_error_deg(&outcome.fit.gyro.cal, raw, axis, 4.0, 119.0);
+        eprintln!(
+            "360° about axis {}: {before:.2}° before, {after:.3}° after",
+            axis + 1
+        );
+        assert!(
+            after < 0.2,
+            "a full turn about axis {} is off by {after:.3}°",
+            axis + 1
+        );
+    }
+}
+
 fn run_calibration(seed: u64, chip: SensorChip) -> (SimHandle, DeviceClient, SessionOutcome) {
     let mut sim_options = SimOptions::new(seed);
     sim_options.speed = SPEED;
@@ -117,6 +181,8 @@ fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
             axis + 1
         );
     }
+
+    assert_gyro_matches_truth(outcome, &truth.imu);
 
     // The written magnetometer matrix is in the accelerometer's output frame: with
     // A_acc = Q·R, the true magnetometer correction in that frame is Qᵀ·A_mag.

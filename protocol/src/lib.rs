@@ -75,6 +75,7 @@
 extern crate std;
 
 pub mod error;
+pub mod error_code;
 pub mod feed;
 pub mod frame;
 pub mod math;
@@ -85,7 +86,8 @@ pub mod sample;
 pub mod validate;
 pub mod version;
 
-pub use error::{BatchError, EncodeError, ErrorCode, FrameError};
+pub use error::{BatchError, EncodeError, FrameError};
+pub use error_code::ErrorCode;
 pub use feed::{FeedDecoder, FeedFrame, MAX_FEED_FRAME};
 pub use frame::{
     decode_payload, encode_frame, max_frame_len, FrameDecoder, Messages, CRC_BYTES, MAX_FRAME,

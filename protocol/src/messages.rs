@@ -3,7 +3,7 @@
 use heapless::String;
 use serde::{Deserialize, Serialize};
 
-use crate::error::ErrorCode;
+use crate::error_code::ErrorCode;
 use crate::params::CalibrationSet;
 use crate::sample::{CalibratedBatch, SampleBatch, SensorScales, SensorSet};
 use crate::version::{FirmwareVersion, ProtocolVersion, PROTOCOL_VERSION};

@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::frame::crc32_of;
 #[cfg(doc)]
-use crate::validate::MAX_DELTA_T_C;
+use crate::validate::limits::MAX_DELTA_T_C;
 
 /// Format version of [`CalibrationSet`] written by this crate.
 ///

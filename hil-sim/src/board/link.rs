@@ -28,6 +28,10 @@ pub struct LinkObservations {
     pub capture_requests: u64,
     /// `PoseStats` replies the firmware sent.
     pub poses_captured: u64,
+    /// `StartStream` requests that reached the firmware.
+    pub stream_starts: u64,
+    /// `StopStream` requests that reached the firmware.
+    pub stream_stops: u64,
     /// The latest `PoseStats` sent.
     pub last_pose: Option<PoseStats>,
     /// Bytes the firmware took from the host.
@@ -159,12 +163,20 @@ impl Read for DeviceLink {
         for (slot, byte) in buf.iter_mut().zip(buffers.to_device.drain(..count)) {
             *slot = byte;
             if let Some(Ok(payload)) = buffers.request_decoder.push(byte) {
-                if let Ok(Request {
-                    body: RequestBody::CapturePose { .. },
-                    ..
-                }) = imucal_protocol::decode_payload::<Request>(payload)
-                {
-                    buffers.observed.capture_requests += 1;
+                match imucal_protocol::decode_payload::<Request>(payload) {
+                    Ok(Request {
+                        body: RequestBody::CapturePose { .. },
+                        ..
+                    }) => buffers.observed.capture_requests += 1,
+                    Ok(Request {
+                        body: RequestBody::StartStream { .. },
+                        ..
+                    }) => buffers.observed.stream_starts += 1,
+                    Ok(Request {
+                        body: RequestBody::StopStream,
+                        ..
+                    }) => buffers.observed.stream_stops += 1,
+                    _ => {}
                 }
             }
         }

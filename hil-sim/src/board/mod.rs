@@ -440,6 +440,8 @@ impl SimBoard {
             Prompts {
                 capture_requests: observed.capture_requests,
                 poses_captured: observed.poses_captured,
+                stream_starts: observed.stream_starts,
+                stream_stops: observed.stream_stops,
             },
         )?;
         let state = self.world_state(t_s);

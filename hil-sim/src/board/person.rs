@@ -6,11 +6,18 @@
 //!    placement errors, headings and hand tremor drawn by [`crate::poser::build_schedule`]
 //!    (`twelve`) from the seed. The first position is held, without a time limit, until the host
 //!    first asks for a pose. From then on each position is held until the firmware has sent a
-//!    `PoseStats` reply during that hold, or for at most `max_hold_s` (counted from the later of
-//!    the hold's start and the first request), then the person turns to the next one. A person
-//!    does not know the order the tool will prompt in; the host accepts poses in any order.
-//! 2. A slow tumble through the waypoints of the `tumble` schedule (the field direction sweeps the
-//!    body sphere), which does not wait for anything.
+//!    `PoseStats` reply during that hold and the host has shown its next prompt (it starts the
+//!    stream again; without that the person moves on [`NO_PROMPT_MOVE_ON_S`] after the capture)
+//!    and a reaction time [`REACTION_S`] has passed,
+//!    or for at most `max_hold_s` (counted from the later of the hold's start and the first
+//!    request), then the person turns to the next one. A person does not know the order the tool
+//!    will prompt in; the host accepts poses in any order. The turns between positions tilt the
+//!    board (the twelve differ in their up direction), which the gyroscope's scale fit needs.
+//! 2. A tumble for the magnetometer that fills in what the turns between the positions have not
+//!    shown yet: the waypoints of the `tumble` schedule whose body-frame field direction is more
+//!    than [`crate::poser::SEEN_ANGLE_DEG`] from every direction shown so far, nearest first
+//!    ([`crate::poser::fill_in_tumble`]), then the rest of the spiral. The person stops tumbling
+//!    as soon as the host stops the stream (it has the coverage it needs).
 //! 3. A rest in the first position, with the hand off the board (no tremor), until stopped: what
 //!    the host's at-rest verification needs.
 //!
@@ -24,15 +31,28 @@
 //! and rate stay continuous and integrating the gyroscope between holds stays exact. The motion is
 //! a function of the seed and of when the firmware finishes each capture.
 
-use nalgebra::UnitQuaternion;
+use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
-use crate::poser::{build_schedule, PoserOptions, ScheduleKind};
+use crate::poser::{build_schedule, fill_in_tumble, PoserOptions, ScheduleKind, SEEN_ANGLE_DEG};
 use crate::world::{EarthField, Motion, Segment, Trajectory, TrajectoryBuilder, Tremor};
 
 /// Length given to a hold that ends only on an observation, s (about 30 years).
 const OPEN_HOLD_S: f64 = 1.0e9;
+
+/// A person who sees no new prompt after a capture moves on after this long, s.
+pub const NO_PROMPT_MOVE_ON_S: f64 = 1.0;
+
+/// A stream that ran this long during the tumble and then stopped ends the tumble, s.
+const WATCHED_TUMBLE_S: f64 = 1.0;
+
+/// Time from seeing a prompt to starting to move, s (a simple visual reaction time).
+pub const REACTION_S: f64 = 0.25;
+
+/// Body-frame field directions are remembered when they differ by more than this from the last
+/// one remembered, degrees (a tenth of the angle that counts as seen).
+const FIELD_TRACE_STEP_DEG: f64 = SEEN_ANGLE_DEG / 10.0;
 
 /// What the simulated person does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -102,6 +122,10 @@ pub struct Prompts {
     pub capture_requests: u64,
     /// `PoseStats` replies seen so far.
     pub poses_captured: u64,
+    /// `StartStream` requests seen so far (the host shows a new prompt and watches).
+    pub stream_starts: u64,
+    /// `StopStream` requests seen so far.
+    pub stream_stops: u64,
 }
 
 #[derive(Debug, Clone)]
@@ -116,9 +140,20 @@ pub struct Person {
     holds: Vec<HoldPlan>,
     /// Holds in the whole schedule: the twelve times the rounds.
     hold_count: usize,
-    tumble: Vec<(UnitQuaternion<f64>, f64)>,
+    /// Waypoints of the tumble schedule (the spiral).
+    tumble: Vec<UnitQuaternion<f64>>,
+    /// The order the tumble goes through, chosen when it begins.
+    tumble_plan: Vec<UnitQuaternion<f64>>,
+    /// Since when the host has been streaming during the tumble, s: a stop after a stream of
+    /// at least [`WATCHED_TUMBLE_S`] means it has the directions it needs.
+    tumble_watched_since_s: Option<f64>,
+    /// Field direction in the world frame (unit), if there is a field.
+    field_world: Option<Vector3<f64>>,
+    /// Body-frame field directions shown so far.
+    field_seen: Vec<Vector3<f64>>,
     rest: UnitQuaternion<f64>,
     turn_peak_rate_dps: f64,
+    tumble_peak_rate_dps: f64,
     max_hold_s: f64,
     phase: PersonPhase,
     /// The current motion segment, in time since `segment_start_s`.
@@ -127,6 +162,10 @@ pub struct Person {
     segment_end_s: f64,
     /// `PoseStats` count when the current hold began; `None` once the hold is ending.
     hold_captures_at_start: Option<u64>,
+    /// When this hold's pose was captured, s, and the `StartStream` count then.
+    captured: Option<(f64, u64)>,
+    /// When the person starts to move after seeing the next prompt, s.
+    moving_at_s: Option<f64>,
     first_prompt_s: Option<f64>,
 }
 
@@ -167,9 +206,9 @@ impl Person {
         for segment in tumble.trajectory.segments() {
             match segment {
                 Segment::Hold { orientation, .. } if waypoints.is_empty() => {
-                    waypoints.push((*orientation, 0.0));
+                    waypoints.push(*orientation);
                 }
-                Segment::Turn { to, duration_s, .. } => waypoints.push((*to, *duration_s)),
+                Segment::Turn { to, .. } => waypoints.push(*to),
                 Segment::Hold { .. } => {}
             }
         }
@@ -180,8 +219,13 @@ impl Person {
             holds,
             hold_count,
             tumble: waypoints,
+            tumble_plan: Vec::new(),
+            tumble_watched_since_s: None,
+            field_world: field.world_vector_ut().try_normalize(0.0),
+            field_seen: Vec::new(),
             rest,
             turn_peak_rate_dps: options.turn_peak_rate_dps,
+            tumble_peak_rate_dps: options.tumble_peak_rate_dps,
             max_hold_s,
             phase: PersonPhase::Rest,
             segment: TrajectoryBuilder::new(rest)
@@ -190,6 +234,8 @@ impl Person {
             segment_start_s: 0.0,
             segment_end_s: OPEN_HOLD_S,
             hold_captures_at_start: None,
+            captured: None,
+            moving_at_s: None,
             first_prompt_s: None,
         };
         if hold_count > 0 {
@@ -213,22 +259,64 @@ impl Person {
         if prompts.capture_requests > 0 && self.first_prompt_s.is_none() {
             self.first_prompt_s = Some(t_s);
         }
+        self.trace_field(t_s);
         if let (PersonPhase::Hold { .. }, Some(at_start)) =
             (self.phase, self.hold_captures_at_start)
         {
-            let captured = prompts.poses_captured > at_start;
+            if self.captured.is_none() && prompts.poses_captured > at_start {
+                self.captured = Some((t_s, prompts.stream_starts));
+            }
+            let prompted = self.captured.is_some_and(|(at_s, starts)| {
+                prompts.stream_starts > starts || t_s - at_s >= NO_PROMPT_MOVE_ON_S
+            });
+            if prompted && self.moving_at_s.is_none() {
+                self.moving_at_s = Some(t_s + REACTION_S);
+            }
+            let prompted_on = self.moving_at_s.is_some_and(|at| t_s >= at);
             let timed_out = self
                 .first_prompt_s
                 .is_some_and(|first| t_s - first.max(self.segment_start_s) >= self.max_hold_s);
-            if captured || timed_out {
+            if prompted_on || timed_out {
                 self.end_hold(t_s)?;
+            }
+        }
+        if let PersonPhase::Tumble { .. } = self.phase {
+            let streaming = prompts.stream_starts > prompts.stream_stops;
+            match (streaming, self.tumble_watched_since_s) {
+                (true, None) => self.tumble_watched_since_s = Some(t_s),
+                (false, Some(since)) if t_s - since >= WATCHED_TUMBLE_S => {
+                    // The host has the directions it needs: put the board down from here.
+                    let here = self.motion_at(t_s).q_body_to_world;
+                    self.turn(here, self.rest, t_s)?;
+                    self.phase = PersonPhase::Rest;
+                    self.tumble_watched_since_s = None;
+                }
+                // A stream stopped at once (the end of the positions) does not count.
+                (false, Some(_)) => self.tumble_watched_since_s = None,
+                _ => {}
             }
         }
         // Segments may be shorter than a sample period; catch up through all that ended.
         while t_s >= self.segment_end_s {
-            self.next_segment(prompts.poses_captured)?;
+            self.next_segment(prompts)?;
         }
         Ok(())
+    }
+
+    /// Remember the body-frame field direction at `t_s` when it is new enough.
+    fn trace_field(&mut self, t_s: f64) {
+        let Some(field) = self.field_world else {
+            return;
+        };
+        let body = self.motion_at(t_s).q_body_to_world.inverse() * field;
+        let step = FIELD_TRACE_STEP_DEG.to_radians().cos();
+        if self
+            .field_seen
+            .last()
+            .is_none_or(|last| last.dot(&body) < step)
+        {
+            self.field_seen.push(body);
+        }
     }
 
     /// Orientation and body rate at `t_s` (call [`Self::observe`] first).
@@ -255,6 +343,8 @@ impl Person {
         self.segment_start_s = start_s;
         self.segment_end_s = start_s + OPEN_HOLD_S;
         self.hold_captures_at_start = Some(captures);
+        self.captured = None;
+        self.moving_at_s = None;
         Ok(())
     }
 
@@ -278,7 +368,8 @@ impl Person {
         Ok(())
     }
 
-    fn next_segment(&mut self, captures: u64) -> Result<(), SimError> {
+    fn next_segment(&mut self, prompts: Prompts) -> Result<(), SimError> {
+        let captures = prompts.poses_captured;
         let start = self.segment_end_s;
         match self.phase {
             PersonPhase::Hold { index } => {
@@ -289,7 +380,10 @@ impl Person {
                         self.turn(from, to, start)?;
                         self.phase = PersonPhase::TurnToHold { index: index + 1 };
                     }
-                    None => self.begin_tumble(0, start)?,
+                    None => {
+                        self.plan_tumble(&from);
+                        self.begin_tumble(0, start)?;
+                    }
                 }
             }
             PersonPhase::TurnToHold { index } => self.begin_hold(index, start, captures)?,
@@ -306,16 +400,29 @@ impl Person {
         Ok(())
     }
 
-    /// Turn to tumble waypoint `index`, or to rest after the last one.
+    /// Choose the tumble's order from `from`: first what the field has not shown yet.
+    fn plan_tumble(&mut self, from: &UnitQuaternion<f64>) {
+        self.tumble_plan = match self.field_world {
+            Some(field) => fill_in_tumble(&self.tumble, &self.field_seen, &field, from),
+            None => self.tumble.clone(),
+        };
+        self.tumble_watched_since_s = None;
+    }
+
+    /// Turn to tumble waypoint `index` of the plan, or to rest after the last one.
     fn begin_tumble(&mut self, index: usize, start_s: f64) -> Result<(), SimError> {
+        if self.tumble_plan.is_empty() && index == 0 {
+            self.tumble_plan = self.tumble.clone();
+        }
         let from = self
             .segment
             .motion_at(self.segment.duration_s())
             .q_body_to_world;
-        match self.tumble.get(index).copied() {
-            // The first waypoint is reached by an ordinary turn; later ones keep the tumble's pace.
-            Some((to, _)) if index == 0 => self.turn(from, to, start_s)?,
-            Some((to, duration)) => {
+        match self.tumble_plan.get(index).copied() {
+            // The first waypoint is reached by an ordinary turn; later ones at the tumble's pace.
+            Some(to) if index == 0 => self.turn(from, to, start_s)?,
+            Some(to) => {
+                let duration = turn_duration_s(&from, &to, self.tumble_peak_rate_dps);
                 self.segment = TrajectoryBuilder::new(from)
                     .turn_to(to, duration)?
                     .build()?;

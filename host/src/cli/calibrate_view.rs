@@ -132,6 +132,10 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
             sigmas(u.gyro_bias_dps, 4)
         ),
         format!(
+            "                 scale  {} (diagonal of A; 1 = nominal)",
+            triple([0, 1, 2].map(|i| fit.gyro.cal.a[(i, i)]), 4)
+        ),
+        format!(
             "  magnetometer   offset {} µT ± {}",
             triple(mag_b, 2),
             sigmas(u.mag_bias_ut, 3)

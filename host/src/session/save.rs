@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use imucal_protocol::PoseStats;
 use serde::{Deserialize, Serialize};
 
+use super::gyro_fit::GyroScale;
 use super::rest::RestErrors;
 use super::solve::{CapturedPose, FieldSource, Uncertainties, Verdict};
 use super::targets::Target;
@@ -64,6 +65,9 @@ pub struct SessionSummary {
     pub uncertainties: Uncertainties,
     /// The verdict.
     pub verdict: Verdict,
+    /// The gyroscope's scale factors and misalignment with their σ (`null` when only the bias
+    /// could be calibrated).
+    pub gyro_scale: Option<GyroScale>,
     /// Calibrated samples per second of board time at rest.
     pub stream_rate_hz: f64,
     /// Samples lost in transit.
@@ -98,6 +102,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         field_source: outcome.fit.field_source,
         gravity_mps2: outcome.fit.gravity_mps2,
         uncertainties: outcome.fit.uncertainties,
+        gyro_scale: outcome.gyro_scale.clone(),
         verdict: outcome.fit.verdict.clone(),
         stream_rate_hz: outcome.stream_rate_hz,
         lost_samples: outcome.lost_samples,

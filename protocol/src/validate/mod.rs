@@ -17,7 +17,7 @@
 //!   within [`MAX_G_SENSITIVITY`]. Real parts are one to two orders of magnitude inside these.
 
 pub mod limits;
-mod reason;
+pub mod reason;
 
 pub use limits::{
     GAIN_LIMITS, MAX_CONDITION_FROBENIUS, MAX_DELTA_T_C, MAX_G_SENSITIVITY, MAX_NONLINEAR_CHANGE,

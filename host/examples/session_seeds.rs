@@ -1,0 +1,167 @@
+//! The guided session on the simulated board over several seeds: per seed the simulated session
+//! time, the errors at rest after calibration (`|a|` in mg, `|m|` in %), and the gyroscope's
+//! scale and misalignment against the board's truth, with the fit's own 1σ, and how far a 360°
+//! turn about each axis integrates off before and after calibration.
+//!
+//! The gyroscope's written `A` maps raw rates into the accelerometer's output frame, which the
+//! norm fit leaves as `Qᵀ·body` with `A_acc = Q·R` (upper-triangular gauge), so the truth it is
+//! compared with is `Qᵀ·A_true`; `E = A_fit·(Qᵀ·A_true)⁻¹ − I` holds the scale errors on its
+//! diagonal and the misalignment angles (radians) off it.
+//!
+//! Run: `cargo run --release -p imucal --example session_seeds -- [SEEDS] [FIRST_SEED] [-v]`
+//! (default 10 seeds from 1).
+
+use imucal::device::DeviceClient;
+use imucal::fit::{Calibration, Mat3, Vec3};
+use imucal::session::gyro_fit::full_turn_error_deg;
+use imucal::session::{run_session, SessionEvent, SessionObserver, SessionOptions};
+use imucal_hil_sim::serve::{SimOptions, SimServer};
+
+/// Simulated seconds per wall second. The simulated board runs on while the host computes, so
+/// the host's computing time counts ×SPEED in the simulated session time; 5 keeps that small
+/// and lets the host keep up with the full-rate stream on a loaded machine.
+const SPEED: f64 = 5.0;
+
+/// Prints the events that matter for timing when `-v` is given.
+struct Log {
+    verbose: bool,
+    start: std::time::Instant,
+}
+
+impl SessionObserver for Log {
+    fn event(&mut self, event: &SessionEvent<'_>) {
+        if !self.verbose {
+            return;
+        }
+        // Approximate simulated time from the wall clock.
+        eprint!("{:6.1} s", self.start.elapsed().as_secs_f64() * SPEED);
+        match event {
+            SessionEvent::Captured {
+                target, samples, ..
+            } => eprintln!("  captured {} ({samples} samples)", target.name),
+            SessionEvent::CaptureFailed { target, reason } => {
+                eprintln!("  failed {}: {reason}", target.name)
+            }
+            SessionEvent::Note(text) => eprintln!("  note: {text}"),
+            SessionEvent::MagPrompt => eprintln!("  magnetometer phase"),
+            SessionEvent::RestPrompt => eprintln!("  rest"),
+            SessionEvent::MagCoverage { covered, .. } => eprintln!("  mag covered {covered}"),
+            SessionEvent::Prompt { target, .. } => eprintln!("  prompt {}", target.name),
+            _ => eprint!("\r"),
+        }
+    }
+}
+
+fn matrix(rows: &[[f64; 3]; 3]) -> Mat3 {
+    Mat3::from_fn(|r, c| rows[r][c])
+}
+
+/// The orthogonal factor `Q` of `A = Q·R` with `R`'s diagonal positive.
+fn orthogonal_factor(a: &Mat3) -> Mat3 {
+    let qr = a.qr();
+    let (mut q, r) = (qr.q(), qr.r());
+    for i in 0..3 {
+        if r[(i, i)] < 0.0 {
+            for c in 0..3 {
+                q[(c, i)] = -q[(c, i)];
+            }
+        }
+    }
+    q
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let verbose = args.iter().any(|a| a == "-v");
+    let numbers: Vec<u64> = args.iter().filter_map(|a| a.parse().ok()).collect();
+    let seeds = numbers.first().copied().unwrap_or(10);
+    let first = numbers.get(1).copied().unwrap_or(1);
+    println!(
+        "seed | session s | |a| mg | |m| % | gyro scale err % (1σ) | misalign err ° (1σ) | moves | \
+         360° before ° | 360° after °"
+    );
+    for seed in first..first + seeds {
+        let mut sim_options = SimOptions::new(seed);
+        sim_options.speed = SPEED;
+        let sim = match SimServer::start(sim_options) {
+            Ok(sim) => sim,
+            Err(e) => {
+                println!("{seed} | simulator failed: {e}");
+                continue;
+            }
+        };
+        let truth = sim.truth();
+        let mut client = match DeviceClient::open(sim.port_path()) {
+            Ok(client) => client,
+            Err(e) => {
+                println!("{seed} | connect failed: {e}");
+                continue;
+            }
+        };
+        let options = SessionOptions {
+            gravity_mps2: truth.world.gravity_mps2,
+            field_ut: Some(Vec3::from(truth.world.field_world_ut).norm()),
+            ..SessionOptions::default()
+        };
+        let outcome = match run_session(
+            &mut client,
+            &options,
+            &mut Log {
+                verbose,
+                start: std::time::Instant::now(),
+            },
+        ) {
+            Ok(outcome) => outcome,
+            Err(e) => {
+                println!("{seed} | session failed: {e}");
+                continue;
+            }
+        };
+        let q = orthogonal_factor(&matrix(&truth.imu.accel.a_true));
+        let gyro_true = matrix(&truth.imu.gyro.a_true);
+        let expected = q.transpose() * gyro_true;
+        let error = outcome.fit.gyro.cal.a * expected.try_inverse().unwrap_or(Mat3::identity())
+            - Mat3::identity();
+        let scale_err = (0..3).map(|i| error[(i, i)].abs()).fold(0.0, f64::max) * 100.0;
+        let mut misalign_err: f64 = 0.0;
+        for r in 0..3 {
+            for c in (0..3).filter(|&c| c != r) {
+                misalign_err = misalign_err.max(error[(r, c)].abs().to_degrees());
+            }
+        }
+        let b_true = Vec3::from(truth.imu.gyro.b_true);
+        let gyro_inverse = gyro_true.try_inverse().unwrap_or(Mat3::identity());
+        let raw = |w: &Vec3| gyro_inverse * w + b_true;
+        let turn = |cal: &Calibration| {
+            (0..3)
+                .map(|axis| full_turn_error_deg(cal, raw, axis, 4.0, 119.0))
+                .fold(0.0, f64::max)
+        };
+        let before = turn(&Calibration::identity());
+        let after = turn(&outcome.fit.gyro.cal);
+        let (scale_sigma, misalign_sigma, moves) =
+            outcome
+                .gyro_scale
+                .as_ref()
+                .map_or((f64::NAN, f64::NAN, String::from("-")), |g| {
+                    (
+                        g.scale_sigma_pct.iter().copied().fold(0.0, f64::max),
+                        g.misalignment_sigma_deg,
+                        format!("{}/{}", g.moves_used, g.moves_recorded),
+                    )
+                });
+        let at_rest = outcome.after;
+        if verbose {
+            let bias_error = (outcome.fit.gyro.cal.b - b_true).norm().to_degrees();
+            let rms = outcome.gyro_scale.as_ref().map_or(f64::NAN, |g| g.rms_deg);
+            eprintln!("  gyro bias error {bias_error:.4} °/s, move residual RMS {rms:.4}°");
+        }
+        println!(
+            "{seed} | {:.1} | {:.3} | {:.3} | {scale_err:.3} ({scale_sigma:.3}) | \
+             {misalign_err:.3} ({misalign_sigma:.3}) | {moves} | {before:.2} | {after:.3}",
+            outcome.session_seconds,
+            at_rest.map_or(f64::NAN, |a| a.accel_error_mg),
+            at_rest.map_or(f64::NAN, |a| a.mag_error_pct),
+        );
+    }
+}

@@ -1,0 +1,268 @@
+//! The positions phase: watch the raw stream for the board to be still in a needed orientation,
+//! have the board average a pose there, and keep the stream of each move between holds (the
+//! gyroscope's scale fit integrates it). The next orientation prompted is the one that most
+//! reduces the worst-direction error of the accelerometer fit ([`plan`]); each hold lasts until
+//! its mean is as good as the fit needs ([`hold`]). After the twelve, corner positions are asked
+//! for when the fit's covariance says they help.
+
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+use imucal_protocol::ErrorCode;
+
+use super::error::SessionError;
+use super::events::{Phase, SessionEvent};
+use super::gyro_moves;
+use super::runner::{names, Runner};
+use super::solve::{self, CapturedPose};
+use super::targets::{self, Target};
+use super::{hold, plan};
+use crate::device::{DeviceError, PoseRequest};
+use crate::fit::norm_lm::fit_accel_lm;
+use crate::fit::{Pose, Vec3};
+
+impl<L: Read + Write> Runner<'_, L> {
+    /// Capture every target of `targets` not yet in `captured`. Returns `false` when
+    /// `timeout` passed without progress and `give_up_quietly` is set.
+    pub(super) fn capture_targets(
+        &mut self,
+        targets: &[Target],
+        captured: &mut Vec<CapturedPose>,
+        timeout: Duration,
+        give_up_quietly: bool,
+    ) -> Result<bool, SessionError> {
+        let total = captured.len()
+            + targets
+                .iter()
+                .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
+                .count();
+        self.start_watching()?;
+        let mut last_progress = Instant::now();
+        let mut prompted = None;
+        // The prompt changes only with the poses captured: (poses when chosen, target index).
+        let mut choice: Option<(usize, usize)> = None;
+        // The capture starts right after the last watched sample.
+        let mut last_sample_s = 0.0;
+        loop {
+            let needed: Vec<&Target> = targets
+                .iter()
+                .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
+                .collect();
+            if needed.is_empty() {
+                return Ok(true);
+            }
+            if choice.is_none_or(|(count, _)| count != captured.len()) {
+                choice = plan::most_informative(captured, &needed, self.options.gravity_mps2)
+                    .map(|t| (captured.len(), t.index));
+            }
+            let Some(next) = choice
+                .and_then(|(_, index)| needed.iter().find(|t| t.index == index))
+                .or(needed.first())
+            else {
+                return Ok(true);
+            };
+            if prompted != Some(next.index) {
+                self.observer.event(&SessionEvent::Prompt {
+                    target: next,
+                    captured: captured.len(),
+                    total,
+                });
+                prompted = Some(next.index);
+            }
+            if last_progress.elapsed() > timeout {
+                self.client.stop_stream()?;
+                if give_up_quietly {
+                    return Ok(false);
+                }
+                return Err(SessionError::NoProgress {
+                    port: self.client.port_name().to_string(),
+                    waited_s: timeout.as_secs_f64(),
+                    missing: names(&needed),
+                });
+            }
+            let chunk = self.read_chunk()?;
+            let mut latest = None;
+            self.current_move.extend_from_slice(&chunk.samples);
+            for sample in &chunk.samples {
+                self.record_mag(sample, Phase::Positions);
+                last_sample_s = sample.t_s;
+                if let Some(state) = self.monitor.push(sample) {
+                    latest = Some(state);
+                }
+            }
+            let Some(state) = latest else {
+                continue;
+            };
+            let at = targets::target_at(targets, &state.up);
+            let wanted = at.filter(|t| needed.iter().any(|n| n.index == t.index));
+            self.observer.event(&SessionEvent::Motion {
+                state,
+                at,
+                needed: wanted.is_some(),
+                settle_s: self.options.settle_s,
+            });
+            let Some(target) = wanted else {
+                continue;
+            };
+            if !(state.still && state.still_for_s >= self.options.settle_s) {
+                continue;
+            }
+            self.client.stop_stream()?;
+            let request = PoseRequest {
+                min_still: hold::hold_length(
+                    &self.current_move,
+                    self.options.window_s,
+                    self.options.budgets.accel_mg,
+                    self.options.hold,
+                ),
+                thresholds: self.options.thresholds,
+                timeout: self.options.capture_timeout,
+            };
+            self.finish_move();
+            let observer = &mut *self.observer;
+            let result = self.client.capture_pose(&request, &mut |progress| {
+                observer.event(&SessionEvent::Capturing {
+                    target,
+                    progress: *progress,
+                });
+            });
+            match result {
+                Ok(stats) => {
+                    let up = Vec3::from(stats.accel_mean.map(f64::from));
+                    let landed = targets::target_at(targets, &up)
+                        .filter(|t| !captured.iter().any(|c| c.target.index == t.index));
+                    match landed {
+                        Some(actual) => {
+                            captured.push(CapturedPose {
+                                target: actual.clone(),
+                                stats,
+                                t_s: last_sample_s + 0.5 * f64::from(stats.duration_ms) * 1e-3,
+                            });
+                            last_progress = Instant::now();
+                            self.observer.event(&SessionEvent::Captured {
+                                target: actual,
+                                samples: stats.n,
+                                captured: captured.len(),
+                                total,
+                            });
+                            self.tell_missing_rotation(captured);
+                        }
+                        None => self.observer.event(&SessionEvent::CaptureFailed {
+                            target,
+                            reason: "the board ended up in another orientation during the \
+                                     capture; the pose was discarded"
+                                .into(),
+                        }),
+                    }
+                }
+                Err(DeviceError::Device { code, .. })
+                    if matches!(
+                        code,
+                        ErrorCode::NotStill | ErrorCode::Timeout | ErrorCode::Saturated
+                    ) =>
+                {
+                    let reason = match code {
+                        ErrorCode::Saturated => {
+                            "a reading hit the sensor's range; hold the board without knocking it"
+                        }
+                        _ => "the board did not stay still long enough; hold it steadier",
+                    };
+                    self.observer.event(&SessionEvent::CaptureFailed {
+                        target,
+                        reason: reason.into(),
+                    });
+                }
+                Err(other) => return Err(other.into()),
+            }
+            self.start_watching()?;
+        }
+    }
+
+    /// After the twelve: ask for corner positions if the covariance says they help.
+    pub(super) fn extra_positions(
+        &mut self,
+        captured: &mut Vec<CapturedPose>,
+    ) -> Result<String, SessionError> {
+        let target_mg = self.options.budgets.accel_mg / 4.0;
+        let mg = 1000.0 / solve::STANDARD_GRAVITY;
+        let poses: Vec<Pose> = captured
+            .iter()
+            .map(|p| solve::pose_of(&p.stats, solve::accel_of))
+            .collect();
+        let fit = fit_accel_lm(&poses, self.options.gravity_mps2)?;
+        let Some(predicted) = solve::max_norm_sigma(&fit).map(|s| s * mg) else {
+            return Ok(
+                "the accelerometer fit gave no covariance, so the benefit of extra positions \
+                 could not be judged; none were asked for"
+                    .into(),
+            );
+        };
+        if predicted <= target_mg {
+            return Ok(format!(
+                "{} positions give an expected |a| error of {predicted:.3} mg (1σ), within the \
+                 {target_mg:.2} mg target (a quarter of the {:.1} mg budget); no extra positions \
+                 needed",
+                captured.len(),
+                self.options.budgets.accel_mg
+            ));
+        }
+        if self.options.max_extra_poses == 0 {
+            return Ok(format!(
+                "the expected |a| error is {predicted:.3} mg (1σ), above the {target_mg:.2} mg \
+                 target, but extra positions are switched off"
+            ));
+        }
+        let mut corners = targets::corner_positions(captured.len().max(12));
+        corners.sort_by(|a, b| {
+            let sa = solve::norm_sigma_at(&fit, &a.up).unwrap_or(0.0);
+            let sb = solve::norm_sigma_at(&fit, &b.up).unwrap_or(0.0);
+            sb.total_cmp(&sa)
+        });
+        corners.truncate(self.options.max_extra_poses);
+        self.observer.event(&SessionEvent::Note(format!(
+            "the expected |a| error is {predicted:.3} mg (1σ), above the {target_mg:.2} mg \
+             target: {} more positions will help ({})",
+            corners.len(),
+            names(&corners.iter().collect::<Vec<_>>())
+        )));
+        let before = captured.len();
+        let complete =
+            self.capture_targets(&corners, captured, self.options.extra_pose_timeout, true)?;
+        if complete {
+            self.client.stop_stream()?;
+        }
+        let added = captured.len() - before;
+        Ok(if complete {
+            format!(
+                "the expected |a| error with 12 positions was {predicted:.3} mg (1σ), above the \
+                 {target_mg:.2} mg target; {added} corner positions were added"
+            )
+        } else {
+            format!(
+                "the expected |a| error with 12 positions was {predicted:.3} mg (1σ), above the \
+                 {target_mg:.2} mg target; {added} of {} corner positions were held before the \
+                 {:.0} s limit, so the fit goes on with what there is",
+                corners.len(),
+                self.options.extra_pose_timeout.as_secs_f64()
+            )
+        })
+    }
+
+    /// Say which of the board's axes the moves so far have hardly turned about (a turn about
+    /// the vertical does not count: the gyroscope's scale fit cannot see it).
+    fn tell_missing_rotation(&mut self, captured: &[CapturedPose]) {
+        if captured.len() < gyro_moves::MIN_MOVES_FOR_ADVICE {
+            return;
+        }
+        let tilt = gyro_moves::tilt_per_axis_deg(&self.moves);
+        let advice = gyro_moves::missing_rotation_advice(&tilt);
+        let axis = advice.as_ref().map(|(axis, _)| *axis);
+        // Said once per lacking axis, not after every capture.
+        if axis != self.lacking_axis {
+            if let Some((_, text)) = advice {
+                self.observer.event(&SessionEvent::Note(text));
+            }
+            self.lacking_axis = axis;
+        }
+    }
+}

@@ -1,0 +1,251 @@
+//! The moves between holds as data for the gyroscope's scale and misalignment fit (Tedaldi,
+//! Pretto & Menegatti 2014, §IV-B; [`crate::fit::gyro_scale::fit_gyro_scale`]).
+//!
+//! A move is the raw stream from the end of one hold to the start of the next capture. Its two
+//! ends are still (the stream starts as the previous capture ends, and stops once the board has
+//! been still for the settle time), and give the gravity direction at the move's first and last
+//! sample. Each end averages the calibrated accelerometer over its still stretch, every sample
+//! first turned with the integrated gyroscope into the frame of the stretch's sample next to the
+//! turn (`Rₛ←ⱼ·aⱼ`), so the hand's sway within the stretch does not blur the direction the
+//! integration starts from, and only the turn itself is integrated.
+//!
+//! How much each body axis was tilted (turned about an axis perpendicular to gravity) tells the
+//! person which turn is still missing: a turn about the vertical leaves gravity unchanged and
+//! says nothing about the gyroscope's scale.
+
+use nalgebra::UnitQuaternion;
+
+use crate::device::UnitSample;
+use crate::fit::gyro_scale::{integrate_rotation, GyroMotion};
+use crate::fit::{Calibration, Mat3, Vec3};
+
+/// Moves needed before the session comments on which axis lacks rotation.
+pub const MIN_MOVES_FOR_ADVICE: usize = 4;
+
+/// Longest still stretch at either end of a move averaged for its gravity direction, s: long
+/// enough to average the accelerometer's noise (≈95 samples at 119 Hz), short enough to stay
+/// within the hold.
+const EDGE_MAX_S: f64 = 0.8;
+
+/// Fewest samples in an end's still stretch for the move to be used.
+const EDGE_MIN_SAMPLES: usize = 5;
+
+/// An axis whose tilting rotation is below this fraction of the mean of the other two counts
+/// as lacking: the scale fit's σ along an axis grows as the inverse of its rotation, so a third
+/// of the others triples it.
+const LACKING_FRACTION: f64 = 1.0 / 3.0;
+
+/// Time step of a stream (mean interval), `None` when samples are missing (a gap of more than
+/// 1.5 intervals) or the time stamps do not increase.
+fn even_step_s(samples: &[UnitSample]) -> Option<f64> {
+    let (first, last) = (samples.first()?, samples.last()?);
+    if samples.len() < 2 {
+        return None;
+    }
+    let dt = (last.t_s - first.t_s) / (samples.len() - 1) as f64;
+    let even = samples
+        .windows(2)
+        .all(|w| w[1].t_s > w[0].t_s && w[1].t_s - w[0].t_s <= 1.5 * dt);
+    (dt.is_finite() && dt > 0.0 && even).then_some(dt)
+}
+
+/// Rotation from each sample's body frame to the first sample's (`R₀←ⱼ`), integrating `a·rates`.
+fn prefix_rotations(a: &Mat3, rates: &[Vec3], dt: f64) -> Vec<UnitQuaternion<f64>> {
+    let mut out = Vec::with_capacity(rates.len());
+    let mut q = UnitQuaternion::identity();
+    out.push(q);
+    for pair in rates.windows(2) {
+        q *= integrate_rotation(a, pair, dt);
+        out.push(q);
+    }
+    out
+}
+
+/// Number of samples from the start of `rates` that turn slower than `still_rate` (rad/s), at
+/// most `max`.
+fn still_run(rates: impl Iterator<Item = Vec3>, still_rate: f64, max: usize) -> usize {
+    rates
+        .take(max)
+        .take_while(|w| w.norm() < still_rate)
+        .count()
+}
+
+/// The move as a [`GyroMotion`]: gyroscope rates bias-corrected with `bias` (rad/s), gravity
+/// directions from `accel` (a calibrated accelerometer) averaged over the still ends, turned
+/// with `a` (the current estimate of the gyroscope matrix). `None` when the stream has a gap or
+/// an end is not still for at least [`EDGE_MIN_SAMPLES`] samples (rate below `still_rate`).
+pub fn motion_of(
+    samples: &[UnitSample],
+    accel: &Calibration,
+    a: &Mat3,
+    bias: &Vec3,
+    still_rate: f64,
+) -> Option<GyroMotion> {
+    let dt = even_step_s(samples)?;
+    let rates: Vec<Vec3> = samples.iter().map(|s| Vec3::from(s.gyro) - bias).collect();
+    let edge = ((EDGE_MAX_S / dt).round() as usize).max(EDGE_MIN_SAMPLES);
+    let head = still_run(rates.iter().copied(), still_rate, edge);
+    let tail = still_run(rates.iter().rev().copied(), still_rate, edge);
+    if head < EDGE_MIN_SAMPLES || tail < EDGE_MIN_SAMPLES || head + tail >= rates.len() {
+        return None;
+    }
+    // Gravity is referred to the last sample of the still head and the first of the still
+    // tail, and only the turn between them is integrated: the bias error then acts over the
+    // turn alone.
+    let to_first = prefix_rotations(a, &rates, dt);
+    let gravity = |j: usize| accel.apply(&Vec3::from(samples[j].accel));
+    let (start, end) = (head - 1, rates.len() - tail);
+    let at_start = to_first[start].inverse();
+    let at_end = to_first[end].inverse();
+    let before = (0..head)
+        .map(|j| at_start * to_first[j] * gravity(j))
+        .sum::<Vec3>()
+        / head as f64;
+    let after = (end..rates.len())
+        .map(|j| at_end * to_first[j] * gravity(j))
+        .sum::<Vec3>()
+        / tail as f64;
+    Some(GyroMotion {
+        gravity_before: before,
+        gravity_after: after,
+        rates: rates.get(start..=end)?.to_vec(),
+        dt,
+    })
+}
+
+/// Every usable move as a [`GyroMotion`] (see [`motion_of`]).
+pub fn motions_of(
+    moves: &[Vec<UnitSample>],
+    accel: &Calibration,
+    a: &Mat3,
+    bias: &Vec3,
+    still_rate: f64,
+) -> Vec<GyroMotion> {
+    moves
+        .iter()
+        .filter_map(|m| motion_of(m, accel, a, bias, still_rate))
+        .collect()
+}
+
+/// Tilting rotation about each body axis summed over the moves, degrees: each move's rotation
+/// vector (nominal scale, no bias correction: good to a few degrees, enough for advice) without
+/// its part about the gravity direction at its start.
+pub fn tilt_per_axis_deg(moves: &[Vec<UnitSample>]) -> [f64; 3] {
+    let mut total = Vec3::zeros();
+    for samples in moves {
+        let (Some(dt), Some(first)) = (even_step_s(samples), samples.first()) else {
+            continue;
+        };
+        let rates: Vec<Vec3> = samples.iter().map(|s| Vec3::from(s.gyro)).collect();
+        let rotation = integrate_rotation(&Mat3::identity(), &rates, dt).scaled_axis();
+        let Some(up) = Vec3::from(first.accel).try_normalize(0.0) else {
+            continue;
+        };
+        let tilting = rotation - up * up.dot(&rotation);
+        total += tilting.abs();
+    }
+    [total.x, total.y, total.z].map(f64::to_degrees)
+}
+
+/// The axis (0 = X) that still lacks tilting rotation and a sentence naming a turn that supplies
+/// it; `None` when every axis has at least [`LACKING_FRACTION`] of the others' mean.
+pub fn missing_rotation_advice(tilt_deg: &[f64; 3]) -> Option<(usize, String)> {
+    let (axis, least) = tilt_deg
+        .iter()
+        .copied()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let others = (tilt_deg.iter().sum::<f64>() - least) / 2.0;
+    if others <= 0.0 || least >= LACKING_FRACTION * others {
+        return None;
+    }
+    let (name, example) = match axis {
+        0 => ('X', "from +Y up to +Z up"),
+        1 => ('Y', "from +Z up to +X up"),
+        _ => ('Z', "from +X up to +Y up"),
+    };
+    let text = format!(
+        "the turns so far have tilted the board {least:.0}° about its {name} axis against \
+         {others:.0}° on average about the others; the gyroscope's scale needs turns about \
+         {name} as well (e.g. {example}); a turn about the vertical does not count"
+    );
+    Some((axis, text))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(t_s: f64, accel: Vec3, gyro: Vec3) -> UnitSample {
+        UnitSample {
+            t_s,
+            accel: [accel.x, accel.y, accel.z],
+            gyro: [gyro.x, gyro.y, gyro.z],
+            mag: [0.0; 3],
+            temp_c: 25.0,
+        }
+    }
+
+    /// A 90° turn about body X at 100 Hz between two still stretches of 0.5 s, +Z up at the
+    /// start, read by a gyroscope whose X scale is `gain`.
+    fn quarter_turn(gain: f64) -> Vec<UnitSample> {
+        let dt = 0.01;
+        let turn_s = 1.0;
+        let rate = std::f64::consts::FRAC_PI_2 / turn_s;
+        let mut out = Vec::new();
+        let mut angle: f64 = 0.0;
+        for k in 0..=200 {
+            let t = k as f64 * dt;
+            let w = if (0.5..1.5).contains(&t) { rate } else { 0.0 };
+            // Gravity (up) in the body frame after turning by `angle` about X.
+            let up = Vec3::new(0.0, angle.sin(), angle.cos()) * 9.8;
+            out.push(sample(t, up, Vec3::new(w * gain, 0.0, 0.0)));
+            angle += w * dt;
+        }
+        out
+    }
+
+    #[test]
+    fn a_quarter_turn_gives_gravity_a_quarter_turn_apart_at_its_still_ends() {
+        let motion = motion_of(
+            &quarter_turn(1.0),
+            &Calibration::identity(),
+            &Mat3::identity(),
+            &Vec3::zeros(),
+            0.02,
+        )
+        .expect("a usable move");
+        let angle = motion
+            .gravity_before
+            .angle(&motion.gravity_after)
+            .to_degrees();
+        // The still ends are exact; only the step rate's discretisation (one sample) remains.
+        assert!((angle - 90.0).abs() < 1.0, "{angle}");
+        assert!((motion.dt - 0.01).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_stream_with_a_lost_batch_is_not_used() {
+        let mut samples = quarter_turn(1.0);
+        samples.drain(80..100);
+        let used = motion_of(
+            &samples,
+            &Calibration::identity(),
+            &Mat3::identity(),
+            &Vec3::zeros(),
+            0.02,
+        );
+        assert!(used.is_none());
+    }
+
+    #[test]
+    fn turns_about_x_only_name_y_and_z_as_lacking_and_balanced_turns_name_none() {
+        let tilt = tilt_per_axis_deg(&[quarter_turn(1.0), quarter_turn(1.0)]);
+        // Two quarter turns about X, each perpendicular to the initial +Z up.
+        assert!((tilt[0] - 180.0).abs() < 2.0, "{tilt:?}");
+        let (axis, advice) = missing_rotation_advice(&[300.0, 280.0, 20.0]).expect("Z lacks");
+        assert_eq!(axis, 2);
+        assert!(advice.contains("about its Z axis"), "{advice}");
+        assert!(missing_rotation_advice(&[300.0, 280.0, 200.0]).is_none());
+    }
+}

@@ -1,0 +1,81 @@
+//! The magnetometer phase: the board is turned until every direction region of the field holds
+//! enough samples ([`super::coverage`]). The samples streamed while moving between the positions
+//! count, so this phase only fills in the directions they left empty.
+
+use std::io::{Read, Write};
+use std::time::Instant;
+
+use super::coverage::{self, Coverage, REGIONS};
+use super::error::SessionError;
+use super::events::{Phase, SessionEvent};
+use super::runner::Runner;
+use crate::fit::Vec3;
+
+impl<L: Read + Write> Runner<'_, L> {
+    pub(super) fn magnetometer(&mut self) -> Result<Coverage, SessionError> {
+        self.observer.event(&SessionEvent::MagPrompt);
+        self.start_watching()?;
+        let start = Instant::now();
+        // Directions seen while moving between the positions count as well: the tumble only
+        // fills in what they left empty.
+        let mut last_update = 0;
+        let regions = REGIONS;
+        let needed_at_timeout = (self.options.mag_accept_fraction * regions as f64).ceil() as usize;
+        loop {
+            let chunk = self.read_chunk()?;
+            for sample in &chunk.samples {
+                self.record_mag(sample, Phase::Tumble);
+            }
+            let count = self.mag.len();
+            let timed_out = start.elapsed() > self.options.mag_timeout;
+            if self.mag.len() - last_update < 100 && !timed_out {
+                continue;
+            }
+            last_update = self.mag.len();
+            let all: Vec<Vec3> = self.mag.iter().map(|m| Vec3::from(m.mag)).collect();
+            let Some(centre) = coverage::sphere_centre(&all) else {
+                if timed_out {
+                    return Err(SessionError::MagCoverage {
+                        waited_s: start.elapsed().as_secs_f64(),
+                        covered: 0,
+                        needed: needed_at_timeout,
+                        regions,
+                        empty: "all".into(),
+                    });
+                }
+                continue;
+            };
+            let cover = Coverage::of(&all, &centre);
+            let covered = cover.covered(self.options.mag_min_per_region);
+            let empty = cover.empty_regions(self.options.mag_min_per_region);
+            self.observer.event(&SessionEvent::MagCoverage {
+                covered,
+                regions,
+                samples: count,
+                empty: empty.clone(),
+            });
+            if covered == regions && count >= self.options.mag_min_samples {
+                self.client.stop_stream()?;
+                return Ok(cover);
+            }
+            if timed_out {
+                self.client.stop_stream()?;
+                if covered >= needed_at_timeout && count >= self.options.mag_min_samples {
+                    self.observer.event(&SessionEvent::Note(format!(
+                        "the magnetometer phase ended at its time limit with {covered} of \
+                         {regions} directions covered (empty: {}); the fit goes on with them",
+                        empty.join(", ")
+                    )));
+                    return Ok(cover);
+                }
+                return Err(SessionError::MagCoverage {
+                    waited_s: start.elapsed().as_secs_f64(),
+                    covered,
+                    needed: needed_at_timeout,
+                    regions,
+                    empty: empty.join(", "),
+                });
+            }
+        }
+    }
+}
