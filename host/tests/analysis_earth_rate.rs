@@ -13,7 +13,8 @@ const LATITUDE_DEG: f64 = 45.41;
 const GYRO_SCALE: f64 = 2.0924e-4;
 
 fn analyse_gyro(latitude_deg: Option<f64>) -> SensorAnalysis {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/real/imutk_xsens_multipos.csv");
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/real/imutk_xsens_multipos.csv");
     let units = Units {
         accel: AccelUnit::Counts,
         gyro: GyroUnit::Counts,
@@ -48,7 +49,12 @@ fn g_sensitivity_diagonal(a: &SensorAnalysis) -> Option<f64> {
     let e = a.accepted().find(|e| e.kind.name() == "g_sensitivity")?;
     let diag: Vec<f64> = ["K_xx", "K_yy", "K_zz"]
         .iter()
-        .filter_map(|n| e.coefficients.iter().find(|c| c.name == *n).map(|c| c.value))
+        .filter_map(|n| {
+            e.coefficients
+                .iter()
+                .find(|c| c.name == *n)
+                .map(|c| c.value)
+        })
         .collect();
     Some(diag.iter().sum::<f64>() / diag.len().max(1) as f64)
 }
@@ -73,7 +79,8 @@ fn xsens_g_sensitivity_absorbs_the_earth_rate_unless_the_latitude_is_given() {
     // diagonal is larger by Ω_E·sin φ/g than with it (±10 %: the accelerometer calibration's
     // scale errors of a few % change f̂ slightly). The rest of the diagonal (≈ 1.4e-5) is the
     // sensor's own, and stays.
-    let absorbed = g_sensitivity_diagonal(&without).expect("g_sensitivity accepted without latitude");
+    let absorbed =
+        g_sensitivity_diagonal(&without).expect("g_sensitivity accepted without latitude");
     let own = g_sensitivity_diagonal(&with).expect("g_sensitivity accepted with latitude");
     let shift = absorbed - own;
     assert!(

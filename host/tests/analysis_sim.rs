@@ -5,9 +5,7 @@
 
 use std::path::PathBuf;
 
-use imucal::analysis::{
-    analyse_recording, AnalysisOptions, RecordingAnalysis, SensorAnalysis,
-};
+use imucal::analysis::{analyse_recording, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
 use imucal::recording::{LoadOptions, Recording, Sensor};
 use imucal::still::{find_still, StillOptions};
 use imucal_hil_sim::effects::{EffectKind as SimEffect, EffectRequest};
@@ -317,7 +315,9 @@ fn temperature_rising_with_time_is_accepted_as_provisional_temperature() {
         .find(|e| e.kind.name() == "bias_temperature")
         .unwrap_or_else(|| panic!("{}", describe(got)));
     assert!(
-        temperature.note.starts_with("provisional: confounded with time")
+        temperature
+            .note
+            .starts_with("provisional: confounded with time")
             && temperature.note.contains("cool-down"),
         "{}",
         temperature.note
@@ -343,12 +343,16 @@ fn a_time_drift_during_warm_up_is_not_written_as_temperature_when_the_plateau_co
     let got = sensor(&a, Sensor::Accel);
     eprintln!("{}", describe(got));
     assert!(
-        got.temp_time_correlation.expect("temperature recorded").abs() < 0.95,
+        got.temp_time_correlation
+            .expect("temperature recorded")
+            .abs()
+            < 0.95,
         "{}",
         describe(got)
     );
     assert!(
-        !accepted(got).contains(&"bias_temperature") && !accepted(got).contains(&"scale_temperature"),
+        !accepted(got).contains(&"bias_temperature")
+            && !accepted(got).contains(&"scale_temperature"),
         "{}",
         describe(got)
     );

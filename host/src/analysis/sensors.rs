@@ -3,9 +3,9 @@
 //! g-sensitivity; the magnetometer from still poses or short windows of the stream.
 
 use super::dataset::{self, to_poses};
+use super::earth_rate::vertical_earth_rate;
 use super::extended_fit::BaseKind;
 use super::result::{AnalysisError, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
-use super::earth_rate::vertical_earth_rate;
 use super::selection::{analyse_observations, SensorSetup};
 use crate::fit::coverage::sphere_start;
 use crate::fit::gyro_bias::fit_gyro_bias;
