@@ -5,9 +5,7 @@
 
 use std::path::PathBuf;
 
-use imucal::analysis::{
-    analyse_recording, AnalysisOptions, EffectStatus, RecordingAnalysis, SensorAnalysis,
-};
+use imucal::analysis::{analyse_recording, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
 use imucal::recording::{LoadOptions, Recording, Sensor};
 use imucal::still::{find_still, StillOptions};
 use imucal_hil_sim::effects::{EffectKind as SimEffect, EffectRequest};
@@ -289,7 +287,7 @@ fn a_bias_step_is_reported_unexplained_not_as_a_wrong_family() {
 }
 
 #[test]
-fn temperature_rising_with_time_is_reported_as_confounded() {
+fn temperature_rising_with_time_is_accepted_as_provisional_temperature() {
     let mut config = with_effect(
         SimConfig::new(7, ScheduleKind::Sweep),
         SimEffect::BiasTemperature,
@@ -310,18 +308,53 @@ fn temperature_rising_with_time_is_reported_as_confounded() {
             .abs()
             > 0.95
     );
+    // The temperature term is kept (the firmware can apply it), marked provisional with the
+    // recording that would confirm it; the time drift is not accepted beside it.
+    let temperature = got
+        .accepted()
+        .find(|e| e.kind.name() == "bias_temperature")
+        .unwrap_or_else(|| panic!("{}", describe(got)));
     assert!(
-        accepted(got)
-            .iter()
-            .all(|n| *n != "bias_temperature" && *n != "bias_drift"),
+        temperature
+            .note
+            .starts_with("provisional: confounded with time")
+            && temperature.note.contains("cool-down"),
+        "{}",
+        temperature.note
+    );
+    assert!(!accepted(got).contains(&"bias_drift"), "{}", describe(got));
+}
+
+#[test]
+fn a_time_drift_during_warm_up_is_not_written_as_temperature_when_the_plateau_contradicts_it() {
+    let mut config = with_effect(
+        SimConfig::new(11, ScheduleKind::Sweep),
+        SimEffect::BiasDrift,
+        SensorKind::Accel,
+    );
+    // Warm-up with a short time constant: temperature follows time early on and then settles,
+    // while the drift goes on; the plateau decorrelates the two.
+    config.temperature = Some(TemperatureProfile::Warmup {
+        ambient_c: 20.0,
+        rise_c: 15.0,
+        time_constant_s: 60.0,
+    });
+    let a = analyse(&config, "warmup-drift");
+    let got = sensor(&a, Sensor::Accel);
+    eprintln!("{}", describe(got));
+    assert!(
+        got.temp_time_correlation
+            .expect("temperature recorded")
+            .abs()
+            < 0.95,
         "{}",
         describe(got)
     );
     assert!(
-        got.effects
-            .iter()
-            .any(|e| e.status == EffectStatus::Confounded),
+        !accepted(got).contains(&"bias_temperature")
+            && !accepted(got).contains(&"scale_temperature"),
         "{}",
         describe(got)
     );
+    assert!(accepted(got).contains(&"bias_drift"), "{}", describe(got));
 }

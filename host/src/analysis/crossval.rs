@@ -78,6 +78,22 @@ pub fn folds(n: usize) -> Vec<usize> {
     out
 }
 
+/// Smallest number of observations for which every training fold of [`folds`] has more
+/// residuals (`components` per observation) than `unknowns`, so that a model with that many
+/// unknowns can be fitted and tested held out.
+pub fn observations_needed(unknowns: usize, components: usize) -> usize {
+    let c = components.max(1);
+    let mut n = 2;
+    loop {
+        let k = n.clamp(1, MAX_FOLDS);
+        let smallest_training = n - n.div_ceil(k);
+        if smallest_training * c > unknowns {
+            return n;
+        }
+        n += 1;
+    }
+}
+
 /// Held-out losses of `effects`, each fold started from `full` (the fit on all observations).
 /// `None` when some fold cannot be fitted.
 pub fn held_out(problem: &Problem, effects: &[EffectKind], full: &ExtendedFit) -> Option<HeldOut> {
@@ -230,6 +246,20 @@ mod tests {
         let approx = wilcoxon_signed_rank(&d);
         let exact = wilcoxon_signed_rank(&d[..60]);
         assert!((approx - exact).abs() < 0.02, "{approx} vs {exact}");
+    }
+
+    #[test]
+    fn observations_needed_leave_one_out_counts_one_held_out_pose() {
+        // 9 unknowns, one residual per pose: every 9-pose training set must exceed 9, so 11 poses.
+        assert_eq!(observations_needed(9, 1), 11);
+        // 6 unknowns, three residuals per pose: 3 training poses (9 > 6), so 4 poses.
+        assert_eq!(observations_needed(6, 3), 4);
+        // Beyond 12 poses a fold holds out ⌈n/12⌉: the answer is the first n that works.
+        for (p, c) in [(9, 1), (6, 3), (30, 1), (15, 3)] {
+            let n = observations_needed(p, c);
+            let training = |n: usize| n - n.div_ceil(n.clamp(1, MAX_FOLDS));
+            assert!(training(n) * c > p && training(n - 1) * c <= p);
+        }
     }
 
     #[test]

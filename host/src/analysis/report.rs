@@ -48,6 +48,7 @@ fn status_name(s: EffectStatus) -> &'static str {
         EffectStatus::Rejected => "rejected",
         EffectStatus::Confounded => "confounded",
         EffectStatus::NotTestable => "not_testable",
+        EffectStatus::NotFittable => "not_fittable",
     }
 }
 

@@ -40,9 +40,10 @@ pub enum AnalysisError {
         /// Why.
         source: FitError,
     },
-    /// The solver failed on all observations.
+    /// The solver did not converge on the base model although there are enough observations.
     #[error(
-        "the {0} model could not be refitted on its observations; check the recording for outliers"
+        "the solver did not converge on the {0} base model over its observations and held-out folds; \
+         the poses may not determine it (too few distinct orientations): record poses in more directions"
     )]
     Refit(&'static str),
 }
@@ -62,6 +63,9 @@ pub struct AnalysisOptions {
     pub mag_window: usize,
     /// Largest number of magnetometer windows.
     pub max_mag_windows: usize,
+    /// Geodetic latitude (degrees), when known: the gyroscope's rest model then includes the
+    /// vertical component of the Earth's rotation (see [`super::earth_rate`]).
+    pub latitude_deg: Option<f64>,
 }
 
 impl Default for AnalysisOptions {
@@ -73,6 +77,7 @@ impl Default for AnalysisOptions {
             gyro_scale_known: true,
             mag_window: 20,
             max_mag_windows: 300,
+            latitude_deg: None,
         }
     }
 }
@@ -101,6 +106,10 @@ pub enum EffectStatus {
     Confounded,
     /// The data do not carry what it depends on (no temperature, no accelerometer, …).
     NotTestable,
+    /// The data carry what it depends on, but the model with it could not be fitted on every
+    /// held-out fold (too few observations for its unknowns, or the solver did not converge);
+    /// the note says which and, for too few, how many more poses are needed.
+    NotFittable,
 }
 
 /// The outcome for one candidate effect.

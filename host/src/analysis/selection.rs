@@ -2,7 +2,7 @@
 //! [`super`]): the base fit, every candidate tested by held-out error, the accepted ones refitted
 //! jointly, temperature and time told apart only when they decorrelate.
 
-use super::crossval::{extend_start, held_out, Comparison, HeldOut};
+use super::crossval::{extend_start, held_out, observations_needed, Comparison, HeldOut};
 use super::dataset::Observation;
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
 use super::extended_fit::{
@@ -69,6 +69,42 @@ fn coefficients(
         .collect()
 }
 
+/// Whether `kind` depends on time or temperature (the pair that warm-up confounds).
+fn is_time_or_temperature(kind: EffectKind) -> bool {
+    matches!(
+        kind,
+        EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
+    )
+}
+
+/// The verdict for a candidate whose model (with `unknowns` parameters) could not be fitted on
+/// `n` observations of `components` residuals each.
+fn not_fittable(kind: EffectKind, unknowns: usize, n: usize, components: usize) -> EffectResult {
+    let needed = observations_needed(unknowns, components);
+    let note = if n < needed {
+        format!(
+            "not fittable: the model with it has {unknowns} unknowns and each held-out fold leaves too few \
+             of the {n} poses to determine them; record at least {} more pose(s) ({needed} in all)",
+            needed - n
+        )
+    } else {
+        format!(
+            "not fittable: the solver did not converge with it on every held-out fold ({n} poses, \
+             {unknowns} unknowns); the poses do not vary enough in what it depends on — record poses \
+             spread over more orientations, temperatures or time"
+        )
+    };
+    EffectResult {
+        kind,
+        status: EffectStatus::NotFittable,
+        score: 0.0,
+        p_value: 1.0,
+        gain: 0.0,
+        coefficients: Vec::new(),
+        note,
+    }
+}
+
 /// Fit `effects` on every observation and evaluate held out.
 fn evaluate(
     problem: &Problem,
@@ -119,8 +155,19 @@ pub fn analyse_observations(
     let components = problem.components();
     let n = observations.len();
     let base_start = start_params(&problem, start, &[]);
-    let (base_fit, base_ho) =
-        evaluate(&problem, &[], &base_start).ok_or(AnalysisError::Refit(sensor.name()))?;
+    let (base_fit, base_ho) = evaluate(&problem, &[], &base_start).ok_or_else(|| {
+        let needed = observations_needed(base_start.len(), components);
+        if n < needed {
+            AnalysisError::TooFewObservations {
+                sensor: sensor.name(),
+                what: "poses",
+                found: n,
+                needed,
+            }
+        } else {
+            AnalysisError::Refit(sensor.name())
+        }
+    })?;
     let temps: Option<Vec<f64>> = observations.iter().map(|o| o.temp_c).collect();
     let times: Vec<f64> = observations.iter().map(|o| o.time_s).collect();
     let temp_time_correlation = temps.as_ref().and_then(|t| pearson(t, &times));
@@ -158,6 +205,8 @@ pub fn analyse_observations(
     let mut last: Vec<(EffectKind, Comparison, ExtendedFit)> = Vec::new();
     let mut confounded_found = false;
     let mut wrong_form: Vec<(&'static str, String)> = Vec::new();
+    let mut unfittable: Vec<(EffectKind, usize)> = Vec::new();
+    let mut provisional: Vec<&'static str> = Vec::new();
     while !remaining.is_empty() {
         let m = remaining.len();
         let mut round: Vec<(EffectKind, Comparison, ExtendedFit, HeldOut)> = Vec::new();
@@ -174,6 +223,9 @@ pub fn analyse_observations(
                 effects.push(kind);
                 let start = extend_start(&current.0.params, kind.param_count());
                 let Some((fit, ho)) = evaluate(&problem, &effects, &start) else {
+                    if best.is_none() {
+                        unfittable.push((kind, start.len()));
+                    }
                     break;
                 };
                 let cmp = Comparison::new(&current.1, &ho, components);
@@ -192,6 +244,7 @@ pub fn analyse_observations(
                 round.push(b);
             }
         }
+        remaining.retain(|r| !unfittable.iter().any(|(k, _)| k.name() == r.name()));
         let winner = round
             .iter()
             .enumerate()
@@ -208,23 +261,26 @@ pub fn analyse_observations(
             last.push((*k, c.clone(), f.clone()));
         }
         let Some(w) = winner else { break };
-        let (kind, _, fit, ho) = round.swap_remove(w);
-        let time_or_temp = matches!(
-            kind,
-            EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
-        );
+        let time_or_temp = is_time_or_temperature(round[w].0);
         if confounded && time_or_temp {
             confounded_found = true;
-            remaining.retain(|r| {
-                !matches!(
-                    r,
-                    EffectKind::BiasDrift
-                        | EffectKind::BiasTemperature(_)
-                        | EffectKind::ScaleTemperature
-                )
-            });
+            remaining.retain(|r| !is_time_or_temperature(*r));
+            // The firmware can only apply a temperature term: keep the best temperature
+            // candidate that passes, marked provisional, rather than nothing.
+            let temperature_winner = round
+                .iter()
+                .enumerate()
+                .filter(|(_, (k, c, _, _))| k.needs_temperature() && c.passes(m))
+                .min_by(|a, b| a.1 .1.p_value.total_cmp(&b.1 .1.p_value))
+                .map(|(i, _)| i);
+            if let Some(t) = temperature_winner {
+                let (kind, _, fit, ho) = round.swap_remove(t);
+                provisional.push(kind.name());
+                current = (fit, ho);
+            }
             continue;
         }
+        let (kind, _, fit, ho) = round.swap_remove(w);
         remaining.retain(|r| r.name() != kind.name());
         if time_or_temp {
             // Form check: a bias free in shape over the same variable must not predict better.
@@ -296,20 +352,28 @@ pub fn analyse_observations(
             p_value,
             gain,
             coefficients: coefficients(&problem, &final_fit, idx, unit, inflation),
-            note: format!(
-                "improves held-out error by {:.0} % (signed-rank p = {p_value:.1e})",
-                100.0 * score
-            ),
+            note: if provisional.contains(&kind.name()) {
+                format!(
+                    "provisional: confounded with time (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); improves held-out error by \
+                     {:.0} % (signed-rank p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
+                     applies temperature terms only; confirm with a recording where temperature does not follow time \
+                     (a cool-down, or a second warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
+                    temp_time_correlation.unwrap_or(f64::NAN),
+                    100.0 * score
+                )
+            } else {
+                format!(
+                    "improves held-out error by {:.0} % (signed-rank p = {p_value:.1e})",
+                    100.0 * score
+                )
+            },
         });
     }
     for (kind, cmp, fit) in &last {
         if final_fit.effects.iter().any(|k| k.name() == kind.name()) {
             continue;
         }
-        let time_or_temp = matches!(
-            kind,
-            EffectKind::BiasDrift | EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature
-        );
+        let time_or_temp = is_time_or_temperature(*kind);
         let status = if confounded_found && time_or_temp && cmp.passes(1) {
             EffectStatus::Confounded
         } else {
@@ -339,6 +403,10 @@ pub fn analyse_observations(
             coefficients: coefficients(&problem, fit, index, unit, 1.0),
             note,
         });
+    }
+
+    for &(kind, unknowns) in &unfittable {
+        results.push(not_fittable(kind, unknowns, n, components));
     }
 
     // The recorded variable the final residual follows best.

@@ -3,6 +3,7 @@
 //! g-sensitivity; the magnetometer from still poses or short windows of the stream.
 
 use super::dataset::{self, to_poses};
+use super::earth_rate::vertical_earth_rate;
 use super::extended_fit::BaseKind;
 use super::result::{AnalysisError, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
 use super::selection::{analyse_observations, SensorSetup};
@@ -100,12 +101,6 @@ pub fn analyse_sensor(
             if obs.len() < 3 {
                 return Err(too_few("still poses", obs.len(), 3));
             }
-            let start = fit_gyro_bias(&to_poses(&obs), options.gyro_scale).map_err(|source| {
-                AnalysisError::BaseFit {
-                    sensor: "gyro",
-                    source,
-                }
-            })?;
             // Specific force from the accelerometer's calibration, else from its nominal unit.
             let accel_si = recording.units.to_si(Sensor::Accel);
             let force = obs
@@ -116,6 +111,20 @@ pub fn analyse_sensor(
                     (None, None) => None,
                 })
                 .collect::<Option<Vec<Vec3>>>();
+            // The Earth's vertical rate is known from each hold's up direction: remove it so that
+            // neither the bias nor a g-sensitivity absorbs it.
+            let mut obs = obs;
+            if let (Some(lat), Some(f)) = (options.latitude_deg, &force) {
+                for (o, fi) in obs.iter_mut().zip(f) {
+                    o.mean -= vertical_earth_rate(lat, fi) / options.gyro_scale;
+                }
+            }
+            let start = fit_gyro_bias(&to_poses(&obs), options.gyro_scale).map_err(|source| {
+                AnalysisError::BaseFit {
+                    sensor: "gyro",
+                    source,
+                }
+            })?;
             let setup = SensorSetup {
                 sensor,
                 base_model: "gyro-bias",

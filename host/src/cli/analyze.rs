@@ -164,6 +164,7 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         },
         gyro_scale,
         gyro_scale_known: gyro_unit == "rad/s",
+        latitude_deg: args.reference.location.map(|l| l.latitude_deg),
         ..AnalysisOptions::default()
     };
     let mut analysis = analyse_recording(recording, still, &options);
