@@ -15,10 +15,10 @@ use imucal::session::motioncal::{
     run_motioncal_session, save_motioncal_session, MotionCalOptions, MotionCalOutcome,
 };
 
-use super::write_policy::WritePolicy;
 use super::args::CalibrateArgs;
 use super::calibrate::{field_reference, session_options};
 use super::calibrate_view::Terminal;
+use super::write_policy::WritePolicy;
 
 /// Longest wait for the board's `Cal1:`/`Cal2:` echo (Adafruit's sketch prints it every 1.5 s).
 const ECHO_TIMEOUT: Duration = Duration::from_secs(10);

@@ -322,7 +322,7 @@ fn collect<'a, L: Read + Write>(
             continue;
         }
         let started = *mag_started_s.get_or_insert(t_s);
-        if index % COVERAGE_EVERY == 0 {
+        if index.is_multiple_of(COVERAGE_EVERY) {
             let coverage = collector.coverage();
             observer.event(&SessionEvent::MagCoverage {
                 covered: coverage.covered(session.mag_min_per_region),
