@@ -22,8 +22,8 @@
 //! the generated code computes is `imucal_protocol::model::apply`.
 
 use imucal_protocol::{
-    validate_for_ranges, CalibrationSet, FullScale, InvalidParamsReason, SensorCalibration,
-    MAX_DELTA_T_C,
+    validate_for_ranges, CalibrationSet, FullScale, InvalidParamsReason, ParamField,
+    SensorCalibration, SensorKind, MAX_DELTA_T_C,
 };
 use serde_json::{json, Value};
 
@@ -68,7 +68,30 @@ pub fn export(
     format: ExportFormat,
     source: &str,
 ) -> Result<String, InvalidParamsReason> {
-    validate_for_ranges(set, &FullScale::WIDEST_SUPPORTED)?;
+    export_checked_as(set, set, format, source)
+}
+
+/// [`export`] of `set`, validated as `checked`: the set with the sensors whose calibration
+/// takes raw counts (no nominal unit, so the board's limits do not apply to them) replaced by
+/// identity. Those sensors are still refused when any of their numbers is not finite.
+pub fn export_checked_as(
+    set: &CalibrationSet,
+    checked: &CalibrationSet,
+    format: ExportFormat,
+    source: &str,
+) -> Result<String, InvalidParamsReason> {
+    validate_for_ranges(checked, &FullScale::WIDEST_SUPPORTED)?;
+    let finite = |s: &SensorCalibration| s.a.iter().flatten().chain(&s.b).all(|v| v.is_finite());
+    if let Some(kind) = [
+        (SensorKind::Accel, &set.accel),
+        (SensorKind::Gyro, &set.gyro),
+        (SensorKind::Mag, &set.mag),
+    ]
+    .into_iter()
+    .find_map(|(kind, s)| (!finite(s)).then_some(kind))
+    {
+        return Err(InvalidParamsReason::NonFinite(ParamField::Matrix(kind)));
+    }
     Ok(match format {
         ExportFormat::CHeader => c_header(set, source),
         ExportFormat::Rust => rust_module(set, source),

@@ -7,8 +7,8 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use imucal::compat::{self, encode_packet, AdafruitCalibration};
 use imucal::device::ParamsFile;
-use imucal::export::{export, ExportFormat};
-use imucal_protocol::CalibrationSet;
+use imucal::export::{export_checked_as, ExportFormat};
+use imucal_protocol::{CalibrationSet, SensorCalibration};
 
 /// Examples shown by `imucal export --help`.
 pub const EXAMPLES: &str = "Examples:\n  \
@@ -70,7 +70,19 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
             return export_adafruit(&set, args);
         }
     };
-    let text = export(&set, format, &name)
+    // Sensors calibrated in raw counts have no nominal unit: the board's limits apply only to
+    // the others (`flash` refuses such files outright).
+    let mut checked = set;
+    for (raw, cal) in [
+        (&params.accel, &mut checked.accel),
+        (&params.gyro, &mut checked.gyro),
+        (&params.mag, &mut checked.mag),
+    ] {
+        if raw.input_unit.is_some() {
+            *cal = SensorCalibration::identity();
+        }
+    }
+    let text = export_checked_as(&set, &checked, format, &name)
         .map_err(|reason| anyhow::anyhow!("`{shown}` is not exported: {reason}"))?;
     write_output(args.out.as_deref(), text.as_bytes())
 }
