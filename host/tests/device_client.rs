@@ -53,8 +53,14 @@ fn handshake_keeps_the_welcome_with_device_id_and_scales() {
 
 #[test]
 fn a_newer_board_protocol_is_refused_naming_both_versions_and_what_to_update() {
+    // One major version ahead of this host, whatever the current one is.
+    let ours = imucal_protocol::PROTOCOL_VERSION;
+    let newer = ProtocolVersion {
+        major: ours.major + 1,
+        minor: 3,
+    };
     let fake = FakeDevice::start(FakeConfig {
-        protocol: Some(ProtocolVersion { major: 3, minor: 3 }),
+        protocol: Some(newer),
         ..FakeConfig::default()
     });
     let message = connect(&fake)
@@ -62,8 +68,14 @@ fn a_newer_board_protocol_is_refused_naming_both_versions_and_what_to_update() {
         .map(|e| e.to_string())
         .unwrap_or_default();
     assert!(message.contains(&fake.path), "{message}");
-    assert!(message.contains("protocol 3.3"), "{message}");
-    assert!(message.contains("speaks 2.0"), "{message}");
+    assert!(
+        message.contains(&format!("protocol {}.3", newer.major)),
+        "{message}"
+    );
+    assert!(
+        message.contains(&format!("speaks {}.{}", ours.major, ours.minor)),
+        "{message}"
+    );
     assert!(message.contains("update imucal"), "{message}");
 }
 
