@@ -84,7 +84,8 @@ fn sample_reads(temp_status_gyro: [u8; 9], accel: [u8; 6], mag: [u8; 6]) -> Vec<
     vec![
         I2cTransaction::write_read(AG, vec![0x15], temp_status_gyro.to_vec()),
         I2cTransaction::write_read(AG, vec![0x28], accel.to_vec()),
-        I2cTransaction::write_read(MAG, vec![0xA8], mag.to_vec()),
+        // STATUS_REG_M (0x27, ZYXDA set) then the axes, one auto-incremented burst.
+        I2cTransaction::write_read(MAG, vec![0xA7], [&[0x08][..], &mag[..]].concat()),
     ]
 }
 

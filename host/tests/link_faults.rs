@@ -260,9 +260,10 @@ fn the_cli_exits_non_zero_naming_the_port_when_it_vanishes_mid_stream() {
 
 #[test]
 fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both_ends() {
+    let ours = imucal_protocol::PROTOCOL_MAJOR;
     for (major, advice) in [
-        (3, "update imucal (the host tool)"),
-        (1, "update the board's firmware"),
+        (ours + 1, "update imucal (the host tool)"),
+        (ours - 1, "update the board's firmware"),
     ] {
         let faults = LinkFaults {
             protocol_major: Some(major),
@@ -274,7 +275,7 @@ fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both
         assert_eq!(
             error.to_string(),
             format!(
-                "{} speaks imucal protocol {major}.0, this imucal speaks 2.0; {advice}",
+                "{} speaks imucal protocol {major}.0, this imucal speaks {ours}.0; {advice}",
                 sim.port_path()
             )
         );
@@ -282,7 +283,7 @@ fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both
         assert_eq!(
             sim.take_notes(),
             vec![format!(
-                "refused Hello: the host speaks imucal protocol 2.0, this board speaks {major}.0"
+                "refused Hello: the host speaks imucal protocol {ours}.0, this board speaks {major}.0"
             )]
         );
     }
@@ -290,8 +291,9 @@ fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both
 
 #[test]
 fn the_cli_reports_a_protocol_mismatch_and_exits_non_zero() {
+    let ours = imucal_protocol::PROTOCOL_MAJOR;
     let faults = LinkFaults {
-        protocol_major: Some(3),
+        protocol_major: Some(ours + 1),
         ..LinkFaults::default()
     };
     let sim = board_with(27, faults);
@@ -302,7 +304,10 @@ fn the_cli_reports_a_protocol_mismatch_and_exits_non_zero() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
     assert!(
-        stderr.contains("speaks imucal protocol 3.0, this imucal speaks 2.0"),
+        stderr.contains(&format!(
+            "speaks imucal protocol {}.0, this imucal speaks {ours}.0",
+            ours + 1
+        )),
         "stderr: {stderr}"
     );
 }
