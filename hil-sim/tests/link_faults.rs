@@ -120,8 +120,10 @@ fn duplicated_frames_arrive_twice_and_held_frames_after_the_delay_overtaken_by_l
 
 #[test]
 fn a_board_of_another_major_answers_hello_itself_with_its_version() {
+    let ours = imucal_protocol::PROTOCOL_MAJOR;
+    let theirs = ours + 1;
     let faults = LinkFaults {
-        protocol_major: Some(3),
+        protocol_major: Some(theirs),
         ..LinkFaults::default()
     };
     let mut link = FaultyLink::new(faults, 1).expect("valid faults");
@@ -143,14 +145,14 @@ fn a_board_of_another_major_answers_hello_itself_with_its_version() {
         .collect();
     assert!(
         matches!(&messages[0], DeviceMessage::Event(Event::Log(line))
-        if line.text.as_str() == "refused Hello: the host speaks imucal protocol 2.0, this board speaks 3.0")
+        if line.text.as_str() == format!("refused Hello: the host speaks imucal protocol {ours}.0, this board speaks {theirs}.0"))
     );
     assert_eq!(
         messages[1],
         DeviceMessage::Response(Response {
             seq: 77,
             body: ResponseBody::Error(ErrorCode::VersionMismatch {
-                device_major: 3,
+                device_major: theirs,
                 device_minor: 0
             })
         })
