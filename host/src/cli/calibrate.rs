@@ -137,9 +137,6 @@ pub(super) fn session_options(
 
 /// Run `imucal calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
-    if args.talks_motioncal() {
-        return super::calibrate_motioncal::run(args);
-    }
     let simulated = if args.sim {
         Some(Simulated::start(args)?)
     } else {

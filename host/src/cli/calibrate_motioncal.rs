@@ -24,7 +24,7 @@ use super::write_policy::WritePolicy;
 const ECHO_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// Run the session on a MotionCal sketch board.
-pub(super) fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let field_ut = field_reference(args)?;
     let options = MotionCalOptions {
         session: session_options(args, field_ut)?,

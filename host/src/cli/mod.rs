@@ -4,7 +4,7 @@ pub mod analyze;
 pub mod args;
 pub mod calibrate;
 mod calibrate_extend;
-mod calibrate_motioncal;
+pub mod calibrate_motioncal;
 mod calibrate_sim;
 mod calibrate_view;
 pub mod device;
