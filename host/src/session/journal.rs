@@ -8,13 +8,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::save::{create_dir, mag_csv, poses_json, write_file};
+use super::save::{create_dir, mag_csv, poses_json, write_file, PROGRESS_FILE};
 use super::{CapturedPose, MagSample, SessionError};
 use crate::device::ParamsFile;
 use imucal_protocol::CalibrationSet;
-
-/// The name of the progress file of an unfinished session directory.
-pub const PROGRESS_FILE: &str = "progress.json";
 
 /// How far an unfinished session got (`progress.json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -133,17 +130,6 @@ impl Journal {
             ),
             Err(error) => format!("saving what was measured failed: {error}"),
         }
-    }
-}
-
-/// Mark `dir` as a finished session (its `progress.json` no longer applies).
-pub(super) fn finish(dir: &Path) -> Result<(), SessionError> {
-    match std::fs::remove_file(dir.join(PROGRESS_FILE)) {
-        Err(cause) if cause.kind() != std::io::ErrorKind::NotFound => Err(SessionError::Save {
-            path: dir.join(PROGRESS_FILE).display().to_string(),
-            cause,
-        }),
-        _ => Ok(()),
     }
 }
 

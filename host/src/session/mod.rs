@@ -68,11 +68,12 @@ pub use error::SessionError;
 pub use events::{MagSample, Phase, SessionEvent, SessionObserver, Unattended};
 pub use extend::{analyse_poses, extend_set, ExtendedSet};
 pub use gyro_fit::{GyroBudgets, GyroScale};
-pub use journal::{load_progress, Progress, PROGRESS_FILE};
+pub use journal::{load_progress, Progress};
 pub use motion::{MotionMonitor, MotionState};
 pub use options::SessionOptions;
 pub use rest::{rest_errors, RestErrors};
 pub use rest_phase::stream_for;
+pub use save::PROGRESS_FILE;
 pub use save::{load_poses, save_session, summary, SessionSummary};
 pub use solve::{
     fit_session, Budgets, CapturedPose, FieldSource, SessionFit, Uncertainties, Verdict,

@@ -228,8 +228,22 @@ pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>
         write_file(&dir.join("mag_samples.csv"), &mag_csv(&outcome.mag_samples))?,
         write_file(&dir.join("summary.json"), &json_text(&summary(outcome)))?,
     ];
-    super::journal::finish(dir)?;
+    finish(dir)?;
     Ok(written)
+}
+
+/// The name of the progress file of an unfinished session directory.
+pub const PROGRESS_FILE: &str = "progress.json";
+
+/// Mark `dir` as a finished session (its `progress.json` no longer applies).
+pub(super) fn finish(dir: &Path) -> Result<(), SessionError> {
+    match std::fs::remove_file(dir.join(PROGRESS_FILE)) {
+        Err(cause) if cause.kind() != std::io::ErrorKind::NotFound => Err(SessionError::Save {
+            path: dir.join(PROGRESS_FILE).display().to_string(),
+            cause,
+        }),
+        _ => Ok(()),
+    }
 }
 
 #[cfg(test)]
