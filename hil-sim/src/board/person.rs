@@ -16,8 +16,7 @@
 //! 2. A tumble for the magnetometer that fills in what the turns between the positions have not
 //!    shown yet: the waypoints of the `tumble` schedule whose body-frame field direction is more
 //!    than [`crate::poser::SEEN_ANGLE_DEG`] from every direction shown so far, nearest first
-//!    ([`crate::poser::fill_in_tumble`]), then the rest of the spiral, pausing
-//!    [`TUMBLE_PAUSE_S`] at each waypoint as the prompt asks. The person stops tumbling
+//!    ([`crate::poser::fill_in_tumble`]), then the rest of the spiral. The person stops tumbling
 //!    as soon as the host stops the stream (it has the coverage it needs).
 //! 3. A rest in the first position, with the hand off the board (no tremor), until stopped: what
 //!    the host's at-rest verification needs.
@@ -47,10 +46,6 @@ pub const NO_PROMPT_MOVE_ON_S: f64 = 1.0;
 
 /// A stream that ran this long during the tumble and then stopped ends the tumble, s.
 const WATCHED_TUMBLE_S: f64 = 1.0;
-
-/// How long the person stops at each tumble waypoint before turning on, s: the pause the
-/// magnetometer prompt asks for, so each turn of the tumble also serves the gyroscope's scale fit.
-pub const TUMBLE_PAUSE_S: f64 = 0.5;
 
 /// Time from seeing a prompt to starting to move, s (a simple visual reaction time).
 pub const REACTION_S: f64 = 0.25;
@@ -428,14 +423,11 @@ impl Person {
             Some(to) if index == 0 => self.turn(from, to, start_s)?,
             Some(to) => {
                 let duration = turn_duration_s(&from, &to, self.tumble_peak_rate_dps);
-                // The pause keeps the hand's tremor of the positions.
-                let tremor = self.hold_plan(0).and_then(|h| h.tremor.clone());
                 self.segment = TrajectoryBuilder::new(from)
                     .turn_to(to, duration)?
-                    .hold(TUMBLE_PAUSE_S, tremor)?
                     .build()?;
                 self.segment_start_s = start_s;
-                self.segment_end_s = start_s + duration + TUMBLE_PAUSE_S;
+                self.segment_end_s = start_s + duration;
             }
             None => {
                 self.turn(from, self.rest, start_s)?;

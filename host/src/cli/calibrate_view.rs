@@ -229,7 +229,7 @@ impl SessionObserver for Terminal {
                 self.last_line = None;
                 self.line(
                     "\nMagnetometer: turn the board slowly through all directions (roll, pitch \
-                     and yaw), pausing for half a second after each turn, away from steel, magnets and cables.",
+                     and yaw), away from steel, magnets and cables.",
                 );
             }
             SessionEvent::MagCoverage {

@@ -18,7 +18,7 @@
 use nalgebra::UnitQuaternion;
 use serde::Serialize;
 
-use super::gyro_moves::{motions_of, split_at_pauses, tilt_per_axis_deg};
+use super::gyro_moves::{motions_of, tilt_per_axis_deg};
 use super::gyro_nuisance::{inherited_covariance, Nuisance};
 use super::solve::{SessionFit, VerdictLevel};
 use crate::device::UnitSample;
@@ -104,14 +104,12 @@ fn combine(a: (Vec3, Vec3), b: (Vec3, Vec3)) -> (Vec3, Vec3) {
 }
 
 /// Fit the gyroscope's scale and misalignment from `moves` and write the whole gyroscope into
-/// `fit` (its `gyro` fit, the set's `A`, `b` and residual, the bias σ, and the verdict), and
-/// from the turns of `tumble` between its pauses ([`split_at_pauses`]). `rest`
+/// `fit` (its `gyro` fit, the set's `A`, `b` and residual, the bias σ, and the verdict). `rest`
 /// is the raw stream of the board lying still (used for the bias when still). On failure `fit`
 /// keeps the bias-only gyroscope, the verdict says why, and the error is returned.
 pub fn complete_gyro(
     fit: &mut SessionFit,
     moves: &[Vec<UnitSample>],
-    tumble: &[UnitSample],
     rest: &[UnitSample],
     still_rate: f64,
     budgets: GyroBudgets,
@@ -129,9 +127,7 @@ pub fn complete_gyro(
         bias,
         bias_sigma,
     };
-    let mut moves = moves.to_vec();
-    moves.extend(split_at_pauses(tumble, &bias, still_rate));
-    let result = fit_scale(&moves, &nuisance, still_rate);
+    let result = fit_scale(moves, &nuisance, still_rate);
     let (scale_fit, summary) = match result {
         Ok(found) => found,
         Err(error) => {

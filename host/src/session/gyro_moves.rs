@@ -30,11 +30,6 @@ const EDGE_MAX_S: f64 = 0.8;
 /// Fewest samples in an end's still stretch for the move to be used.
 const EDGE_MIN_SAMPLES: usize = 5;
 
-/// Shortest still stretch that splits a continuous stream (the magnetometer's tumble) into
-/// moves, s: each half then averages ≥ 0.15 s of the accelerometer (≈18 samples at 119 Hz),
-/// the same order as a hold's still ends; the instant a smooth turn reverses is far shorter.
-const MIN_PAUSE_S: f64 = 0.3;
-
 /// An axis whose tilting rotation is below this fraction of the mean of the other two counts
 /// as lacking: the scale fit's σ along an axis grows as the inverse of its rotation, so a third
 /// of the others triples it.
@@ -129,42 +124,6 @@ pub fn motions_of(
     moves
         .iter()
         .filter_map(|m| motion_of(m, accel, a, bias, still_rate))
-        .collect()
-}
-
-/// The moves of a continuous stream in which the board pauses between turns (the tumble): the
-/// stream is split at each still stretch (rate below `still_rate` once `bias` is removed) of at
-/// least [`MIN_PAUSE_S`]. A pause's first half ends one move and its second half starts the
-/// next, so no sample's noise enters the gravity direction of two moves.
-pub fn split_at_pauses(
-    samples: &[UnitSample],
-    bias: &Vec3,
-    still_rate: f64,
-) -> Vec<Vec<UnitSample>> {
-    let (Some(first), Some(last)) = (samples.first(), samples.last()) else {
-        return Vec::new();
-    };
-    let dt = (last.t_s - first.t_s) / samples.len().saturating_sub(1).max(1) as f64;
-    if !(dt.is_finite() && dt > 0.0) {
-        return Vec::new();
-    }
-    let min_run = ((MIN_PAUSE_S / dt).ceil() as usize).max(2 * EDGE_MIN_SAMPLES);
-    let still = |s: &UnitSample| (Vec3::from(s.gyro) - bias).norm() < still_rate;
-    let mut pauses = Vec::new();
-    let mut k = 0;
-    while k < samples.len() {
-        let start = k;
-        while k < samples.len() && still(&samples[k]) {
-            k += 1;
-        }
-        if k - start >= min_run {
-            pauses.push((start + k) / 2);
-        }
-        k += 1;
-    }
-    pauses
-        .windows(2)
-        .filter_map(|w| samples.get(w[0]..w[1]).map(<[UnitSample]>::to_vec))
         .collect()
 }
 
@@ -277,39 +236,6 @@ mod tests {
             0.02,
         );
         assert!(used.is_none());
-    }
-
-    #[test]
-    fn a_stream_pausing_between_two_quarter_turns_splits_into_two_moves() {
-        // Two quarter turns about X, with 0.5 s still at the start, between them and at the end.
-        let first = quarter_turn(1.0);
-        let mut stream = first.clone();
-        let end = first.last().expect("samples");
-        let angle_after = std::f64::consts::FRAC_PI_2;
-        for s in quarter_turn(1.0).iter().skip(1) {
-            // The second turn starts where the first ended: rotate its gravity by 90° about X.
-            let up = Vec3::from(s.accel);
-            let (c, si) = (angle_after.cos(), angle_after.sin());
-            let turned = Vec3::new(up.x, c * up.y + si * up.z, -si * up.y + c * up.z);
-            stream.push(sample(end.t_s + s.t_s, turned, Vec3::from(s.gyro)));
-        }
-        let moves = split_at_pauses(&stream, &Vec3::zeros(), 0.02);
-        assert_eq!(moves.len(), 2, "{}", moves.len());
-        for m in &moves {
-            let motion = motion_of(
-                m,
-                &Calibration::identity(),
-                &Mat3::identity(),
-                &Vec3::zeros(),
-                0.02,
-            )
-            .expect("a usable move");
-            let angle = motion
-                .gravity_before
-                .angle(&motion.gravity_after)
-                .to_degrees();
-            assert!((angle - 90.0).abs() < 1.0, "{angle}");
-        }
     }
 
     #[test]

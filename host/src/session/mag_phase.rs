@@ -26,7 +26,6 @@ impl<L: Read + Write> Runner<'_, L> {
             for sample in &chunk.samples {
                 self.record_mag(sample, Phase::Tumble);
             }
-            self.tumble.extend_from_slice(&chunk.samples);
             let count = self.mag.len();
             let timed_out = start.elapsed() > self.options.mag_timeout;
             if self.mag.len() - last_update < 100 && !timed_out {

@@ -180,7 +180,6 @@ pub fn run_session<L: Read + Write>(
     let gyro_scale = gyro_fit::complete_gyro(
         &mut fit,
         &runner.moves,
-        &runner.tumble,
         &raw_rest,
         f64::from(options.thresholds.gyro_std_rads),
         options.gyro_budgets,

@@ -25,8 +25,6 @@ pub(super) struct Runner<'a, L: Read + Write> {
     pub(super) current_move: Vec<UnitSample>,
     /// Finished moves, each from the end of one hold to the start of the next capture.
     pub(super) moves: Vec<Vec<UnitSample>>,
-    /// The raw stream of the magnetometer's tumble (its pauses split it into more moves).
-    pub(super) tumble: Vec<UnitSample>,
     /// The axis the moves were last said to lack rotation about.
     pub(super) lacking_axis: Option<usize>,
 }
@@ -61,7 +59,6 @@ impl<'a, L: Read + Write> Runner<'a, L> {
             mag: Vec::new(),
             current_move: Vec::new(),
             moves: Vec::new(),
-            tumble: Vec::new(),
             lacking_axis: None,
         }
     }
