@@ -36,6 +36,7 @@ pub mod events;
 pub mod extend;
 pub mod gyro_fit;
 pub mod gyro_moves;
+mod gyro_nuisance;
 pub mod hold;
 pub mod journal;
 mod mag_phase;
@@ -116,6 +117,9 @@ pub struct SessionOutcome {
     pub session_seconds: f64,
     /// Wall time of the same span, s.
     pub wall_seconds: f64,
+    /// Wall time the host spent fitting (the board waits meanwhile), s. A simulated board
+    /// running `k`× faster than real time counts it `k` times in `session_seconds`.
+    pub fit_wall_seconds: f64,
     /// Calibrated samples per second of board time during the "after" measurement.
     pub stream_rate_hz: f64,
     /// Samples lost in transit over the whole session.
@@ -222,6 +226,7 @@ fn run_phases<L: Read + Write>(
         .filter(|m| m.phase != Phase::Rest)
         .map(|m| Vec3::from(m.mag))
         .collect();
+    let fit_start = Instant::now();
     let mut fit = fit_session(
         &captured,
         &solve::thin(&turning, options.mag_max_fit_samples),
@@ -243,6 +248,7 @@ fn run_phases<L: Read + Write>(
         options.gyro_budgets,
     )
     .ok();
+    let fit_wall_seconds = fit_start.elapsed().as_secs_f64();
     runner.journal.fitted(&fit.set)?;
     runner.observer.event(&SessionEvent::Fitted(&fit));
 
@@ -260,6 +266,7 @@ fn run_phases<L: Read + Write>(
         after: None,
         session_seconds: 0.0,
         wall_seconds: 0.0,
+        fit_wall_seconds,
         stream_rate_hz: 0.0,
         lost_samples: 0,
         fit,
