@@ -448,6 +448,7 @@ impl SimBoard {
                 poses_captured: observed.poses_captured,
                 stream_starts: observed.stream_starts,
                 stream_stops: observed.stream_stops,
+                streaming: observed.streaming,
             },
         )?;
         let state = self.world_state(t_s);

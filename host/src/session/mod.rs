@@ -12,7 +12,8 @@
 //!    of every move between holds is kept for the gyroscope ([`gyro_moves`]). With
 //!    [`SessionOptions::rounds`] above 1 the twelve are captured that many times over. Afterwards, if the
 //!    covariance of the accelerometer fit says the expected `|a|` error exceeds a quarter of the
-//!    budget, up to four corner positions are asked for as well ([`targets::corner_positions`]).
+//!    budget, corner positions are asked for as well ([`targets::corner_positions`]), until it
+//!    meets that target or four are in.
 //! 2. Magnetometer ([`mag_phase`]): raw samples while the user turns the board, until every one
 //!    of 26 direction regions holds enough samples ([`coverage`]); the moves between the
 //!    positions count, so this only fills in what they left empty.
@@ -202,7 +203,13 @@ fn run_phases<L: Read + Write>(
         } else {
             Vec::new()
         };
-        runner.capture_targets(&twelve, &mut this_round, options.pose_timeout, false)?;
+        runner.capture_targets(
+            &twelve,
+            &mut this_round,
+            options.pose_timeout,
+            false,
+            &|_| false,
+        )?;
         runner.client.stop_stream()?;
         captured.append(&mut this_round);
     }
