@@ -165,9 +165,11 @@ pub struct Person {
     tumble: Vec<UnitQuaternion<f64>>,
     /// The order the tumble goes through, chosen when it begins.
     tumble_plan: Vec<UnitQuaternion<f64>>,
-    /// Since when the host has been streaming during the tumble, s: a stop after a stream of
-    /// at least [`WATCHED_TUMBLE_S`] means it has the directions it needs.
-    tumble_watched_since_s: Option<f64>,
+    /// Since when the host has been streaming during the tumble, s, and the `StopStream` count
+    /// then: a stop after a stream of at least [`WATCHED_TUMBLE_S`] means it has the directions
+    /// it needs. The stop is told by the count, as a host may start its next stream before the
+    /// next sample.
+    tumble_watched_since_s: Option<(f64, u64)>,
     /// Field direction in the world frame (unit), if there is a field.
     field_world: Option<Vector3<f64>>,
     /// Body-frame field directions shown so far.
@@ -318,17 +320,24 @@ impl Person {
             }
         }
         if let PersonPhase::Tumble { .. } = self.phase {
-            match (prompts.streaming, self.tumble_watched_since_s) {
-                (true, None) => self.tumble_watched_since_s = Some(t_s),
-                (false, Some(since)) if t_s - since >= WATCHED_TUMBLE_S => {
-                    // The host has the directions it needs: put the board down from here.
-                    let here = self.motion_at(t_s).q_body_to_world;
-                    self.turn(here, self.rest, t_s)?;
-                    self.phase = PersonPhase::Rest;
-                    self.tumble_watched_since_s = None;
+            match self.tumble_watched_since_s {
+                None if prompts.streaming => {
+                    self.tumble_watched_since_s = Some((t_s, prompts.stream_stops));
                 }
-                // A stream stopped at once (the end of the positions) does not count.
-                (false, Some(_)) => self.tumble_watched_since_s = None,
+                Some((since, stops)) if prompts.stream_stops > stops => {
+                    if t_s - since >= WATCHED_TUMBLE_S {
+                        // The host has the directions it needs: put the board down from here.
+                        let here = self.motion_at(t_s).q_body_to_world;
+                        self.turn(here, self.rest, t_s)?;
+                        self.phase = PersonPhase::Rest;
+                        self.tumble_watched_since_s = None;
+                    } else {
+                        // A stream stopped at once (the end of the positions) does not count.
+                        self.tumble_watched_since_s = prompts
+                            .streaming
+                            .then_some((t_s, prompts.stream_stops));
+                    }
+                }
                 _ => {}
             }
         }
