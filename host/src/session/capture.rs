@@ -22,22 +22,25 @@ use crate::fit::norm_lm::fit_accel_lm;
 use crate::fit::{Pose, Vec3};
 
 impl<L: Read + Write> Runner<'_, L> {
-    /// Capture every target of `targets` not yet in `captured`, or fewer once `enough` says the
-    /// poses captured so far suffice (it is asked after each capture). Returns `false` when
-    /// `timeout` passed without progress and `give_up_quietly` is set.
+    /// Capture the targets of `targets` not yet in `captured`, at most `most` of them, fewer
+    /// once `enough` says the poses captured so far suffice (it is asked after each capture).
+    /// Returns `false` when `timeout` passed without progress and `give_up_quietly` is set.
     pub(super) fn capture_targets(
         &mut self,
         targets: &[Target],
         captured: &mut Vec<CapturedPose>,
         timeout: Duration,
         give_up_quietly: bool,
-        enough: &dyn Fn(&[CapturedPose]) -> bool,
+        (most, enough): (usize, &dyn Fn(&[CapturedPose]) -> bool),
     ) -> Result<bool, SessionError> {
-        let total = captured.len()
-            + targets
-                .iter()
-                .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
-                .count();
+        let start = captured.len();
+        let total = start
+            + most.min(
+                targets
+                    .iter()
+                    .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
+                    .count(),
+            );
         self.start_watching()?;
         let mut last_progress = Instant::now();
         let mut prompted = None;
@@ -50,7 +53,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 .iter()
                 .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
                 .collect();
-            if needed.is_empty() || enough(captured) {
+            if needed.is_empty() || captured.len() >= total || enough(captured) {
                 return Ok(true);
             }
             if choice.is_none_or(|(count, _)| count != captured.len()) {
@@ -220,9 +223,8 @@ impl<L: Read + Write> Runner<'_, L> {
         let gravity = self.options.gravity_mps2;
         let most = self.options.max_extra_poses;
         let before = captured.len();
-        let enough = move |poses: &[CapturedPose]| {
-            poses.len() >= before + most || expected_norm_error_mg(poses, gravity) <= target_mg
-        };
+        let enough =
+            move |poses: &[CapturedPose]| expected_norm_error_mg(poses, gravity) <= target_mg;
         self.observer.event(&SessionEvent::Note(format!(
             "the expected |a| error is {predicted:.3} mg (1σ), above the {target_mg:.2} mg \
              target: up to {most} corner positions will help (any corner; the phase ends once \
@@ -233,7 +235,7 @@ impl<L: Read + Write> Runner<'_, L> {
             captured,
             self.options.extra_pose_timeout,
             true,
-            &enough,
+            (most, &enough),
         )?;
         if complete {
             self.client.stop_stream()?;
