@@ -289,3 +289,25 @@ fn expected_norm_error_mg(captured: &[CapturedPose], gravity: f64) -> f64 {
         .and_then(|fit| solve::max_norm_sigma(&fit))
         .map_or(f64::INFINITY, |s| s * 1000.0 / solve::STANDARD_GRAVITY)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::session::plan::tests::pose;
+    use crate::session::targets::{corner_positions, twelve_positions};
+
+    #[test]
+    fn each_corner_lowers_the_expected_norm_error_left_by_the_twelve() {
+        let g = 9.8;
+        let mut poses: Vec<CapturedPose> =
+            twelve_positions().iter().map(|t| pose(t, g)).collect();
+        let mut before = expected_norm_error_mg(&poses, g);
+        assert!(before.is_finite() && before > 0.0, "{before}");
+        for corner in corner_positions(12).iter().take(4) {
+            poses.push(pose(corner, g));
+            let after = expected_norm_error_mg(&poses, g);
+            assert!(after < before, "{after} mg after a corner, {before} mg before");
+            before = after;
+        }
+    }
+}
