@@ -241,13 +241,19 @@ pub fn corner_up_directions() -> [Vector3<f64>; 8] {
     .map(|(x, y, z)| Vector3::new(x, y, z) * s)
 }
 
-/// The eight corner positions as a person holds them (orientation body to world, hand tremor),
+/// A position as a person holds it.
+#[derive(Debug, Clone)]
+pub struct PlacedHold {
+    /// Orientation, body to world (placement error and heading included).
+    pub orientation: UnitQuaternion<f64>,
+    /// Hand tremor, if the person has any.
+    pub tremor: Option<Tremor>,
+}
+
+/// The eight corner positions as a person holds them,
 /// placed and headed like the twelve ([`PoserOptions`]), drawn from `seed` on a stream of its
 /// own so the twelve positions of a seed stay as they were.
-pub fn corner_holds(
-    options: &PoserOptions,
-    seed: u64,
-) -> Result<Vec<(UnitQuaternion<f64>, Option<Tremor>)>, SimError> {
+pub fn corner_holds(options: &PoserOptions, seed: u64) -> Result<Vec<PlacedHold>, SimError> {
     options.validate()?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(3);
@@ -259,8 +265,11 @@ pub fn corner_holds(
             let error = random_unit(&mut rng)
                 * rng.gen_range(0.0..=1.0)
                 * options.placement_error_deg.to_radians();
-            let q = UnitQuaternion::from_scaled_axis(error) * orientation_with_up(up, heading);
-            (q, options.tremor.then(|| hand_tremor(&mut rng)))
+            PlacedHold {
+                orientation: UnitQuaternion::from_scaled_axis(error)
+                    * orientation_with_up(up, heading),
+                tremor: options.tremor.then(|| hand_tremor(&mut rng)),
+            }
         })
         .collect())
 }

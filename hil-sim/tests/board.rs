@@ -251,7 +251,7 @@ fn the_person_holds_each_position_until_captured_then_an_asked_corner_then_tumbl
     }
     // The host asks for a corner: the person holds the first of the corners.
     let stats = host.capture(&mut board);
-    let corner = corner_holds(&PoserOptions::default(), 4).unwrap()[0].0;
+    let corner = corner_holds(&PoserOptions::default(), 4).unwrap()[0].orientation;
     let expected = true_reading(&board, &corner, SensorKind::Accel);
     let mean = Vector3::from(stats.accel_mean.map(f64::from));
     assert!(

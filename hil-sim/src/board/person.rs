@@ -237,9 +237,9 @@ impl Person {
         }
         let corners = corner_holds(options, seed)?
             .into_iter()
-            .map(|(orientation, tremor)| HoldPlan {
-                orientation,
-                tremor,
+            .map(|hold| HoldPlan {
+                orientation: hold.orientation,
+                tremor: hold.tremor,
             })
             .collect();
         let first = holds.first().cloned().ok_or(SimError::EmptyTrajectory)?;
@@ -333,9 +333,8 @@ impl Person {
                         self.tumble_watched_since_s = None;
                     } else {
                         // A stream stopped at once (the end of the positions) does not count.
-                        self.tumble_watched_since_s = prompts
-                            .streaming
-                            .then_some((t_s, prompts.stream_stops));
+                        self.tumble_watched_since_s =
+                            prompts.streaming.then_some((t_s, prompts.stream_stops));
                     }
                 }
                 _ => {}
@@ -383,12 +382,7 @@ impl Person {
         matches!(self.phase, PersonPhase::Hold { index } if index >= self.hold_count)
     }
 
-    fn begin_hold(
-        &mut self,
-        index: usize,
-        start_s: f64,
-        prompts: Prompts,
-    ) -> Result<(), SimError> {
+    fn begin_hold(&mut self, index: usize, start_s: f64, prompts: Prompts) -> Result<(), SimError> {
         let captures = prompts.poses_captured;
         self.hold_requests_at_start = prompts.capture_requests;
         let Some(plan) = self.hold_plan(index) else {

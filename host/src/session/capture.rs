@@ -31,7 +31,8 @@ impl<L: Read + Write> Runner<'_, L> {
         captured: &mut Vec<CapturedPose>,
         timeout: Duration,
         give_up_quietly: bool,
-        (most, enough): (usize, &dyn Fn(&[CapturedPose]) -> bool),
+        most: usize,
+        enough: &dyn Fn(&[CapturedPose]) -> bool,
     ) -> Result<bool, SessionError> {
         let start = captured.len();
         let total = start
@@ -235,7 +236,8 @@ impl<L: Read + Write> Runner<'_, L> {
             captured,
             self.options.extra_pose_timeout,
             true,
-            (most, &enough),
+            most,
+            &enough,
         )?;
         if complete {
             self.client.stop_stream()?;
@@ -299,14 +301,16 @@ mod tests {
     #[test]
     fn each_corner_lowers_the_expected_norm_error_left_by_the_twelve() {
         let g = 9.8;
-        let mut poses: Vec<CapturedPose> =
-            twelve_positions().iter().map(|t| pose(t, g)).collect();
+        let mut poses: Vec<CapturedPose> = twelve_positions().iter().map(|t| pose(t, g)).collect();
         let mut before = expected_norm_error_mg(&poses, g);
         assert!(before.is_finite() && before > 0.0, "{before}");
         for corner in corner_positions(12).iter().take(4) {
             poses.push(pose(corner, g));
             let after = expected_norm_error_mg(&poses, g);
-            assert!(after < before, "{after} mg after a corner, {before} mg before");
+            assert!(
+                after < before,
+                "{after} mg after a corner, {before} mg before"
+            );
             before = after;
         }
     }

@@ -208,7 +208,8 @@ fn run_phases<L: Read + Write>(
             &mut this_round,
             options.pose_timeout,
             false,
-            (twelve.len(), &|_| false),
+            twelve.len(),
+            &|_| false,
         )?;
         runner.client.stop_stream()?;
         captured.append(&mut this_round);
