@@ -41,9 +41,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
 use crate::poser::{
-    build_schedule, corner_holds, fill_in_tumble, PoserOptions, ScheduleKind, SEEN_ANGLE_DEG,
+    build_schedule, corner_holds, fill_in_tumble, PlacedHold, PoserOptions, ScheduleKind,
+    SEEN_ANGLE_DEG,
 };
-use crate::world::{EarthField, Motion, Segment, Trajectory, TrajectoryBuilder, Tremor};
+use crate::world::{EarthField, Motion, Segment, Trajectory, TrajectoryBuilder};
 
 /// Length given to a hold that ends only on an observation, s (about 30 years).
 const OPEN_HOLD_S: f64 = 1.0e9;
@@ -143,20 +144,14 @@ pub struct Prompts {
     pub streaming: bool,
 }
 
-#[derive(Debug, Clone)]
-struct HoldPlan {
-    orientation: UnitQuaternion<f64>,
-    tremor: Option<Tremor>,
-}
-
 /// The person and the motion they produce.
 #[derive(Debug, Clone)]
 pub struct Person {
-    holds: Vec<HoldPlan>,
+    holds: Vec<PlacedHold>,
     /// Holds in the whole schedule: the twelve times the rounds.
     hold_count: usize,
     /// The eight corners, held after the last round while the host captures them.
-    corners: Vec<HoldPlan>,
+    corners: Vec<PlacedHold>,
     /// `CapturePose` count when the current hold began.
     hold_requests_at_start: u64,
     /// Set when a corner went without a capture request: the tumble comes next.
@@ -209,7 +204,7 @@ impl Person {
         crate::error::require_positive("maximum hold time (s)", max_hold_s)?;
         let twelve = build_schedule(ScheduleKind::Twelve, options, field, seed)?;
         let tumble = build_schedule(ScheduleKind::Tumble, options, field, seed)?;
-        let holds: Vec<HoldPlan> = twelve
+        let holds: Vec<PlacedHold> = twelve
             .trajectory
             .segments()
             .iter()
@@ -218,7 +213,7 @@ impl Person {
                     orientation,
                     tremor,
                     ..
-                } => Some(HoldPlan {
+                } => Some(PlacedHold {
                     orientation: *orientation,
                     tremor: tremor.clone(),
                 }),
@@ -235,13 +230,7 @@ impl Person {
                 Segment::Hold { .. } => {}
             }
         }
-        let corners = corner_holds(options, seed)?
-            .into_iter()
-            .map(|hold| HoldPlan {
-                orientation: hold.orientation,
-                tremor: hold.tremor,
-            })
-            .collect();
+        let corners = corner_holds(options, seed)?;
         let first = holds.first().cloned().ok_or(SimError::EmptyTrajectory)?;
         let rest = first.orientation;
         let hold_count = holds.len() * schedule.rounds();
@@ -370,7 +359,7 @@ impl Person {
 
     /// The plan of hold `index` of the schedule: one of the twelve, then the corners; `None`
     /// after the last corner.
-    fn hold_plan(&self, index: usize) -> Option<&HoldPlan> {
+    fn hold_plan(&self, index: usize) -> Option<&PlacedHold> {
         if index >= self.hold_count {
             return self.corners.get(index - self.hold_count);
         }
