@@ -30,7 +30,7 @@ pub enum Command {
     Still(StillArgs),
     /// Analyse the residual of the fitted models: noise floor, candidate effects, held-out error.
     Analyze(AnalyzeArgs),
-    /// Board commands: ports, info, flash, stream, record.
+    /// Board commands: ports, info, flash, stream, record, params.
     #[command(flatten)]
     Device(super::device::DeviceCommand),
     /// Guided calibration of a board (or `--sim`): positions, magnetometer, fit, write, verify.

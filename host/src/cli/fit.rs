@@ -363,10 +363,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     }
     // Recorded once the parameter file holds the fit; a failure is returned last.
     let recorded = match &args.params_out {
-        Some(path) => record_fit(
-            args,
-            write_params(&calibration, path)?,
-        ),
+        Some(path) => record_fit(args, write_params(&calibration, path)?),
         None => Ok(()),
     };
     let failed = calibration.failures();

@@ -83,8 +83,13 @@ pub fn input_paths(input: &InputArgs) -> Vec<PathBuf> {
     let mut paths = vec![recording.clone()];
     if recording.is_dir() {
         paths.extend(
-            ["recording.csv", "poses.json", "params.json", "params-base.json"]
-                .map(|name| recording.join(name)),
+            [
+                "recording.csv",
+                "poses.json",
+                "params.json",
+                "params-base.json",
+            ]
+            .map(|name| recording.join(name)),
         );
     }
     let mag = match &input.mag_file {

@@ -117,7 +117,9 @@ fn reset(args: &ResetArgs) -> anyhow::Result<()> {
     let device_id = client.welcome().device_id;
     let identity = CalibrationSet::identity();
     if crc == identity.crc32() {
-        println!("device {device_id} already holds the identity set (CRC {crc:#010x}); nothing to do");
+        println!(
+            "device {device_id} already holds the identity set (CRC {crc:#010x}); nothing to do"
+        );
         return Ok(());
     }
     eprintln!(

@@ -113,12 +113,11 @@ fn check_one(output: Output<'_>, inputs: &[PathBuf], force: bool) -> Result<(), 
         Ok(meta) if meta.is_dir() => return Err(OutputRefused::IsADirectory(shown(path))),
         // A device or a FIFO (`-o /dev/stdout`) is written to, not replaced.
         Ok(meta) if meta.is_file() && !force => return Err(OutputRefused::Exists(shown(path))),
-        Ok(_) => {}
-        Err(_) => {}
+        _ => {}
     }
     let parent = parent_of(path);
     match output {
-        Output::File(_) if !parent.is_dir() => Err(OutputRefused::MissingDir {
+        Output::File(_) if std::fs::metadata(&parent).is_err() => Err(OutputRefused::MissingDir {
             output: shown(path),
             dir: shown(&parent),
         }),
@@ -199,10 +198,8 @@ mod tests {
     use super::*;
 
     fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!(
-            "imucal-outputs-{}-{name}",
-            std::process::id()
-        ));
+        let dir =
+            std::env::temp_dir().join(format!("imucal-outputs-{}-{name}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("temp dir writable");
         dir
@@ -215,7 +212,10 @@ mod tests {
         std::fs::write(&input, "{}").unwrap();
         let other_spelling = dir.join(".").join("p.json");
         let error = check_outputs(&[Output::File(&other_spelling)], &[input], true).unwrap_err();
-        assert!(matches!(error, OutputRefused::SameAsInput { .. }), "{error}");
+        assert!(
+            matches!(error, OutputRefused::SameAsInput { .. }),
+            "{error}"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 
