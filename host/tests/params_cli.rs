@@ -61,6 +61,14 @@ fn calibrated_set() -> CalibrationSet {
     set
 }
 
+/// Writes `set` to the board straight through the library (the link is closed on return).
+fn write_directly(sim: &SimHandle, set: &CalibrationSet) {
+    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    client
+        .write_params_verified(set)
+        .expect("the set is written");
+}
+
 /// The board's active CRC and set, read directly (the link is closed again on return).
 fn active(sim: &SimHandle) -> (u32, CalibrationSet) {
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
@@ -73,12 +81,7 @@ fn a_saved_set_is_bound_to_its_board_and_flashes_back_with_the_same_crc() {
     let dir = scratch("round-trip");
     let sim = board(21);
     let set = calibrated_set();
-    {
-        let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
-        client
-            .write_params_verified(&set)
-            .expect("the set is written");
-    }
+    write_directly(&sim, &set);
     let (crc_before, _) = active(&sim);
     assert_eq!(crc_before, set.crc32());
 
@@ -118,12 +121,7 @@ fn a_saved_set_is_bound_to_its_board_and_flashes_back_with_the_same_crc() {
 fn a_reset_leaves_the_identity_set_verified_by_read_back() {
     let dir = scratch("reset");
     let sim = board(23);
-    {
-        let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
-        client
-            .write_params_verified(&calibrated_set())
-            .expect("the set is written");
-    }
+    write_directly(&sim, &calibrated_set());
     let out = succeeded(&imucal(
         &["params", "reset", "--port", sim.port_path(), "--yes"],
         &dir,
@@ -145,12 +143,7 @@ fn a_reset_without_confirmation_on_a_non_terminal_is_refused_and_changes_nothing
     let dir = scratch("unconfirmed");
     let sim = board(24);
     let set = calibrated_set();
-    {
-        let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
-        client
-            .write_params_verified(&set)
-            .expect("the set is written");
-    }
+    write_directly(&sim, &set);
     let out = imucal(&["params", "reset", "--port", sim.port_path()], &dir);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");

@@ -5,13 +5,14 @@
 
 use super::args::BoardProtocol;
 
-/// A simulated board serving a pseudo-terminal until it is dropped.
+/// A simulated board serving a pseudo-terminal until it is dropped (boxed: both handles
+/// carry the board's truth).
 #[cfg(feature = "sim")]
 pub(super) enum SimBoard {
     /// imucal's firmware on the simulated Nano 33 BLE Sense.
-    Firmware(imucal_hil_sim::serve::SimHandle),
+    Firmware(Box<imucal_hil_sim::serve::SimHandle>),
     /// Adafruit's calibration sketch.
-    Sketch(imucal_hil_sim::motioncal_serve::MotionCalHandle),
+    Sketch(Box<imucal_hil_sim::motioncal_serve::MotionCalHandle>),
 }
 
 #[cfg(feature = "sim")]
@@ -22,8 +23,12 @@ impl SimBoard {
         use imucal_hil_sim::motioncal_serve::MotionCalHandle;
         use imucal_hil_sim::serve::{SimOptions, SimServer};
         let board = match protocol {
-            BoardProtocol::Imucal => SimServer::start(SimOptions::new(seed)).map(Self::Firmware),
-            BoardProtocol::Motioncal => MotionCalHandle::start(seed, 1.0).map(Self::Sketch),
+            BoardProtocol::Imucal => {
+                SimServer::start(SimOptions::new(seed)).map(|h| Self::Firmware(Box::new(h)))
+            }
+            BoardProtocol::Motioncal => {
+                MotionCalHandle::start(seed, 1.0).map(|h| Self::Sketch(Box::new(h)))
+            }
         };
         let board = board.context("the simulated board could not start")?;
         eprintln!(

@@ -165,7 +165,7 @@ impl SampleSource for SketchSource {
             received += 1;
             let index = self.index;
             self.index += 1;
-            if index % self.decimation == 0 {
+            if index.is_multiple_of(self.decimation) {
                 samples.push(UnitSample {
                     t_s: index as f64 / self.rate_hz,
                     accel: reading.accel,

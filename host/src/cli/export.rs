@@ -55,7 +55,11 @@ pub struct ExportArgs {
 /// Run the command.
 pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
     if let Some(out) = &args.out {
-        check_outputs(&[Output::File(out)], &[args.params.clone()], args.force)?;
+        check_outputs(
+            &[Output::File(out)],
+            std::slice::from_ref(&args.params),
+            args.force,
+        )?;
     }
     let params = ParamsFile::load(&args.params)?;
     let shown = args.params.display().to_string();
