@@ -1,6 +1,7 @@
 //! `imucal record` and `imucal stream` on a board that runs Adafruit's MotionCal calibration
 //! sketch: the simulated sketch board (`--sim --sim-protocol motioncal`, in real time) is read
-//! through its `Uni:` lines into the recording CSV, timed at the sketch's rate.
+//! through its `Uni:` lines into the recording CSV, timed at the sketch's rate; a board that
+//! prints only `Raw:` lines (fed here on a pseudo-terminal) is read with MotionCal's scales.
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
@@ -141,5 +142,72 @@ fn a_calibrated_stream_from_a_sketch_board_is_refused_with_the_reason() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("leave out --calibrated"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Feeds `line` 100 times a second to a pseudo-terminal until `stop`, as a sketch that prints
+/// only `Raw:` lines would; returns the port's path and the slave kept open for the host.
+fn raw_only_board(
+    line: &'static str,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> (String, serialport::TTYPort, std::thread::JoinHandle<()>) {
+    use serialport::SerialPort;
+    use std::io::Write;
+    let (mut master, slave) = serialport::TTYPort::pair().expect("the machine provides ptys");
+    let path = slave.name().expect("a pty slave has a path");
+    // A write that cannot go out (nobody reads) gives up, so the feeder always sees `stop`.
+    master
+        .set_timeout(std::time::Duration::from_millis(10))
+        .expect("a timeout can be set");
+    let feeder = std::thread::spawn(move || {
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            let _ = master.write_all(line.as_bytes());
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    });
+    (path, slave, feeder)
+}
+
+#[test]
+fn a_board_printing_only_raw_lines_is_recorded_with_motioncals_scales() {
+    let dir = scratch("raw");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (port, _slave, feeder) =
+        raw_only_board("Raw:8192,-4096,0,16,-32,0,10,-20,485\r\n", stop.clone());
+    let out = imucal(
+        &[
+            "record",
+            "--port",
+            &port,
+            "--protocol",
+            "motioncal",
+            "-o",
+            "raw.csv",
+            "--seconds",
+            "1",
+        ],
+        &dir,
+    );
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    feeder.join().expect("the feeder ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("`Raw:`"), "{stderr}");
+    let csv = std::fs::read_to_string(dir.join("raw.csv")).expect("the recording was written");
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().expect("numbers")).collect())
+        .collect();
+    assert!(rows.len() >= 50, "{} rows", rows.len());
+    // Adafruit's sketch: 8192 counts per 9.8 m/s²; MotionCal: 16 counts per °/s, 10 per µT.
+    let dps = std::f64::consts::PI / 180.0;
+    let expected = [9.8, -4.9, 0.0, dps, -2.0 * dps, 0.0, 1.0, -2.0, 48.5];
+    for row in &rows {
+        for (value, want) in row[1..].iter().zip(expected) {
+            // Six printed decimals.
+            assert!((value - want).abs() <= 5e-7, "{row:?}");
+        }
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
