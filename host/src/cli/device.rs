@@ -32,13 +32,17 @@ pub enum DeviceCommand {
     /// Print the board's samples as they arrive (raw counts in units, or calibrated).
     #[command(
         after_help = "Examples:\n  imucal stream --port /dev/ttyACM0 --seconds 5\n  \
-        imucal stream --calibrated --csv --seconds 10 > check.csv"
+        imucal stream --calibrated --csv --seconds 10 > check.csv\n  \
+        imucal stream --port /dev/ttyACM0 --protocol motioncal      (a MotionCal sketch board)\n  \
+        imucal stream --sim --seconds 5"
     )]
     Stream(StreamArgs),
     /// Record the raw stream (in m/s², rad/s, µT, °C) to a recording CSV for `imucal fit`.
     #[command(
-        after_help = "Example:\n  imucal record --port /dev/ttyACM0 -o rest.csv --seconds 60\n\n\
-        Columns: t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c (sensors the board lacks are left out)."
+        after_help = "Examples:\n  imucal record --port /dev/ttyACM0 -o rest.csv --seconds 60\n  \
+        imucal record --port /dev/ttyACM0 --protocol motioncal -o sketch.csv --seconds 60\n\n\
+        Columns: t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c (sensors the board lacks are left out; a \
+        MotionCal sketch prints no temperature, and its times are counted at --sketch-rate)."
     )]
     Record(RecordArgs),
     /// Read the board's active parameters into a file, or reset them to identity.
