@@ -57,12 +57,12 @@ pub(in crate::cli) enum OutputRefused {
         dir: String,
     },
     /// The directory that would hold the output cannot be written.
-    #[error("`{output}` cannot be written: {dir} {why}; choose a place you can write to")]
+    #[error("`{output}` cannot be written: {place} {why}; choose a place you can write to")]
     Unwritable {
         /// The output as given.
         output: String,
-        /// The directory that would hold it.
-        dir: String,
+        /// What refuses: the directory that would hold it, or the existing file.
+        place: String,
         /// What is wrong with it.
         why: String,
     },
@@ -111,9 +111,23 @@ fn check_one(output: Output<'_>, inputs: &[PathBuf], force: bool) -> Result<(), 
             return writable(path, path);
         }
         Ok(meta) if meta.is_dir() => return Err(OutputRefused::IsADirectory(shown(path))),
-        // A device or a FIFO (`-o /dev/stdout`) is written to, not replaced.
         Ok(meta) if meta.is_file() && !force => return Err(OutputRefused::Exists(shown(path))),
-        _ => {}
+        // Replaced in place: the file must take writes (opened without truncating it).
+        Ok(meta) if meta.is_file() => {
+            return std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .map(drop)
+                .map_err(|e| OutputRefused::Unwritable {
+                    output: shown(path),
+                    place: "the file".to_string(),
+                    why: format!("cannot be written ({e})"),
+                });
+        }
+        // A device or a FIFO (`-o /dev/stdout`) is written to, not replaced: opening a FIFO
+        // here would wait for its reader, so it is left to the command.
+        Ok(_) => return Ok(()),
+        Err(_) => {}
     }
     let parent = parent_of(path);
     match output {
@@ -170,7 +184,7 @@ fn canonical_target(path: &Path) -> Option<PathBuf> {
 fn writable(output: &Path, dir: &Path) -> Result<(), OutputRefused> {
     let refused = |why: String| OutputRefused::Unwritable {
         output: shown(output),
-        dir: format!("`{}`", dir.display()),
+        place: format!("`{}`", dir.display()),
         why,
     };
     if !dir.is_dir() {
@@ -235,6 +249,13 @@ mod tests {
             Err(OutputRefused::NotADirectory(_))
         ));
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_device_is_written_to_and_not_refused_as_existing() {
+        let null = Path::new("/dev/null");
+        assert!(check_outputs(&[Output::File(null)], &[], false).is_ok());
     }
 
     #[test]
