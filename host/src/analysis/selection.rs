@@ -2,7 +2,9 @@
 //! [`super`]): the base fit, every candidate tested by held-out error, the accepted ones refitted
 //! jointly, temperature and time told apart only when they decorrelate.
 
-use super::crossval::{extend_start, held_out, observations_needed, Comparison, HeldOut};
+use super::crossval::{
+    extend_start, held_out, observations_needed, Comparison, HeldOut, ALPHA, MIN_GAIN_PER_COMPONENT,
+};
 use super::dataset::Observation;
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
 use super::extended_fit::{
@@ -295,7 +297,7 @@ pub fn analyse_observations(
                         kind.name(),
                         format!(
                             "explains part of the residual, but a bias free in shape over {} predicts held-out poses better \
-                             (signed-rank p = {:.1e}): the dependence has another form (a step, hysteresis), so it is not accepted",
+                             (corrected t p = {:.1e}): the dependence has another form (a step, hysteresis), so it is not accepted",
                             kind.variable(),
                             cmp.p_value
                         ),
@@ -355,7 +357,7 @@ pub fn analyse_observations(
             note: if provisional.contains(&kind.name()) {
                 format!(
                     "provisional: confounded with time (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); improves held-out error by \
-                     {:.0} % (signed-rank p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
+                     {:.0} % (corrected t p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
                      applies temperature terms only; confirm with a recording where temperature does not follow time \
                      (a cool-down, or a second warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
                     temp_time_correlation.unwrap_or(f64::NAN),
@@ -363,7 +365,7 @@ pub fn analyse_observations(
                 )
             } else {
                 format!(
-                    "improves held-out error by {:.0} % (signed-rank p = {p_value:.1e})",
+                    "improves held-out error by {:.0} % (corrected t p = {p_value:.1e})",
                     100.0 * score
                 )
             },
@@ -388,8 +390,9 @@ pub fn analyse_observations(
             _ => match wrong_form.iter().find(|(name, _)| *name == kind.name()) {
                 Some((_, why)) => why.clone(),
                 None => format!(
-                    "held-out gain {:.2} noise variances per component, signed-rank p = {:.2e}: not enough",
-                    cmp.gain_per_component, cmp.p_value
+                    "held-out gain {:.2} variances of the inflated floor per component (white-noise floor × {:.2}, \
+                     the Birge ratio), corrected t p = {:.2e}: not enough (needs ≥ {MIN_GAIN_PER_COMPONENT} and p ≤ {ALPHA}/m, m candidates in the round)",
+                    cmp.gain_per_component, cmp.floor_inflation, cmp.p_value
                 ),
             },
         };
