@@ -37,7 +37,7 @@
 use super::effects::EffectKind;
 use super::extended_fit::{fit_rows, ExtendedFit, Problem};
 use crate::fit::uncertainty::{noise_scale, NoiseLevel};
-use crate::stats::distributions::student_t_upper_tail;
+use crate::stats::distributions::{f_upper_tail, student_t_upper_tail};
 use nalgebra::DVector;
 
 /// Largest number of folds.
@@ -48,6 +48,11 @@ pub const MAX_FOLDS: usize = 12;
 pub const REPEATS: usize = 5;
 /// Family-wise significance level of one round of candidates.
 pub const ALPHA: f64 = 0.01;
+/// Significance level of the lack-of-fit test by which a bias free in shape over time or
+/// temperature shows that an accepted time or temperature effect has the wrong form (the form
+/// check of [`super`]). Higher than [`ALPHA`]: there a miss writes a wrong family to the
+/// device, so the free-shape rival needs less evidence than a new effect does.
+pub const FORM_ALPHA: f64 = 0.05;
 /// Minimum fall of the mean held-out loss per residual component, in variances of the
 /// inflated floor.
 pub const MIN_GAIN_PER_COMPONENT: f64 = 0.25;
@@ -250,6 +255,20 @@ impl Comparison {
     pub fn passes(&self, m: usize) -> bool {
         self.p_value <= ALPHA / m.max(1) as f64 && self.gain_per_component >= MIN_GAIN_PER_COMPONENT
     }
+
+}
+
+/// P-value of the lack-of-fit F test of a model (in-sample cost `cost`) against the same model
+/// extended by `extra` parameters (cost `cost_extended`, `dof_extended` residual degrees of
+/// freedom): `F = ((χ² − χ²_ext)/extra)/(χ²_ext/ν_ext)`. The noise is estimated from the
+/// extended model, so a floor that is too small cancels; fitted once on every observation, the
+/// test has none of the dependence between cross-validation splits.
+pub fn lack_of_fit_p(cost: f64, cost_extended: f64, extra: usize, dof_extended: usize) -> f64 {
+    if extra == 0 || dof_extended == 0 || !(cost_extended > 0.0) || !cost.is_finite() {
+        return 1.0;
+    }
+    let f = ((cost - cost_extended).max(0.0) / extra as f64) / (cost_extended / dof_extended as f64);
+    f_upper_tail(f, extra as f64, dof_extended as f64)
 }
 
 /// Start vector for `extended` from a fit of `current` (a prefix of it): the fitted parameters
@@ -281,6 +300,18 @@ mod tests {
         // No improvement on average gives p ≥ ½; a single split decides nothing.
         assert!(corrected_resampled_t(&[1.0, -1.0, 0.5, -0.5], 0.1) >= 0.5);
         assert_eq!(corrected_resampled_t(&[3.0], 0.1), 1.0);
+    }
+
+    #[test]
+    fn lack_of_fit_p_is_the_f_tail_of_the_cost_reduction_per_extra_parameter() {
+        // χ² 21.124 → 10 with 3 extra parameters and ν = 10: F = (11.124/3)/(10/10) = 3.708, the
+        // tabulated upper 5 % point of F(3, 10) (3 decimals, hence 2e-4 on p).
+        assert!((lack_of_fit_p(21.124, 10.0, 3, 10) - 0.05).abs() < 2e-4);
+        // Scaling both costs (a floor too small by any factor) leaves p unchanged.
+        let p = lack_of_fit_p(21.124 * 7.0, 70.0, 3, 10);
+        assert!((p - lack_of_fit_p(21.124, 10.0, 3, 10)).abs() < 1e-12);
+        // No reduction: nothing to find.
+        assert_eq!(lack_of_fit_p(10.0, 10.0, 3, 10), 1.0);
     }
 
     #[test]

@@ -3,7 +3,8 @@
 //! jointly, temperature and time told apart only when they decorrelate.
 
 use super::crossval::{
-    extend_start, held_out, observations_needed, Comparison, HeldOut, ALPHA, MIN_GAIN_PER_COMPONENT,
+    extend_start, held_out, lack_of_fit_p, observations_needed, Comparison, HeldOut, ALPHA,
+    FORM_ALPHA, MIN_GAIN_PER_COMPONENT,
 };
 use super::dataset::Observation;
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
@@ -285,21 +286,25 @@ pub fn analyse_observations(
         let (kind, _, fit, ho) = round.swap_remove(w);
         remaining.retain(|r| r.name() != kind.name());
         if time_or_temp {
-            // Form check: a bias free in shape over the same variable must not predict better.
+            // Form check: a bias free in shape over the same variable, added to the effect, must
+            // neither fit significantly better (lack-of-fit F test) nor predict visibly better.
             let binned = EffectKind::BinnedBias(kind.needs_temperature());
-            let mut effects = current.0.effects.clone();
+            let mut effects = fit.effects.clone();
             effects.push(binned);
-            let start = extend_start(&current.0.params, binned.param_count());
-            if let Some((_, binned_ho)) = evaluate(&problem, &effects, &start) {
-                let cmp = Comparison::new(&ho, &binned_ho, components);
-                if cmp.passes(1) {
+            let start = extend_start(&fit.params, binned.param_count());
+            if let Some((free_fit, free_ho)) = evaluate(&problem, &effects, &start) {
+                let dof = (n * components).saturating_sub(free_fit.params.len());
+                let p = lack_of_fit_p(fit.cost, free_fit.cost, binned.param_count(), dof);
+                let cmp = Comparison::new(&ho, &free_ho, components);
+                if p <= FORM_ALPHA && cmp.gain_per_component >= MIN_GAIN_PER_COMPONENT {
                     wrong_form.push((
                         kind.name(),
                         format!(
-                            "explains part of the residual, but a bias free in shape over {} predicts held-out poses better \
-                             (corrected t p = {:.1e}): the dependence has another form (a step, hysteresis), so it is not accepted",
+                            "explains part of the residual, but a bias free in shape over {} fits it better (lack-of-fit \
+                             F test p = {p:.1e}) and predicts held-out poses better by {:.2} variances of the inflated floor: \
+                             the dependence has another form (a step, hysteresis), so it is not accepted",
                             kind.variable(),
-                            cmp.p_value
+                            cmp.gain_per_component
                         ),
                     ));
                     continue;
