@@ -37,7 +37,9 @@ fn run(path: &Path) -> Result<(), Box<dyn std::error::Error>> {
     let still = find_still(&recording, &StillOptions::default())?;
     let counts = gyro_counts_to_rads(&name);
     let options = AnalysisOptions {
-        gyro_scale: counts.or(recording.units.to_si(imucal::recording::Sensor::Gyro)).unwrap_or(1.0),
+        gyro_scale: counts
+            .or(recording.units.to_si(imucal::recording::Sensor::Gyro))
+            .unwrap_or(1.0),
         gyro_scale_known: true,
         ..AnalysisOptions::default()
     };
@@ -53,18 +55,37 @@ fn run(path: &Path) -> Result<(), Box<dyn std::error::Error>> {
             .effects
             .iter()
             .filter(|e| e.status == EffectStatus::Accepted)
-            .map(|e| format!("**{}** (score {:.0} %, p = {:.1e}, gain {:.1})", e.kind.name(), 100.0 * e.score, e.p_value, e.gain))
+            .map(|e| {
+                format!(
+                    "**{}** (score {:.0} %, p = {:.1e}, gain {:.1})",
+                    e.kind.name(),
+                    100.0 * e.score,
+                    e.p_value,
+                    e.gain
+                )
+            })
             .collect();
         let best_rejected = a
             .effects
             .iter()
             .filter(|e| e.status == EffectStatus::Rejected)
             .max_by(|x, y| x.score.total_cmp(&y.score))
-            .map(|e| format!("; best rejected {} (gain {:.2}, p = {:.2})", e.kind.name(), e.gain, e.p_value))
+            .map(|e| {
+                format!(
+                    "; best rejected {} (gain {:.2}, p = {:.2})",
+                    e.kind.name(),
+                    e.gain,
+                    e.p_value
+                )
+            })
             .unwrap_or_default();
         let found = format!(
             "{}{}{}{}",
-            if accepted.is_empty() { "nothing".to_string() } else { accepted.join(", ") },
+            if accepted.is_empty() {
+                "nothing".to_string()
+            } else {
+                accepted.join(", ")
+            },
             if a.unexplained {
                 format!("; **unexplained** (χ²/dof {:.1})", a.test_after.reduced())
             } else {

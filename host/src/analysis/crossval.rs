@@ -255,7 +255,6 @@ impl Comparison {
     pub fn passes(&self, m: usize) -> bool {
         self.p_value <= ALPHA / m.max(1) as f64 && self.gain_per_component >= MIN_GAIN_PER_COMPONENT
     }
-
 }
 
 /// P-value of the lack-of-fit F test of a model (in-sample cost `cost`) against the same model
@@ -267,7 +266,8 @@ pub fn lack_of_fit_p(cost: f64, cost_extended: f64, extra: usize, dof_extended: 
     if extra == 0 || dof_extended == 0 || !(cost_extended > 0.0) || !cost.is_finite() {
         return 1.0;
     }
-    let f = ((cost - cost_extended).max(0.0) / extra as f64) / (cost_extended / dof_extended as f64);
+    let f =
+        ((cost - cost_extended).max(0.0) / extra as f64) / (cost_extended / dof_extended as f64);
     f_upper_tail(f, extra as f64, dof_extended as f64)
 }
 
@@ -325,7 +325,10 @@ mod tests {
             // Balanced: 40 poses in 12 folds of 3 or 4.
             for fold in 0..MAX_FOLDS {
                 let size = f.iter().filter(|&&x| x == fold).count();
-                assert!((3..=4).contains(&size), "repetition {r}, fold {fold}: {size}");
+                assert!(
+                    (3..=4).contains(&size),
+                    "repetition {r}, fold {fold}: {size}"
+                );
             }
             // Different pairings of poses from the first repetition.
             let pairs_kept = (0..40)
@@ -336,7 +339,10 @@ mod tests {
                 .flat_map(|i| (i + 1..40).map(move |j| (i, j)))
                 .filter(|&(i, j)| first[i] == first[j])
                 .count();
-            assert!(pairs_kept * 2 < pairs, "repetition {r}: {pairs_kept} of {pairs} pairs kept");
+            assert!(
+                pairs_kept * 2 < pairs,
+                "repetition {r}: {pairs_kept} of {pairs} pairs kept"
+            );
         }
     }
 

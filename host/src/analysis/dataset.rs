@@ -89,9 +89,10 @@ pub fn pose_observations(
         let (start, end) = (interval.start + guard, interval.end - guard);
         let rows = hold_rows(recording, start, end, interval.label);
         let (t_start, t_end) = match (recording.time.get(start), end.checked_sub(1)) {
-            (Some(&a), Some(last)) if guard > 0 => {
-                (a, recording.time.get(last).copied().unwrap_or(interval.t_end))
-            }
+            (Some(&a), Some(last)) if guard > 0 => (
+                a,
+                recording.time.get(last).copied().unwrap_or(interval.t_end),
+            ),
             _ => (interval.t_start, interval.t_end),
         };
         let temp = recording.temp_c.as_ref().and_then(|t| {
