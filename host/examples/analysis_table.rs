@@ -15,7 +15,22 @@ use imucal::still::{find_still, StillOptions};
 
 #[path = "common/real_units.rs"]
 mod real_units;
-use real_units::{gyro_counts_to_rads, units_of};
+use real_units::units_of;
+
+/// Gyroscope counts to rad/s for the sets stored in counts (documented sensitivities: Xsens
+/// 1/6258 rad/s per count, MPU-6050 at ±250 °/s (π/180)/131, MaD-Lab raw (π/180)/16.4).
+fn gyro_counts_to_rads(name: &str) -> Option<f64> {
+    let dps = std::f64::consts::PI / 180.0;
+    if name.starts_with("imutk_") {
+        Some(1.0 / 6258.0)
+    } else if name.starts_with("tsi_") {
+        Some(dps / 131.0)
+    } else if name.starts_with("imucal_ferraris_raw") {
+        Some(dps / 16.4)
+    } else {
+        None
+    }
+}
 
 fn run(path: &Path) -> Result<(), Box<dyn std::error::Error>> {
     let name = path

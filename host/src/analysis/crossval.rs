@@ -263,7 +263,12 @@ impl Comparison {
 /// extended model, so a floor that is too small cancels; fitted once on every observation, the
 /// test has none of the dependence between cross-validation splits.
 pub fn lack_of_fit_p(cost: f64, cost_extended: f64, extra: usize, dof_extended: usize) -> f64 {
-    if extra == 0 || dof_extended == 0 || !(cost_extended > 0.0) || !cost.is_finite() {
+    if extra == 0
+        || dof_extended == 0
+        || cost_extended.is_nan()
+        || cost_extended <= 0.0
+        || !cost.is_finite()
+    {
         return 1.0;
     }
     let f =
