@@ -15,7 +15,7 @@
 //! sensor, not of the person holding it.
 
 use crate::fit::{Pose, Vec3};
-use crate::recording::{LabelKind, Recording, Sensor};
+use crate::recording::{Recording, Sensor};
 use crate::stats::autocorrelation::run_stats;
 use crate::still::StillReport;
 
@@ -46,18 +46,6 @@ fn mean_of(values: &[f64]) -> Option<f64> {
     (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
 }
 
-/// Rows of the main stream that belong to a hold: every row in `[start, end)`, or only those
-/// carrying the hold's label when the holds came from a `pose` column.
-fn hold_rows(recording: &Recording, start: usize, end: usize, label: Option<i64>) -> Vec<usize> {
-    match (&recording.labels, label) {
-        (Some(labels), Some(value)) if labels.kind == LabelKind::Pose => (start
-            ..end.min(labels.per_row.len()))
-            .filter(|&i| labels.per_row[i].map(|l| labels.value(l)) == Some(value))
-            .collect(),
-        _ => (start..end.min(recording.len())).collect(),
-    }
-}
-
 /// One observation per still interval for `sensor` (accelerometer, gyroscope, or the
 /// magnetometer samples that fall inside each hold).
 pub fn pose_observations(
@@ -67,37 +55,13 @@ pub fn pose_observations(
 ) -> Vec<Observation> {
     let mut out = Vec::new();
     for interval in &still.intervals {
-        let rows = hold_rows(recording, interval.start, interval.end, interval.label);
-        let temp = recording.temp_c.as_ref().and_then(|t| {
-            mean_of(
-                &rows
-                    .iter()
-                    .filter_map(|&i| t.get(i).copied())
-                    .collect::<Vec<f64>>(),
-            )
-        });
-        let accel_mean = recording.accel.as_ref().and_then(|a| {
-            let picked: Vec<Vec3> = rows.iter().filter_map(|&i| a.get(i).copied()).collect();
-            (!picked.is_empty()).then(|| picked.iter().sum::<Vec3>() / picked.len() as f64)
-        });
-        let samples: Vec<Vec3> = match sensor {
-            Sensor::Accel | Sensor::Gyro => {
-                let Some(all) = recording.samples(sensor) else {
-                    continue;
-                };
-                rows.iter().filter_map(|&i| all.get(i).copied()).collect()
-            }
-            Sensor::Mag => match &recording.mag {
-                Some(m) => m
-                    .time
-                    .iter()
-                    .zip(&m.samples)
-                    .filter(|(t, _)| **t >= interval.t_start && **t <= interval.t_end)
-                    .map(|(_, x)| *x)
-                    .collect(),
-                None => continue,
-            },
+        let temp = interval.temp.map(|t| t.mean);
+        // The screened samples (spikes dropped), the same ones the hold's pose is made of.
+        let accel_mean = interval.accel.as_ref().map(|p| p.mean);
+        let Some(held) = interval.samples(recording, sensor) else {
+            continue;
         };
+        let samples = held.kept;
         let Some(stats) = run_stats(&samples) else {
             continue;
         };

@@ -150,7 +150,8 @@ pub fn check_input(
 }
 
 /// Still intervals with the holds that cannot be used left out; refuses when none is found or
-/// none is usable. Returns warnings.
+/// none is usable. Returns warnings, among them one per hold and sensor whose outliers were
+/// dropped.
 fn still_intervals(
     recording: &Recording,
     options: &StillOptions,
@@ -159,7 +160,14 @@ fn still_intervals(
         .map_err(|e| format!("still intervals could not be found: {e}"))?;
     input_checks::require_still(recording, &still, options.min_hold_s)
         .map_err(|e| e.to_string())?;
-    let warnings = input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
-        .map_err(|e| e.to_string())?;
+    let mut warnings =
+        input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
+            .map_err(|e| e.to_string())?;
+    warnings.extend(
+        still
+            .intervals
+            .iter()
+            .flat_map(|i| i.dropped_sentences()),
+    );
     Ok((still, warnings))
 }

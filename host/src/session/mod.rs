@@ -38,6 +38,7 @@ pub mod gyro_fit;
 pub mod gyro_moves;
 pub mod hold;
 pub mod journal;
+mod mag_alignment;
 mod mag_phase;
 pub mod motion;
 pub mod motioncal;

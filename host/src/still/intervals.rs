@@ -1,6 +1,7 @@
 //! What the detector finds: the holds, their per-sensor statistics, and the noise floors used.
 
 use super::directions::cluster_directions;
+use super::samples::{hold_samples, DroppedSamples, HoldSamples};
 use crate::fit::{Pose, Vec3};
 use crate::recording::{LabelKind, Recording, Sensor};
 
@@ -38,6 +39,9 @@ pub struct StillInterval {
     pub temp: Option<TempStats>,
     /// Index into [`StillReport::directions`] of this hold's gravity direction.
     pub direction: Option<usize>,
+    /// Samples the outlier screen dropped from the statistics above, per sensor (empty when
+    /// none was).
+    pub dropped: Vec<DroppedSamples>,
 }
 
 impl StillInterval {
@@ -56,6 +60,35 @@ impl StillInterval {
             .filter(|&row| match label_index {
                 Some((l, index)) => l.per_row.get(row).copied().flatten() == Some(index),
                 None => true,
+            })
+            .collect()
+    }
+
+    /// The screened samples of `sensor` in this hold, the ones its statistics are made of.
+    pub fn samples(&self, recording: &Recording, sensor: Sensor) -> Option<HoldSamples> {
+        hold_samples(
+            recording,
+            &self.rows(recording),
+            self.t_start,
+            self.t_end,
+            sensor,
+        )
+    }
+
+    /// One sentence per sensor with samples dropped by the outlier screen, naming the hold.
+    pub fn dropped_sentences(&self) -> Vec<String> {
+        let name = self
+            .label
+            .map_or(String::new(), |l| format!(" (pose {l})"));
+        self.dropped
+            .iter()
+            .map(|d| {
+                format!(
+                    "hold at {:.1}–{:.1} s{name}: {}",
+                    self.t_start,
+                    self.t_end,
+                    d.sentence()
+                )
             })
             .collect()
     }
