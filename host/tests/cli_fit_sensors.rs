@@ -108,7 +108,9 @@ fn poses_that_cannot_determine_cross_axis_terms_get_the_axis_aligned_model_and_s
     for phrase in [
         "axis-aligned (6 unknowns) chosen by leave-one-pose-out error",
         "lm: refused",
-        "uncertain by 6 %",
+        // 4 %, not 6 %: the knocks in these hand-held holds are screened out of the pose
+        // variances (median/MAD bound), which sets the noise the covariance is scaled by.
+        "uncertain by 4 %",
         "six-position: refused",
     ] {
         assert!(note.contains(phrase), "missing `{phrase}` in {note}");
@@ -337,7 +339,7 @@ fn a_magnetometer_spike_inside_a_hold_is_dropped_named_and_leaves_the_alignment_
     let (ok, stdout, stderr) = imucal(&["fit", &path, "--field-ut", "50", "--json"]);
     assert!(ok, "{stderr}");
     assert!(
-        stderr.contains("1 of ") && stderr.contains("magnetometer samples dropped as outliers"),
+        stderr.contains("outliers dropped from its statistics: 1 of ") && stderr.contains(" mag samples"),
         "{stderr}"
     );
     assert!(stderr.contains("hold at 15."), "the warning names the hold: {stderr}");

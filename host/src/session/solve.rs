@@ -35,6 +35,7 @@ use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::norm_lm::fit_mag_lm;
 use crate::fit::{Calibration, Fit, FitError, Mat3, Pose, Vec3};
 use crate::pipeline::chain::{default_accel_chain, ChainChoice};
+use crate::stats::robust::screen_stream;
 
 /// Standard gravity, m/s² (the unit of "mg").
 pub const STANDARD_GRAVITY: f64 = 9.806_65;
@@ -304,7 +305,9 @@ pub fn fit_session(
     let accel_choice = default_accel_chain(&accel_poses, gravity_mps2)?;
     let accel = accel_choice.fit.clone();
     let gyro = fit_gyro_bias(&gyro_poses, 1.0)?;
-    let (mag, field, field_source) = fit_mag(mag_points, field_ut)?;
+    // A spike in the stream would dominate the ellipsoid: screened like a recording's.
+    let screening = screen_stream(mag_points);
+    let (mag, field, field_source) = fit_mag(&screening.kept(mag_points), field_ut)?;
 
     let accel_up: Vec<Vec3> = accel_poses
         .iter()
@@ -317,8 +320,17 @@ pub fn fit_session(
     let names: Vec<&str> = poses.iter().map(|p| p.target.name.as_str()).collect();
     let SessionAlignment {
         outcome: alignment,
-        notes,
+        mut notes,
     } = align_session_mag(&accel_up, &raw_field, &names, &mag, field);
+    if screening.dropped > 0 {
+        notes.push(format!(
+            "{} of {} magnetometer samples of the turns were left out of the field fit as \
+             spikes (up to {:.3e} robust standard deviations from their neighbours)",
+            screening.dropped,
+            mag_points.len(),
+            screening.worst_sigmas
+        ));
+    }
     let mag_final = alignment
         .as_ref()
         .map_or(mag.cal, |align| align.apply_to(&mag.cal));

@@ -1,5 +1,7 @@
 //! Screening of gross outliers (a spike, a corrupted read) from a set of samples that should
-//! scatter about one value: median and MAD with a Bonferroni bound.
+//! scatter about one value: median and MAD with a Bonferroni bound; and from a stream taken
+//! while turning, by the same bound on the deviations from a running median
+//! ([`screen_stream`]).
 //!
 //! Centre `m = median(x)`, scale `σ̂ = 1.4826·median|xᵢ − m|` (Rousseeuw & Croux 1993): both
 //! ignore up to half the values being wrong, unlike the mean and standard deviation a spike
@@ -134,6 +136,37 @@ pub fn screen_vectors(samples: &[Vec3]) -> Screening {
     screen_axes(&axes, &[step.x, step.y, step.z])
 }
 
+/// Half-width of the running median of [`screen_stream`]: seven samples follow a turning
+/// board's smooth path, and a spike of up to three samples cannot move their median.
+const STREAM_HALF_WINDOW: usize = 3;
+
+/// Screen a stream of 3-vector samples taken while the board turns (the magnetometer's
+/// tumble), where no single value is expected: each sample's deviation from the running median
+/// of the seven around it (Hampel's identifier; Pearson, "Outliers in process modeling and
+/// identification", IEEE TCST 10(1), 2002), screened axis by axis like [`screen_vectors`] with
+/// one robust scale per axis for the whole stream. A smooth path leaves the deviations at the
+/// noise; a spike stands out by its own size.
+pub fn screen_stream(samples: &[Vec3]) -> Screening {
+    let n = samples.len();
+    if n < MIN_SCREENED.max(2 * STREAM_HALF_WINDOW + 1) {
+        return Screening::keep_all(n);
+    }
+    let axes: Vec<Vec<f64>> = (0..3)
+        .map(|k| {
+            (0..n)
+                .map(|i| {
+                    let lo = i.saturating_sub(STREAM_HALF_WINDOW);
+                    let hi = (i + STREAM_HALF_WINDOW + 1).min(n);
+                    let mut window: Vec<f64> = samples[lo..hi].iter().map(|s| s[k]).collect();
+                    samples[i][k] - median(&mut window)
+                })
+                .collect()
+        })
+        .collect();
+    let step = quantisation_step(samples);
+    screen_axes(&axes, &[step.x, step.y, step.z])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -209,6 +242,24 @@ mod tests {
             .collect();
         let screening = screen_scalars(&values, 0.15);
         assert_eq!(screening.dropped, 0);
+    }
+
+    #[test]
+    fn a_spike_in_a_turning_stream_is_dropped_and_the_smooth_path_kept() {
+        // A 48 µT field turning at up to 2 rad/s, sampled at 100 Hz with 0.3 µT noise.
+        let noise = [gaussian(1, 3000), gaussian(2, 3000), gaussian(3, 3000)];
+        let mut samples: Vec<Vec3> = (0..3000)
+            .map(|i| {
+                let t = i as f64 / 100.0;
+                let (a, b) = (2.0 * (0.3 * t).sin() * t / 10.0, 0.7 * t);
+                Vec3::new(a.cos() * b.cos(), a.cos() * b.sin(), a.sin()) * 48.0
+                    + Vec3::new(noise[0][i], noise[1][i], noise[2][i]) * 0.3
+            })
+            .collect();
+        samples[1234].x = 1e5;
+        let screening = screen_stream(&samples);
+        assert!(!screening.keep[1234]);
+        assert_eq!(screening.dropped, 1, "{}", screening.bound_sigmas);
     }
 
     #[test]

@@ -75,22 +75,24 @@ impl StillInterval {
         )
     }
 
-    /// One sentence per sensor with samples dropped by the outlier screen, naming the hold.
-    pub fn dropped_sentences(&self) -> Vec<String> {
+    /// One sentence naming the samples the outlier screen dropped from this hold, per sensor;
+    /// `None` when nothing was dropped.
+    pub fn dropped_sentence(&self) -> Option<String> {
+        if self.dropped.is_empty() {
+            return None;
+        }
         let name = self
             .label
             .map_or(String::new(), |l| format!(" (pose {l})"));
-        self.dropped
-            .iter()
-            .map(|d| {
-                format!(
-                    "hold at {:.1}–{:.1} s{name}: {}",
-                    self.t_start,
-                    self.t_end,
-                    d.sentence()
-                )
-            })
-            .collect()
+        let what: Vec<String> = self.dropped.iter().map(DroppedSamples::phrase).collect();
+        Some(format!(
+            "hold at {:.1}–{:.1} s{name}: outliers dropped from its statistics: {} (robust \
+             standard deviations from the hold's median): a spike, a corrupted read or a knock \
+             during the hold",
+            self.t_start,
+            self.t_end,
+            what.join(", ")
+        ))
     }
 
     /// Duration in seconds.

@@ -24,12 +24,10 @@ pub struct DroppedSamples {
 }
 
 impl DroppedSamples {
-    /// One sentence naming what was dropped (the hold is named by the caller).
-    pub fn sentence(&self) -> String {
+    /// What was dropped, e.g. `1 of 113 mag samples (up to 4.1e5 σ, bound 4.2 σ)`.
+    pub fn phrase(&self) -> String {
         format!(
-            "{} of {} {} samples dropped as outliers (up to {:.3e} robust standard deviations \
-             from the hold's median; the bound for this many samples is {:.1}); a spike or a \
-             corrupted read, so check the wiring or the sensor if it recurs",
+            "{} of {} {} samples (up to {:.2e} σ, bound {:.1} σ)",
             self.dropped, self.total, self.sensor, self.worst_sigmas, self.bound_sigmas
         )
     }
