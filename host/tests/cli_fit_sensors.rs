@@ -324,7 +324,11 @@ fn a_magnetometer_spike_inside_a_hold_is_dropped_named_and_leaves_the_alignment_
     let lines: Vec<String> = text
         .lines()
         .map(|line| {
-            let t: f64 = line.split(',').next().and_then(|t| t.parse().ok()).unwrap_or(-1.0);
+            let t: f64 = line
+                .split(',')
+                .next()
+                .and_then(|t| t.parse().ok())
+                .unwrap_or(-1.0);
             if !spiked && (16.0..16.1).contains(&t) {
                 spiked = true;
                 let rest: Vec<&str> = line.split(',').skip(2).collect();
@@ -339,10 +343,14 @@ fn a_magnetometer_spike_inside_a_hold_is_dropped_named_and_leaves_the_alignment_
     let (ok, stdout, stderr) = imucal(&["fit", &path, "--field-ut", "50", "--json"]);
     assert!(ok, "{stderr}");
     assert!(
-        stderr.contains("outliers dropped from its statistics: 1 of ") && stderr.contains(" mag samples"),
+        stderr.contains("outliers dropped from its statistics: 1 of ")
+            && stderr.contains(" mag samples"),
         "{stderr}"
     );
-    assert!(stderr.contains("hold at 15."), "the warning names the hold: {stderr}");
+    assert!(
+        stderr.contains("hold at 15."),
+        "the warning names the hold: {stderr}"
+    );
     let alignment = &json(&stdout)["mag"]["alignment"];
     assert_eq!(alignment["applied"], true, "{alignment}");
     // The same 0.1° budget as without the spike (see the test above): unscreened, the spike

@@ -96,7 +96,10 @@ const BUDGETS: Budgets = Budgets {
 /// Angle of the fitted mag→accel rotation away from the mounting rotation, degrees.
 fn alignment_error_deg(poses: &[CapturedPose]) -> (f64, f64, Vec<String>) {
     let fit = fit_session(poses, &tumble(), G, Some(FIELD_UT), BUDGETS, 0).expect("fitted");
-    let alignment = fit.alignment.as_ref().expect("the magnetometer was aligned");
+    let alignment = fit
+        .alignment
+        .as_ref()
+        .expect("the magnetometer was aligned");
     // The norm fit leaves its output in an upper-triangular gauge; the alignment takes that
     // gauge into the accelerometer frame, so the written R·A maps raw readings as the mounting
     // rotation does (the reference is the true field, so the true A is that rotation).
@@ -125,7 +128,10 @@ fn a_spike_averaged_into_one_position_is_left_out_of_the_alignment_and_named() {
     poses[5].stats.mag_mean[0] += spike as f32;
     let name = poses[5].target.name.clone();
     let (error, sigma, notes) = alignment_error_deg(&poses);
-    assert!(error < 0.1, "{error}° (σ {sigma}°) with the spiked position");
+    assert!(
+        error < 0.1,
+        "{error}° (σ {sigma}°) with the spiked position"
+    );
     assert_eq!(notes.len(), 1, "{notes:?}");
     assert!(
         notes[0].contains(&name) && notes[0].contains("left out of the alignment"),

@@ -132,7 +132,10 @@ fn analyzed_calibration_holds_g_within_1_mg_at_25_c_and_2_mg_over_10_to_40_c() {
             fitted["value"].as_f64().expect("value"),
             fitted["std"].as_f64().expect("std"),
         );
-        println!("{axis}: fitted {value:.4e} ± {std:.2e}, simulated {:.4e}", -truth_value);
+        println!(
+            "{axis}: fitted {value:.4e} ± {std:.2e}, simulated {:.4e}",
+            -truth_value
+        );
         assert!(
             (value + truth_value).abs() <= 4.0 * std,
             "{axis}: {value:.4e} ± {std:.2e} against {:.4e}",
@@ -154,5 +157,8 @@ fn analyzed_calibration_holds_g_within_1_mg_at_25_c_and_2_mg_over_10_to_40_c() {
     // The bound is met because of the temperature terms: the base set without them misses it
     // at the ends of the sweep (the effect alone is 1.5–3 mg there).
     let base_ends = worst_mg(&base, &truth, 10.0).max(worst_mg(&base, &truth, 40.0));
-    assert!(base_ends > 2.0, "the base set alone gives {base_ends:.3} mg");
+    assert!(
+        base_ends > 2.0,
+        "the base set alone gives {base_ends:.3} mg"
+    );
 }

@@ -167,7 +167,12 @@ impl RecordingCalibration {
         self.sensors
             .iter()
             .filter_map(|r| {
-                let reason = r.fit.as_ref().err().cloned().or_else(|| r.alignment_failure())?;
+                let reason = r
+                    .fit
+                    .as_ref()
+                    .err()
+                    .cloned()
+                    .or_else(|| r.alignment_failure())?;
                 Some(format!("{}: {reason}", r.sensor))
             })
             .collect()

@@ -179,11 +179,6 @@ fn still_intervals(
     let mut warnings =
         input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
             .map_err(|e| e.to_string())?;
-    warnings.extend(
-        still
-            .intervals
-            .iter()
-            .filter_map(|i| i.dropped_sentence()),
-    );
+    warnings.extend(still.intervals.iter().filter_map(|i| i.dropped_sentence()));
     Ok((still, warnings))
 }

@@ -130,7 +130,8 @@ pub fn pose_stats(samples: &[UnitSample]) -> PoseStats {
     let moments = |pick: fn(&UnitSample) -> [f64; 3]| {
         let values: Vec<Vec3> = samples.iter().map(|s| Vec3::from(pick(s))).collect();
         let kept = screen_vectors(&values).kept(&values);
-        let (mean, var, _) = mean_variance(kept.iter()).unwrap_or((Vec3::zeros(), Vec3::zeros(), 0));
+        let (mean, var, _) =
+            mean_variance(kept.iter()).unwrap_or((Vec3::zeros(), Vec3::zeros(), 0));
         (
             [mean.x, mean.y, mean.z].map(|v| v as f32),
             [var.x, var.y, var.z].map(|v| v as f32),

@@ -28,8 +28,8 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
 use super::coverage::region_directions;
-use super::targets::Target;
 use super::mag_alignment::{align_session_mag, SessionAlignment};
+use super::targets::Target;
 use crate::fit::alignment::Alignment;
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::norm_lm::fit_mag_lm;

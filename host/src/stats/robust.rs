@@ -196,7 +196,13 @@ mod tests {
             gaussian(seed + 2, n),
         );
         (0..n)
-            .map(|i| Vec3::new(20.0 + sigma * x[i], -5.0 + sigma * y[i], 40.0 + sigma * z[i]))
+            .map(|i| {
+                Vec3::new(
+                    20.0 + sigma * x[i],
+                    -5.0 + sigma * y[i],
+                    40.0 + sigma * z[i],
+                )
+            })
             .collect()
     }
 

@@ -81,9 +81,7 @@ impl StillInterval {
         if self.dropped.is_empty() {
             return None;
         }
-        let name = self
-            .label
-            .map_or(String::new(), |l| format!(" (pose {l})"));
+        let name = self.label.map_or(String::new(), |l| format!(" (pose {l})"));
         let what: Vec<String> = self.dropped.iter().map(DroppedSamples::phrase).collect();
         Some(format!(
             "hold at {:.1}–{:.1} s{name}: outliers dropped from its statistics: {} (robust \
