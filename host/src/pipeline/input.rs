@@ -159,8 +159,8 @@ fn stream_outliers_sentence(screening: &Screening, total: usize) -> String {
     format!(
         "{} of {total} magnetometer samples dropped from the field fit as outliers (up to \
          {:.3e} robust standard deviations from the running median of their neighbours; the \
-         bound for this many samples is {:.1}): a spike or a corrupted read; check the wiring \
-         or the sensor if it recurs",
+         bound for this many samples is {:.1}): a spike, a corrupted read or a jerk of the hand; \
+         check the wiring or the sensor if spikes recur",
         screening.dropped, screening.worst_sigmas, screening.bound_sigmas
     )
 }

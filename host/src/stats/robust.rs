@@ -136,13 +136,13 @@ pub fn screen_vectors(samples: &[Vec3]) -> Screening {
     screen_axes(&axes, &[step.x, step.y, step.z])
 }
 
-/// Half-width of the running median of [`screen_stream`]: seven samples follow a turning
-/// board's smooth path, and a spike of up to three samples cannot move their median.
+/// Half-width of the running median of [`screen_stream`]: six neighbours follow a turning
+/// board's smooth path, and a spike of up to two samples cannot move their median far.
 const STREAM_HALF_WINDOW: usize = 3;
 
 /// Screen a stream of 3-vector samples taken while the board turns (the magnetometer's
-/// tumble), where no single value is expected: each sample's deviation from the running median
-/// of the seven around it (Hampel's identifier; Pearson, "Outliers in process modeling and
+/// tumble), where no single value is expected: each sample's deviation from the median of the
+/// six around it (Hampel's identifier; Pearson, "Outliers in process modeling and
 /// identification", IEEE TCST 10(1), 2002), screened axis by axis like [`screen_vectors`] with
 /// one robust scale per axis for the whole stream. A smooth path leaves the deviations at the
 /// noise; a spike stands out by its own size.
@@ -157,8 +157,13 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
                 .map(|i| {
                     let lo = i.saturating_sub(STREAM_HALF_WINDOW);
                     let hi = (i + STREAM_HALF_WINDOW + 1).min(n);
-                    let mut window: Vec<f64> = samples[lo..hi].iter().map(|s| s[k]).collect();
-                    samples[i][k] - median(&mut window)
+                    // The neighbours without the sample itself: on a steady turn the sample
+                    // would be its own window's median, and the deviations would collapse to 0.
+                    let mut neighbours: Vec<f64> = (lo..hi)
+                        .filter(|&j| j != i)
+                        .filter_map(|j| samples.get(j).map(|s| s[k]))
+                        .collect();
+                    samples[i][k] - median(&mut neighbours)
                 })
                 .collect()
         })
