@@ -176,22 +176,12 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
 mod tests {
     use super::*;
 
-    /// Deterministic pseudo-normal numbers (sum of 12 uniforms, variance 1).
+    /// Standard normal numbers from a seeded generator.
     fn gaussian(seed: u64, n: usize) -> Vec<f64> {
-        let mut state = seed.wrapping_mul(6_364_136_223_846_793_005) | 1;
-        (0..n)
-            .map(|_| {
-                (0..12)
-                    .map(|_| {
-                        state = state
-                            .wrapping_mul(6_364_136_223_846_793_005)
-                            .wrapping_add(1_442_695_040_888_963_407);
-                        (state >> 11) as f64 / (1u64 << 53) as f64
-                    })
-                    .sum::<f64>()
-                    - 6.0
-            })
-            .collect()
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        (0..n).map(|_| StandardNormal.sample(&mut rng)).collect()
     }
 
     fn noisy_vectors(seed: u64, n: usize, sigma: f64) -> Vec<Vec3> {
