@@ -25,9 +25,8 @@
 //!
 //! Files: `options` (settings, errors), `intervals` (what is found), `detect` (the windowed test
 //! and the runs it gives), `samples` (a hold's screened samples), `holds` (per-sensor
-//! statistics of a hold), `directions` (clustering of
-//! gravity directions), `motions` (the gyroscope rotations between consecutive holds, for the
-//! gyroscope-scale fit).
+//! statistics of a hold), `directions` (clustering of gravity directions), `motions` (the
+//! gyroscope rotations between consecutive holds, for the gyroscope-scale fit).
 
 mod detect;
 pub mod directions;
