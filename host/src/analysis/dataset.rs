@@ -23,9 +23,9 @@
 //! hold. Holds from a `pose` column are the user's own boundaries and are kept whole.
 
 use crate::fit::{Pose, Vec3};
-use crate::recording::{LabelKind, Recording, Sensor};
+use crate::recording::{Recording, Sensor};
 use crate::stats::autocorrelation::run_stats;
-use crate::still::StillReport;
+use crate::still::{hold_samples, StillReport};
 
 /// One observation: a still pose or a short window of samples.
 #[derive(Debug, Clone, PartialEq)]
@@ -54,18 +54,6 @@ fn mean_of(values: &[f64]) -> Option<f64> {
     (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
 }
 
-/// Rows of the main stream that belong to a hold: every row in `[start, end)`, or only those
-/// carrying the hold's label when the holds came from a `pose` column.
-fn hold_rows(recording: &Recording, start: usize, end: usize, label: Option<i64>) -> Vec<usize> {
-    match (&recording.labels, label) {
-        (Some(labels), Some(value)) if labels.kind == LabelKind::Pose => (start
-            ..end.min(labels.per_row.len()))
-            .filter(|&i| labels.per_row[i].map(|l| labels.value(l)) == Some(value))
-            .collect(),
-        _ => (start..end.min(recording.len())).collect(),
-    }
-}
-
 /// Samples dropped at each end of a detected hold of `len` samples (see the module comment):
 /// the detector's window, at most a quarter of the hold; none for holds from a `pose` column.
 pub fn hold_guard(still: &StillReport, len: usize) -> usize {
@@ -87,7 +75,11 @@ pub fn pose_observations(
     for interval in &still.intervals {
         let guard = hold_guard(still, interval.end.saturating_sub(interval.start));
         let (start, end) = (interval.start + guard, interval.end - guard);
-        let rows = hold_rows(recording, start, end, interval.label);
+        let rows: Vec<usize> = interval
+            .rows(recording)
+            .into_iter()
+            .filter(|&i| (start..end).contains(&i))
+            .collect();
         let (t_start, t_end) = match (recording.time.get(start), end.checked_sub(1)) {
             (Some(&a), Some(last)) if guard > 0 => (
                 a,
@@ -103,28 +95,14 @@ pub fn pose_observations(
                     .collect::<Vec<f64>>(),
             )
         });
-        let accel_mean = recording.accel.as_ref().and_then(|a| {
-            let picked: Vec<Vec3> = rows.iter().filter_map(|&i| a.get(i).copied()).collect();
-            (!picked.is_empty()).then(|| picked.iter().sum::<Vec3>() / picked.len() as f64)
-        });
-        let samples: Vec<Vec3> = match sensor {
-            Sensor::Accel | Sensor::Gyro => {
-                let Some(all) = recording.samples(sensor) else {
-                    continue;
-                };
-                rows.iter().filter_map(|&i| all.get(i).copied()).collect()
-            }
-            Sensor::Mag => match &recording.mag {
-                Some(m) => m
-                    .time
-                    .iter()
-                    .zip(&m.samples)
-                    .filter(|(t, _)| **t >= t_start && **t <= t_end)
-                    .map(|(_, x)| *x)
-                    .collect(),
-                None => continue,
-            },
+        // The screened samples (spikes dropped) of the trimmed hold.
+        let accel_mean = hold_samples(recording, &rows, t_start, t_end, Sensor::Accel)
+            .filter(|h| !h.kept.is_empty())
+            .map(|h| h.kept.iter().sum::<Vec3>() / h.kept.len() as f64);
+        let Some(held) = hold_samples(recording, &rows, t_start, t_end, sensor) else {
+            continue;
         };
+        let samples = held.kept;
         let Some(stats) = run_stats(&samples) else {
             continue;
         };
