@@ -3,6 +3,7 @@
 //! Each function returns the SVG text of one figure, or a [`PlotError`] saying what could not
 //! be drawn. Data is thinned before drawing so that a page stays a few megabytes at most.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::fit::{Mat3, Vec3};
@@ -35,8 +36,8 @@ const SHAPE: RGBColor = RGBColor(30, 30, 30);
 pub const MAX_POINTS: usize = 1500;
 
 /// A residual plot's finish: a thin zero line across `x` and the legend in the upper right.
-fn zero_line_and_legend(
-    chart: &mut ChartContext<'_, SVGBackend<'_>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+fn zero_line_and_legend<'a>(
+    chart: &mut ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     x: std::ops::Range<f64>,
     figure: &'static str,
 ) -> Result<(), PlotError> {

@@ -2,10 +2,10 @@
 //!
 //! Candidates, simplest first: the six-face min/max (6 unknowns: per-axis scale and offset from
 //! the face readings, seed 004), the axis-aligned ellipsoid (6 unknowns: the same parameters by
-//! least squares over every pose), the norm model solved by Levenberg–Marquardt (9: upper-triangular `A` and `b`) and the
-//! six-position least squares of seed 000 eq. 11–15 (12: full `A` and `b`, poses labelled by
-//! their nearest face). Each is first fitted on every pose with its own refusals (coverage,
-//! faces, closed ellipsoid).
+//! least squares over every pose), the norm model solved by Levenberg–Marquardt (9:
+//! upper-triangular `A` and `b`) and the six-position least squares of seed 000 eq. 11–15 (12:
+//! full `A` and `b`, poses labelled by their nearest face). Each is first fitted on every pose
+//! with its own refusals (coverage, faces, closed ellipsoid).
 //!
 //! **Choice by leave-one-pose-out (LOPO) error of the norm residual** `(|A(xᵢ − b)| − g)/g`,
 //! each pose predicted by the model fitted without it. This measures what a calibration is for —
@@ -30,8 +30,8 @@
 //! equals is unstable, Breiman 1996, *Ann. Statist.* 24:2350). The chain instead uses the mean of
 //! their outputs ([`mean`]), again an axis-aligned calibration: since `|·|²` is convex, its
 //! squared vector error on any pose is at most the mean of the two models' (to first order the
-//! same holds for the norm residual), so it is never far behind the better of the two, whichever
-//! that turns out to be on poses not yet seen. Its own LOPO error is reported alongside.
+//! same holds for the norm residual), so whichever of the two turns out better on poses not yet
+//! seen, the mean does no worse than their average. Its own LOPO error is reported alongside.
 //!
 //! **Models are compared on the same held-out poses.** A refit can be refused when a pose is
 //! left out (leaving out the only hold of a face leaves a norm model without that direction;
