@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use imucal::fit::validate::face_directions;
 use imucal::fit::{Mat3, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal, UnitSphere};
@@ -84,14 +85,7 @@ fn write_synthetic_imu(path: &Path, sigma_counts: f64, sigma_gyro: f64, gyro_bia
     let mut rng = rand::rngs::StdRng::seed_from_u64(42);
     let na = Normal::new(0.0, sigma_counts).expect("sigma");
     let ng = Normal::new(0.0, sigma_gyro).expect("sigma");
-    let mut dirs: Vec<Vec3> = vec![
-        Vec3::x(),
-        -Vec3::x(),
-        Vec3::y(),
-        -Vec3::y(),
-        Vec3::z(),
-        -Vec3::z(),
-    ];
+    let mut dirs: Vec<Vec3> = face_directions().to_vec();
     for s in [-1.0, 1.0] {
         for t in [-1.0, 1.0] {
             dirs.push(Vec3::new(s, t, 1.0).normalize());
