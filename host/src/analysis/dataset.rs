@@ -13,6 +13,14 @@
 //! slower than the sample rate contributes little to them. The white-noise variance is then
 //! `E[Δx²]/(2(1 − ρ))`, also from the differences. Both choices make the floor the noise of the
 //! sensor, not of the person holding it.
+//!
+//! Guard at the ends of a detected hold: a sample is called still when the window centred on it
+//! is quiet, and the threshold sits above the noise, so the first and last window of a hold can
+//! hold the end of the motion (up to half a window) and its decay (the hand letting go). At rest
+//! a gyroscope's mean is its residual, so a tenth of a second at a few °/s moves the mean of an
+//! 8 s hold by several standard errors; the difference-based noise estimate grows with it. One
+//! detector window is dropped at each end ([`hold_guard`]), never more than a quarter of the
+//! hold. Holds from a `pose` column are the user's own boundaries and are kept whole.
 
 use crate::fit::{Pose, Vec3};
 use crate::recording::{LabelKind, Recording, Sensor};
@@ -58,8 +66,18 @@ fn hold_rows(recording: &Recording, start: usize, end: usize, label: Option<i64>
     }
 }
 
+/// Samples dropped at each end of a detected hold of `len` samples (see the module comment):
+/// the detector's window, at most a quarter of the hold; none for holds from a `pose` column.
+pub fn hold_guard(still: &StillReport, len: usize) -> usize {
+    if still.from_pose_column {
+        0
+    } else {
+        still.window.min(len / 4)
+    }
+}
+
 /// One observation per still interval for `sensor` (accelerometer, gyroscope, or the
-/// magnetometer samples that fall inside each hold).
+/// magnetometer samples that fall inside each hold), without the guard at each end.
 pub fn pose_observations(
     recording: &Recording,
     still: &StillReport,
@@ -67,7 +85,16 @@ pub fn pose_observations(
 ) -> Vec<Observation> {
     let mut out = Vec::new();
     for interval in &still.intervals {
-        let rows = hold_rows(recording, interval.start, interval.end, interval.label);
+        let guard = hold_guard(still, interval.end.saturating_sub(interval.start));
+        let (start, end) = (interval.start + guard, interval.end - guard);
+        let rows = hold_rows(recording, start, end, interval.label);
+        let (t_start, t_end) = match (recording.time.get(start), end.checked_sub(1)) {
+            (Some(&a), Some(last)) if guard > 0 => (
+                a,
+                recording.time.get(last).copied().unwrap_or(interval.t_end),
+            ),
+            _ => (interval.t_start, interval.t_end),
+        };
         let temp = recording.temp_c.as_ref().and_then(|t| {
             mean_of(
                 &rows
@@ -92,7 +119,7 @@ pub fn pose_observations(
                     .time
                     .iter()
                     .zip(&m.samples)
-                    .filter(|(t, _)| **t >= interval.t_start && **t <= interval.t_end)
+                    .filter(|(t, _)| **t >= t_start && **t <= t_end)
                     .map(|(_, x)| *x)
                     .collect(),
                 None => continue,
@@ -108,7 +135,7 @@ pub fn pose_observations(
             n_eff: stats.n_eff,
             noise_correlation: stats.rho,
             temp_c: temp,
-            time_s: 0.5 * (interval.t_start + interval.t_end),
+            time_s: 0.5 * (t_start + t_end),
             accel_mean,
             label: interval.label,
         });
