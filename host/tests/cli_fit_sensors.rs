@@ -7,6 +7,7 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use imucal::fit::validate::face_directions;
 use imucal::fit::{Mat3, Vec3};
 use nalgebra::{Rotation3, Unit};
 use rand::{Rng, SeedableRng};
@@ -168,14 +169,7 @@ fn write_accel_mag(dir: &Path, truth: &Truth, mag_holds: &[usize]) -> String {
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     let accel_noise = Normal::new(0.0, 0.02).expect("sigma"); // m/s²
     let mag_noise = Normal::new(0.0, 0.2).expect("sigma"); // µT
-    let mut dirs = vec![
-        Vec3::x(),
-        -Vec3::x(),
-        Vec3::y(),
-        -Vec3::y(),
-        Vec3::z(),
-        -Vec3::z(),
-    ];
+    let mut dirs = face_directions().to_vec();
     for s in [-1.0, 1.0] {
         for t in [-1.0, 1.0] {
             dirs.push(Vec3::new(s, t, 1.0).normalize());
