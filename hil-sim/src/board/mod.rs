@@ -106,6 +106,8 @@ pub struct BoardConfig {
     pub sensor: SensorChip,
     /// Unique id the board reports.
     pub device_id: u64,
+    /// A hardware fault of this board (none by default).
+    pub fault: Option<crate::faults::HardwareFault>,
 }
 
 impl BoardConfig {
@@ -126,6 +128,7 @@ impl BoardConfig {
             chip: lsm9ds1::Config::default(),
             sensor: SensorChip::Lsm9ds1,
             device_id: 0x5349_4d00_0000_0000 | (seed & 0xFFFF_FFFF),
+            fault: None,
         }
     }
 
@@ -207,13 +210,16 @@ impl SimBoard {
             config.seed,
         )?;
         let expected_duration_s = world.trajectory.duration_s() + tumble.trajectory.duration_s();
-        let truth = ImuTruth::draw(
+        let mut truth = ImuTruth::draw(
             config.seed,
             &config.error_ranges,
             &config.effects,
             rate,
             expected_duration_s,
         )?;
+        if let Some(fault) = &config.fault {
+            fault.apply(&mut truth);
+        }
         let physics = ImuPhysics::new(truth, config.seed)?;
         let (device_link, link) = link_pair();
         let mut board = Self {

@@ -6,7 +6,8 @@
 //! before/after table, and the session directory. With `--analyze` the residual analysis of the
 //! session's poses follows, and the effects it accepts are written as the firmware's extended
 //! terms (`imucal::session::extend`). The screen is `calibrate_view.rs`, the `--analyze` step
-//! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`.
+//! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`, several
+//! boards at once `calibrate_batch.rs`.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -29,32 +30,53 @@ fn duration_arg(name: &str, seconds: f64) -> anyhow::Result<Duration> {
     Ok(Duration::from_secs_f64(seconds))
 }
 
-fn unix_now() -> u64 {
+pub(super) fn unix_now() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_secs())
 }
 
-/// The die temperature profile of `--sim-temperature`.
-/// Run `imucal calibrate`.
-pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+/// The session's settings from the flags, with the magnetometer's reference `field_ut`.
+pub(super) fn session_options(
+    args: &CalibrateArgs,
+    field_ut: Option<f64>,
+) -> anyhow::Result<SessionOptions> {
     anyhow::ensure!(
         args.gravity.is_finite() && args.gravity > 0.0,
         "--gravity is {}, but it must be a positive number of m/s²",
         args.gravity
     );
-    if let Some(field) = args.field_ut {
+    if let Some(field) = field_ut {
         anyhow::ensure!(
             field.is_finite() && field > 0.0,
             "--field-ut is {field}, but it must be a positive number of µT"
         );
+    }
+    Ok(SessionOptions {
+        gravity_mps2: args.gravity,
+        field_ut,
+        hold: duration_arg("--hold", args.hold)?,
+        pose_timeout: duration_arg("--pose-timeout", args.pose_timeout)?,
+        mag_timeout: duration_arg("--mag-timeout", args.mag_timeout)?,
+        rest_timeout: duration_arg("--rest-timeout", args.rest_timeout)?,
+        rounds: usize::from(args.rounds),
+        ..SessionOptions::default()
+    })
+}
+
+/// Run `imucal calibrate`.
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    // Checked before a simulator starts or a board is opened.
+    session_options(args, args.field_ut)?;
+    if args.sim_boards.is_some() || args.ports.is_some() || args.port.len() > 1 {
+        return super::calibrate_batch::run(args);
     }
     let simulated = if args.sim {
         Some(Simulated::start(args)?)
     } else {
         None
     };
-    let port = match (&simulated, &args.port) {
+    let port = match (&simulated, args.port.first()) {
         (Some(sim), _) => sim.port(),
         (None, Some(port)) => port.clone(),
         (None, None) => choose_port(&list_ports()?)?.path.clone(),
@@ -89,16 +111,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     }
 
-    let options = SessionOptions {
-        gravity_mps2: args.gravity,
-        field_ut,
-        hold: duration_arg("--hold", args.hold)?,
-        pose_timeout: duration_arg("--pose-timeout", args.pose_timeout)?,
-        mag_timeout: duration_arg("--mag-timeout", args.mag_timeout)?,
-        rest_timeout: duration_arg("--rest-timeout", args.rest_timeout)?,
-        rounds: usize::from(args.rounds),
-        ..SessionOptions::default()
-    };
+    let options = session_options(args, field_ut)?;
     let mut client = DeviceClient::open(&port)?;
     let welcome = *client.welcome();
     eprintln!(
