@@ -4,6 +4,8 @@
 
 pub mod analysis;
 pub mod compat;
+/// Coverage of reported uncertainties over simulated recordings (needs `synthetic`).
+#[cfg(feature = "synthetic")]
 pub mod coverage;
 pub mod device;
 pub mod export;
