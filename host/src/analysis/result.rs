@@ -7,9 +7,9 @@ use imucal_protocol::{BiasTemperature, Nonlinearity, SensorCalibration};
 use super::dataset::Observation;
 use super::effects::EffectKind;
 use super::extended_fit::{physical_factor, ExtendedFit, Problem};
-use crate::stats::chi_square::ChiSquareTest;
 use crate::fit::{Calibration, FitError};
 use crate::recording::Sensor;
+use crate::stats::chi_square::ChiSquareTest;
 
 /// Why a sensor could not be analysed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -9,10 +9,10 @@ use super::extended_fit::{
     base_calibration, fit_rows, physical_factor, physical_residual, start_params, BaseKind,
     ExtendedFit, Problem,
 };
-use crate::stats::chi_square::ChiSquareTest;
 use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, SensorAnalysis};
 use crate::fit::{Calibration, Vec3};
 use crate::recording::Sensor;
+use crate::stats::chi_square::ChiSquareTest;
 
 /// Above this |ρ| between pose temperature and pose time, temperature and time effects are
 /// reported as confounded instead of choosing one.

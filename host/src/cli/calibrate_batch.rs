@@ -148,7 +148,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         };
         println!(
             "{}",
-            serde_json::to_string_pretty(&json).context("the batch summary could not be encoded")?
+            serde_json::to_string_pretty(&json)
+                .context("the batch summary could not be encoded")?
         );
     } else {
         print!("{}", batch_table(&report));
@@ -192,7 +193,10 @@ fn batch_table(report: &BatchReport) -> String {
                 let check = &board.outlier_check.as_ref()?.check;
                 if check.outlier {
                     check.findings.first().map(|f| {
-                        format!("{} (z = {:.1}): {}", f.parameter, f.robust_z, f.likely_cause)
+                        format!(
+                            "{} (z = {:.1}): {}",
+                            f.parameter, f.robust_z, f.likely_cause
+                        )
                     })
                 } else if !check.tested {
                     check.note.clone()

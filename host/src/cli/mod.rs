@@ -3,8 +3,8 @@
 pub mod analyze;
 pub mod args;
 pub mod calibrate;
-mod calibrate_extend;
 mod calibrate_batch;
+mod calibrate_extend;
 mod calibrate_sim;
 mod calibrate_view;
 pub mod device;

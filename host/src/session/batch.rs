@@ -13,8 +13,8 @@ use serde::Serialize;
 
 use super::batch_gate::{GateOptions, OutlierCheck, WriteGate};
 use super::{
-    run_session, save_session, summary, SessionEvent, SessionFit, SessionObserver,
-    SessionOptions, SessionSummary, VerdictLevel,
+    run_session, save_session, summary, SessionEvent, SessionFit, SessionObserver, SessionOptions,
+    SessionSummary, VerdictLevel,
 };
 use crate::device::DeviceClient;
 use crate::history::{record_calibration, CalibrationRecord, RecordId, RecordVerdict};
@@ -144,9 +144,10 @@ impl SessionObserver for BoardObserver<'_> {
     }
 
     fn confirm_write(&mut self, fit: &SessionFit) -> bool {
-        let check = self
-            .gate
-            .arrive(self.index, CalibrationRecord::from_fit(&self.device_id, fit));
+        let check = self.gate.arrive(
+            self.index,
+            CalibrationRecord::from_fit(&self.device_id, fit),
+        );
         let status = if check.check.outlier && !self.options.accept_outlier {
             BoardStatus::RefusedOutlier
         } else if fit.verdict.level == VerdictLevel::Poor && !self.options.accept_poor {
