@@ -7,7 +7,7 @@
 //! session's poses follows, and the effects it accepts are written as the firmware's extended
 //! terms (`imucal::session::extend`). The screen is `calibrate_view.rs`, the `--analyze` step
 //! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`, boards that run a MotionCal
-//! sketch `calibrate_motioncal.rs`.
+//! sketch `calibrate_motioncal.rs`, several boards on one fixture `calibrate_batch.rs`.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -37,7 +37,7 @@ fn duration_arg(name: &str, seconds: f64) -> anyhow::Result<Duration> {
     Ok(Duration::from_secs_f64(seconds))
 }
 
-fn unix_now() -> u64 {
+pub(super) fn unix_now() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_secs())
@@ -137,12 +137,15 @@ pub(super) fn session_options(
 
 /// Run `imucal calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    if args.sim_boards.is_some() || args.ports.is_some() || args.port.len() > 1 {
+        return super::calibrate_batch::run(args);
+    }
     let simulated = if args.sim {
         Some(Simulated::start(args)?)
     } else {
         None
     };
-    let port = match (&simulated, &args.port) {
+    let port = match (&simulated, args.port.first()) {
         (Some(sim), _) => sim.port(),
         (None, Some(port)) => port.clone(),
         (None, None) => choose_port(&list_ports()?)?.path.clone(),

@@ -25,6 +25,11 @@ const ECHO_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// Run the session on a MotionCal sketch board.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.port.len() <= 1 && args.ports.is_none(),
+        "a batch (several --port, or --ports auto) needs boards running imucal's firmware; \
+         calibrate MotionCal sketch boards one at a time with one --port"
+    );
     let field_ut = field_reference(args)?;
     let options = MotionCalOptions {
         session: session_options(args, field_ut)?,
@@ -37,7 +42,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let port = match (&simulated, &args.port) {
+    let port = match (&simulated, args.port.first()) {
         (Some(sim), _) => sim.port(),
         (None, Some(port)) => port.clone(),
         (None, None) => choose_port(&list_ports()?)?.path.clone(),
