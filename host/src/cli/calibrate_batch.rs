@@ -16,12 +16,6 @@ use super::args::CalibrateArgs;
 use super::calibrate::{field_reference, session_options, unix_now};
 use super::calibrate_sim::Simulated;
 
-/// Fewest other boards of a batch to compare a board with when the fleet is too small. The
-/// test's threshold is Student's t with ν = 0.37·n (the MAD's efficiency), so it widens by itself
-/// for few boards; below six others (ν < 2.2) the t tail is so heavy that only absurd values
-/// would pass it, and saying "no test" is more honest.
-const BATCH_MIN_OTHER_BOARDS: usize = 6;
-
 /// Longest wait at the write gate for the slowest board's fit: a whole session's phases.
 fn gate_timeout(args: &CalibrateArgs) -> Duration {
     let phases = args.pose_timeout * f64::from(args.rounds.max(1)) * 16.0
@@ -104,7 +98,6 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         gate: GateOptions {
             db: args.history.db.clone(),
             fleet: FleetOptions::default(),
-            batch_min_boards: BATCH_MIN_OTHER_BOARDS,
             timeout: gate_timeout(args),
         },
         out_dir: out_dir.clone(),

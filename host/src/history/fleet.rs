@@ -1,5 +1,5 @@
 //! Fleet statistics and the robust outlier test: is a board's calibration far outside the
-//! population of boards calibrated before it?
+//! population of boards calibrated before it (or of the other boards of its batch)?
 //!
 //! Method: per parameter, the fleet's centre is the median and its spread the scaled median
 //! absolute deviation `s = 1.4826·MAD` (a consistent estimate of σ for normal data). Both have a
@@ -12,10 +12,21 @@
 //! Threshold: a board is flagged when any `|z|` exceeds `z*`, chosen so that a fault-free board
 //! is flagged with probability at most `α` (the false-alarm rate per board, default 0.1 %):
 //! Bonferroni over the `m` parameters tested gives a two-sided `α/m` per parameter, and because
-//! `s` is itself estimated from `n` boards with the MAD's efficiency of 37 %, the quantile is
-//! Student's t with `ν = 0.37·n` degrees of freedom instead of the normal's. `z*` thus follows
-//! from `α`, `m` and `n`, never from the data's values. Fewer than [`FleetOptions::min_boards`]
-//! boards give too uncertain a spread to test against.
+//! `s` is itself estimated from `k` values with the MAD's efficiency of 37 %, the quantile is
+//! Student's t with `ν = 0.37·k` degrees of freedom instead of the normal's. `z*` thus follows
+//! from `α`, `m` and `k`, never from the data's values.
+//!
+//! Small fleets: every spread must rest on at least [`FleetOptions::min_spread_values`] values
+//! (20, ν ≈ 7). A parameter that at least that many boards have gets its own spread. In a
+//! smaller fleet (a first batch on an empty history) the MAD of one parameter over a handful of
+//! boards is too uncertain (its t tail needs `|z|` of 50–100 at α/m), so the deviations of the
+//! axes of one sensor's parameter of one kind (offsets x, y, z; gain diagonal; cross-axis
+//! terms; noise) are pooled, each from its own median: the axes of one part share one datasheet
+//! tolerance (e.g. the LSM9DS1's ±90 mg zero-g offset for all three axes), so they share a
+//! population spread. Seven boards then give 21 values per offset. Parameters without such
+//! axes (residuals) are tested only once the fleet is large enough for their own spread.
+
+use std::collections::BTreeMap;
 
 use serde::Serialize;
 
@@ -35,8 +46,9 @@ const MAD_EFFICIENCY: f64 = 0.367_4;
 pub struct FleetOptions {
     /// Probability that a fault-free board is flagged.
     pub false_alarm_per_board: f64,
-    /// Fewest boards to test against.
-    pub min_boards: usize,
+    /// Fewest values a spread may rest on: a parameter's own values (one per board), or in a
+    /// small fleet those of its sensor's axes of the same kind, pooled.
+    pub min_spread_values: usize,
 }
 
 impl Default for FleetOptions {
@@ -44,7 +56,7 @@ impl Default for FleetOptions {
         Self {
             false_alarm_per_board: 1e-3,
             // ν = 0.37·20 ≈ 7 degrees of freedom: below that the spread is too uncertain.
-            min_boards: 20,
+            min_spread_values: 20,
         }
     }
 }
@@ -67,6 +79,11 @@ pub struct ParameterStats {
     pub max: f64,
     /// Whether the test compares logarithms (noise, residuals).
     pub log_scale: bool,
+    /// Values the spread rests on: `boards`, or more when pooled with the sensor's other axes
+    /// of the same kind (a small fleet).
+    pub spread_values: usize,
+    /// The threshold on `|z|` of this parameter (Student's t, `ν = 0.37·spread_values`).
+    pub threshold_z: f64,
 }
 
 /// One parameter of one board outside the fleet.
@@ -80,6 +97,8 @@ pub struct Finding {
     pub fleet_median: f64,
     /// Robust distance `z`.
     pub robust_z: f64,
+    /// The threshold on `|z|` of this parameter.
+    pub threshold_z: f64,
     /// The likely cause, in words.
     pub likely_cause: String,
 }
@@ -108,7 +127,8 @@ pub struct FleetReport {
     pub method: String,
     /// False-alarm rate per board the threshold was set for.
     pub false_alarm_per_board: f64,
-    /// The threshold on `|z|`.
+    /// The largest threshold on `|z|` over the parameters (each parameter's own is in
+    /// `parameters`; parameters with a pooled spread have smaller ones).
     pub threshold_z: f64,
     /// Per parameter.
     pub parameters: Vec<ParameterStats>,
@@ -125,7 +145,7 @@ pub struct FleetCheck {
     pub outlier: bool,
     /// Boards it was compared with.
     pub fleet_boards: usize,
-    /// The threshold on `|z|` (0 when not tested).
+    /// The largest threshold on `|z|` over the parameters tested (0 when not tested).
     pub threshold_z: f64,
     /// The parameters beyond it, farthest first.
     pub findings: Vec<Finding>,
@@ -140,7 +160,7 @@ pub enum FleetError {
     #[error(transparent)]
     History(#[from] HistoryError),
     /// Too few boards for a robust spread.
-    #[error("the history holds {boards} boards; the outlier test needs at least {needed} for a trustworthy spread, so calibrate more boards first")]
+    #[error("the fleet holds {boards} boards; the outlier test needs at least {needed} for a trustworthy spread (the three axes of a sensor pooled), so calibrate more boards first")]
     TooFewBoards {
         /// Boards found.
         boards: usize,
@@ -162,73 +182,134 @@ fn transformed(parameter: &str, value: f64) -> Option<f64> {
     }
 }
 
+/// The parameters whose spreads may be pooled in a small fleet: one sensor's axes of one kind
+/// (`accel.b`, `accel.A.diagonal`, `accel.A.cross`, `gyro.noise`, …); a residual is alone.
+fn axis_family(parameter: &str) -> String {
+    let mut parts = parameter.splitn(3, '.');
+    let (sensor, kind, axis) = (
+        parts.next().unwrap_or_default(),
+        parts.next().unwrap_or_default(),
+        parts.next().unwrap_or_default(),
+    );
+    match (kind, axis.as_bytes()) {
+        ("A", [row, col]) if row == col => format!("{sensor}.A.diagonal"),
+        ("A", _) => format!("{sensor}.A.cross"),
+        (_, []) => parameter.to_string(),
+        _ => format!("{sensor}.{kind}"),
+    }
+}
+
+/// One parameter's values on the test's scale, their median and absolute deviations.
+struct Column {
+    name: String,
+    raw: Vec<f64>,
+    centre: f64,
+    deviations: Vec<f64>,
+}
+
+impl Column {
+    fn new(name: String, raw: Vec<f64>) -> Option<Self> {
+        let mut scaled: Vec<f64> = raw.iter().filter_map(|v| transformed(&name, *v)).collect();
+        let centre = median(&mut scaled)?;
+        let deviations: Vec<f64> = scaled.iter().map(|v| (v - centre).abs()).collect();
+        // A parameter every board shares exactly (not fitted) cannot tell boards apart.
+        let varies = deviations.iter().any(|d| *d > 0.0);
+        varies.then_some(Self {
+            name,
+            raw,
+            centre,
+            deviations,
+        })
+    }
+
+    /// `1.4826·MAD` of `deviations`, or `None` when it is zero.
+    fn spread(deviations: &[f64]) -> Option<f64> {
+        let spread = MAD_TO_SIGMA * median(&mut deviations.to_vec())?;
+        (spread > 0.0 && spread.is_finite()).then_some(spread)
+    }
+}
+
 /// The fitted population: per parameter its median and robust spread.
 #[derive(Debug, Clone)]
 pub struct FleetModel {
     boards: usize,
     parameters: Vec<ParameterStats>,
-    threshold_z: f64,
 }
 
 impl FleetModel {
     /// The model of `records` (one per board), or why none can be made.
     pub fn fit(records: &[&CalibrationRecord], options: &FleetOptions) -> Result<Self, FleetError> {
         let boards = records.len();
-        if boards < options.min_boards {
-            return Err(FleetError::TooFewBoards {
-                boards,
-                needed: options.min_boards,
-            });
-        }
-        let mut columns: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+        let mut values: BTreeMap<String, Vec<f64>> = BTreeMap::new();
         for record in records {
             for (name, value) in record.parameters() {
                 if value.is_finite() {
-                    columns.entry(name).or_default().push(value);
+                    values.entry(name).or_default().push(value);
                 }
             }
         }
+        let columns: Vec<Column> = values
+            .into_iter()
+            .filter_map(|(name, raw)| Column::new(name, raw))
+            .collect();
+        let mut pooled: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        for column in &columns {
+            pooled
+                .entry(axis_family(&column.name))
+                .or_default()
+                .extend(&column.deviations);
+        }
         let mut parameters = Vec::new();
-        for (name, values) in columns {
-            let mut z: Vec<f64> = values
-                .iter()
-                .filter_map(|v| transformed(&name, *v))
-                .collect();
-            if z.len() < options.min_boards {
+        for column in columns {
+            let own = column.deviations.len();
+            let family = &pooled[&axis_family(&column.name)];
+            let (deviations, spread_values) = if own >= options.min_spread_values {
+                (&column.deviations, own)
+            } else if family.len() >= options.min_spread_values {
+                (family, family.len())
+            } else {
                 continue;
-            }
-            let centre = median(&mut z).unwrap_or_default();
-            let mut deviations: Vec<f64> = z.iter().map(|v| (v - centre).abs()).collect();
-            let spread = MAD_TO_SIGMA * median(&mut deviations).unwrap_or_default();
-            // A parameter every board shares exactly (not fitted) cannot tell boards apart.
-            if spread <= 0.0 || !spread.is_finite() {
+            };
+            let Some(spread) = Column::spread(deviations) else {
                 continue;
-            }
-            let log_scale = is_log_scale(&name);
+            };
+            let log_scale = is_log_scale(&column.name);
             parameters.push(ParameterStats {
-                boards: z.len(),
-                median: if log_scale { centre.exp() } else { centre },
+                boards: own,
+                median: if log_scale {
+                    column.centre.exp()
+                } else {
+                    column.centre
+                },
                 robust_sd: spread,
-                min: values.iter().copied().fold(f64::INFINITY, f64::min),
-                max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                min: column.raw.iter().copied().fold(f64::INFINITY, f64::min),
+                max: column.raw.iter().copied().fold(f64::NEG_INFINITY, f64::max),
                 log_scale,
-                parameter: name,
+                spread_values,
+                threshold_z: 0.0,
+                parameter: column.name,
             });
         }
-        let tests = parameters.len().max(1) as f64;
-        let dof = MAD_EFFICIENCY * boards as f64;
-        let threshold_z =
-            t_upper_quantile(options.false_alarm_per_board / (2.0 * tests), dof.max(1.0));
-        Ok(Self {
-            boards,
-            parameters,
-            threshold_z,
-        })
+        if parameters.is_empty() {
+            return Err(FleetError::TooFewBoards {
+                boards,
+                needed: options.min_spread_values.div_ceil(3).max(3),
+            });
+        }
+        let per_parameter = options.false_alarm_per_board / (2.0 * parameters.len() as f64);
+        for stats in &mut parameters {
+            let dof = MAD_EFFICIENCY * stats.spread_values as f64;
+            stats.threshold_z = t_upper_quantile(per_parameter, dof.max(1.0));
+        }
+        Ok(Self { boards, parameters })
     }
 
-    /// The threshold on `|z|`.
+    /// The largest threshold on `|z|` over the parameters.
     pub fn threshold_z(&self) -> f64 {
-        self.threshold_z
+        self.parameters
+            .iter()
+            .map(|p| p.threshold_z)
+            .fold(0.0, f64::max)
     }
 
     /// `|z|` of every parameter of `record` against the fleet, largest first, as findings
@@ -251,6 +332,7 @@ impl FleetModel {
                     value,
                     fleet_median: stats.median,
                     robust_z: z,
+                    threshold_z: stats.threshold_z,
                     likely_cause: likely_cause(&stats.parameter),
                 })
             })
@@ -262,7 +344,7 @@ impl FleetModel {
     /// The findings of `record` beyond the threshold, farthest first.
     pub fn outlying(&self, record: &CalibrationRecord) -> Vec<Finding> {
         let mut findings = self.distances(record);
-        findings.retain(|f| f.robust_z.abs() > self.threshold_z);
+        findings.retain(|f| f.robust_z.abs() > f.threshold_z);
         findings
     }
 }
@@ -313,7 +395,7 @@ pub fn fleet_report(
         boards: model.boards,
         method: METHOD.into(),
         false_alarm_per_board: options.false_alarm_per_board,
-        threshold_z: model.threshold_z,
+        threshold_z: model.threshold_z(),
         parameters: model.parameters.clone(),
         results,
     })
@@ -322,15 +404,17 @@ pub fn fleet_report(
 /// The method in one sentence, for reports.
 pub const METHOD: &str = "per parameter: median and 1.4826·MAD of the fleet (50 % breakdown), \
     robust z = (x − median)/√(s² + σ_fit²), logarithms for noise and residuals; flagged when \
-    |z| exceeds the Student-t (ν = 0.37·boards) quantile for the false-alarm rate per board \
-    split over the parameters tested (Bonferroni)";
+    |z| exceeds the Student-t (ν = 0.37·values) quantile for the false-alarm rate per board \
+    split over the parameters tested (Bonferroni); a parameter's own spread when ≥ 20 boards \
+    have it, else the deviations of its sensor's axes of the same kind pooled (one datasheet \
+    tolerance per part)";
 
 fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
     let distances = model.distances(&stored.record);
     let max_abs_z = distances.first().map_or(0.0, |f| f.robust_z.abs());
     let findings: Vec<Finding> = distances
         .into_iter()
-        .filter(|f| f.robust_z.abs() > model.threshold_z)
+        .filter(|f| f.robust_z.abs() > f.threshold_z)
         .collect();
     BoardResult {
         device_id: stored.record.device_id.clone(),
@@ -361,7 +445,7 @@ pub fn is_outlier_against_fleet(
                 tested: true,
                 outlier: !findings.is_empty(),
                 fleet_boards: others.len(),
-                threshold_z: model.threshold_z,
+                threshold_z: model.threshold_z(),
                 findings,
                 note: None,
             }

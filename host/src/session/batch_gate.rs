@@ -1,7 +1,9 @@
 //! The write gate of a batch: every board's fit waits here before it is written, so that each
 //! board can be compared with the fleet in the history store and, when that fleet is too small
 //! for the robust test, with the other boards of the same batch (leave-one-out, the same
-//! median/MAD test of [`crate::history::fleet`], whose threshold already widens for few boards).
+//! median/MAD test of [`crate::history::fleet`]: with few boards it pools the spread over a
+//! sensor's axes of one kind, and its threshold widens with fewer values; seven other boards
+//! are the fewest it tests with).
 //!
 //! Boards that fail before their fit ("depart") do not hold the others; a board that never comes
 //! (hung link) is waited for at most [`WriteGate::new`]'s timeout, after which the boards present
@@ -46,8 +48,6 @@ pub struct GateOptions {
     pub db: Option<String>,
     /// The fleet test's settings.
     pub fleet: FleetOptions,
-    /// Fewest boards of a batch for the in-batch comparison (the board itself excluded).
-    pub batch_min_boards: usize,
     /// Longest wait for the slowest board's fit.
     pub timeout: Duration,
 }
@@ -165,11 +165,7 @@ impl WriteGate {
             .filter(|r| r.device_id != record.device_id)
             .collect();
         let fleet_note = fleet_note.unwrap_or_else(|| "no fleet test".into());
-        let options = FleetOptions {
-            min_boards: self.options.batch_min_boards,
-            ..self.options.fleet
-        };
-        match FleetModel::fit(&others, &options) {
+        match FleetModel::fit(&others, &self.options.fleet) {
             Ok(model) => {
                 let findings = model.outlying(record);
                 OutlierCheck {
