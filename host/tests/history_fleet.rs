@@ -147,7 +147,7 @@ fn too_small_a_fleet_is_not_tested_and_says_so() {
         }
         let options = FleetOptions::default();
         let error = fleet_report(&mut store, &options).expect_err("5 boards");
-        assert!(error.to_string().contains("at least 20"), "{error}");
+        assert!(error.to_string().contains("at least 7"), "{error}");
         let check = is_outlier_against_fleet(&board_record(9), &mut store, &options).expect("");
         assert!(!check.tested && !check.outlier);
         assert!(check.note.expect("why").contains("5 boards"));

@@ -5,8 +5,12 @@
 //! absolute deviation `s = 1.4826·MAD` (a consistent estimate of σ for normal data). Both have a
 //! 50 % breakdown point: up to half the fleet may be faulty without moving them much, unlike a
 //! mean and standard deviation that a single gross fault inflates until it hides itself. A
-//! board's distance is the robust z `z = (x − median) / √(s² + σ²)`, where `σ` is the board's own
-//! fit uncertainty of that parameter (an uncertain fit is not evidence of a fault). Noise and
+//! board's distance is the robust z `z = (x − median) / √(s²·(1 + π/2n) + σ²)`, where `σ` is the
+//! board's own fit uncertainty of that parameter (an uncertain fit is not evidence of a fault)
+//! and `π/2n` the variance of the median of `n` boards in units of `s²` (it matters in a small
+//! fleet). For `n` below 10 the MAD is corrected by Croux & Rousseeuw's small-sample factors
+//! (1992, "Time-efficient algorithms for two highly robust estimators of scale"), above by
+//! `n/(n − 0.8)`: the MAD about a sample median is biased low for few values. Noise and
 //! residual parameters are positive and multiplicative, so they are compared as logarithms.
 //!
 //! Threshold: a board is flagged when any `|z|` exceeds `z*`, chosen so that a fault-free board
@@ -37,6 +41,23 @@ use super::HistoryError;
 
 /// Consistency factor of the MAD for the normal distribution: `1/Φ⁻¹(3/4)`.
 const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// Croux & Rousseeuw's small-sample correction of the MAD about the sample median of `n`
+/// values (their table for n ≤ 9, `n/(n − 0.8)` above).
+fn mad_small_sample_factor(n: usize) -> f64 {
+    match n {
+        0..=1 => 1.0,
+        2 => 1.196,
+        3 => 1.495,
+        4 => 1.363,
+        5 => 1.206,
+        6 => 1.200,
+        7 => 1.140,
+        8 => 1.129,
+        9 => 1.107,
+        _ => n as f64 / (n as f64 - 0.8),
+    }
+}
 
 /// Asymptotic efficiency of the MAD relative to the standard deviation (normal data).
 const MAD_EFFICIENCY: f64 = 0.367_4;
@@ -70,7 +91,7 @@ pub struct ParameterStats {
     pub boards: usize,
     /// Median, in the parameter's unit.
     pub median: f64,
-    /// Robust standard deviation `1.4826·MAD`: in the parameter's unit, or of its natural
+    /// Robust standard deviation `1.4826·MAD` (small-sample corrected): in the parameter's unit, or of its natural
     /// logarithm (a relative spread) when `log_scale`.
     pub robust_sd: f64,
     /// Smallest value.
@@ -222,9 +243,11 @@ impl Column {
         })
     }
 
-    /// `1.4826·MAD` of `deviations`, or `None` when it is zero.
-    fn spread(deviations: &[f64]) -> Option<f64> {
-        let spread = MAD_TO_SIGMA * median(&mut deviations.to_vec())?;
+    /// `1.4826·MAD` of `deviations` about medians of `boards` values each, corrected for few
+    /// boards; `None` when it is zero.
+    fn spread(deviations: &[f64], boards: usize) -> Option<f64> {
+        let mad = median(&mut deviations.to_vec())?;
+        let spread = MAD_TO_SIGMA * mad_small_sample_factor(boards) * mad;
         (spread > 0.0 && spread.is_finite()).then_some(spread)
     }
 }
@@ -259,18 +282,21 @@ impl FleetModel {
                 .or_default()
                 .extend(&column.deviations);
         }
+        // A pooled spread still needs a median per axis from enough boards: as many as make the
+        // smallest pool (three axes) reach the minimum.
+        let min_pooled_boards = options.min_spread_values.div_ceil(3).max(3);
         let mut parameters = Vec::new();
         for column in columns {
             let own = column.deviations.len();
             let family = &pooled[&axis_family(&column.name)];
             let (deviations, spread_values) = if own >= options.min_spread_values {
                 (&column.deviations, own)
-            } else if family.len() >= options.min_spread_values {
+            } else if own >= min_pooled_boards && family.len() >= options.min_spread_values {
                 (family, family.len())
             } else {
                 continue;
             };
-            let Some(spread) = Column::spread(deviations) else {
+            let Some(spread) = Column::spread(deviations, own) else {
                 continue;
             };
             let log_scale = is_log_scale(&column.name);
@@ -293,7 +319,7 @@ impl FleetModel {
         if parameters.is_empty() {
             return Err(FleetError::TooFewBoards {
                 boards,
-                needed: options.min_spread_values.div_ceil(3).max(3),
+                needed: min_pooled_boards,
             });
         }
         let per_parameter = options.false_alarm_per_board / (2.0 * parameters.len() as f64);
@@ -326,7 +352,9 @@ impl FleetModel {
                 // The fit's own σ, moved to the log scale by d(ln x) = dx / x.
                 let own = record.sigma.get(&stats.parameter).copied().unwrap_or(0.0);
                 let own = if stats.log_scale { own / value } else { own };
-                let z = (x - centre) / stats.robust_sd.hypot(own);
+                let centre_variance = std::f64::consts::PI / (2.0 * stats.boards as f64);
+                let fleet_sd = stats.robust_sd * (1.0 + centre_variance).sqrt();
+                let z = (x - centre) / fleet_sd.hypot(own);
                 Some(Finding {
                     parameter: stats.parameter.clone(),
                     value,
@@ -403,7 +431,7 @@ pub fn fleet_report(
 
 /// The method in one sentence, for reports.
 pub const METHOD: &str = "per parameter: median and 1.4826·MAD of the fleet (50 % breakdown), \
-    robust z = (x − median)/√(s² + σ_fit²), logarithms for noise and residuals; flagged when \
+    robust z = (x − median)/√(s²(1 + π/2n) + σ_fit²), logarithms for noise and residuals; flagged when \
     |z| exceeds the Student-t (ν = 0.37·values) quantile for the false-alarm rate per board \
     split over the parameters tested (Bonferroni); a parameter's own spread when ≥ 20 boards \
     have it, else the deviations of its sensor's axes of the same kind pooled (one datasheet \

@@ -76,6 +76,8 @@ pub struct BoardResult {
     pub recorded_as: Option<RecordId>,
     /// Why the attempt could not be recorded.
     pub history_error: Option<String>,
+    /// Wall time of the history write (open the store, insert, commit), s.
+    pub history_write_seconds: Option<f64>,
     /// The session's summary (fit, verdict, errors at rest).
     pub summary: Option<SessionSummary>,
     /// Wall time of this board's session, s.
@@ -227,6 +229,7 @@ fn failed(port: &str, device_id: Option<String>, error: String) -> BoardResult {
         session_dir: None,
         recorded_as: None,
         history_error: None,
+        history_write_seconds: None,
         summary: None,
         wall_seconds: 0.0,
         host_cpu_seconds: None,
@@ -296,6 +299,7 @@ fn run_board(
         session_dir: saved.is_ok().then_some(dir),
         recorded_as: None,
         history_error: None,
+        history_write_seconds: None,
         summary: Some(summary),
         wall_seconds: 0.0,
         host_cpu_seconds: None,
@@ -358,7 +362,10 @@ fn record_attempt<L>(
         });
         verdict.reasons.push(refusal);
     }
-    match record_calibration(options.gate.db.as_deref(), &record) {
+    let start = Instant::now();
+    let written = record_calibration(options.gate.db.as_deref(), &record);
+    result.history_write_seconds = Some(start.elapsed().as_secs_f64());
+    match written {
         Ok((id, _)) => result.recorded_as = Some(id),
         Err(e) => result.history_error = Some(e.to_string()),
     }
