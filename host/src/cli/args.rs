@@ -305,6 +305,12 @@ impl CalibrateArgs {
         };
         protocol == BoardProtocol::Motioncal
     }
+
+    /// Whether several boards on one fixture are calibrated together (`--sim-boards`,
+    /// `--ports auto`, or more than one `--port`).
+    pub fn is_batch(&self) -> bool {
+        self.sim_boards.is_some() || self.ports.is_some() || self.port.len() > 1
+    }
 }
 
 /// What a board runs, so which protocol talks to it.

@@ -7,7 +7,8 @@
 //! session's poses follows, and the effects it accepts are written as the firmware's extended
 //! terms (`imucal::session::extend`). The screen is `calibrate_view.rs`, the `--analyze` step
 //! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`, boards that run a MotionCal
-//! sketch `calibrate_motioncal.rs`, several boards on one fixture `calibrate_batch.rs`.
+//! sketch `calibrate_motioncal.rs`, several boards on one fixture `calibrate_batch.rs` (both
+//! chosen where commands are dispatched).
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -137,9 +138,6 @@ pub(super) fn session_options(
 
 /// Run `imucal calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
-    if args.sim_boards.is_some() || args.ports.is_some() || args.port.len() > 1 {
-        return super::calibrate_batch::run(args);
-    }
     let simulated = if args.sim {
         Some(Simulated::start(args)?)
     } else {

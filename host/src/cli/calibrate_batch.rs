@@ -85,8 +85,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         args.port.clone()
     };
-    let field_ut =
-        field_reference(args)?.or(simulated.first().map(Simulated::field_ut));
+    let field_ut = field_reference(args)?.or(simulated.first().map(Simulated::field_ut));
     let out_dir = args
         .out
         .clone()

@@ -26,9 +26,9 @@ const ECHO_TIMEOUT: Duration = Duration::from_secs(10);
 /// Run the session on a MotionCal sketch board.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
-        args.port.len() <= 1 && args.ports.is_none(),
-        "a batch (several --port, or --ports auto) needs boards running imucal's firmware; \
-         calibrate MotionCal sketch boards one at a time with one --port"
+        !args.is_batch(),
+        "a batch (--sim-boards, several --port, or --ports auto) needs boards running imucal's \
+         firmware; calibrate MotionCal sketch boards one at a time with one --port"
     );
     let field_ut = field_reference(args)?;
     let options = MotionCalOptions {

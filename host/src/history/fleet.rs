@@ -288,9 +288,11 @@ impl FleetModel {
         let mut parameters = Vec::new();
         for column in columns {
             let own = column.deviations.len();
-            let family = &pooled[&axis_family(&column.name)];
+            let family = pooled
+                .get(&axis_family(&column.name))
+                .map_or(&[][..], Vec::as_slice);
             let (deviations, spread_values) = if own >= options.min_spread_values {
-                (&column.deviations, own)
+                (column.deviations.as_slice(), own)
             } else if own >= min_pooled_boards && family.len() >= options.min_spread_values {
                 (family, family.len())
             } else {

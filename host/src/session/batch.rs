@@ -14,8 +14,8 @@ use serde::Serialize;
 
 use super::batch_gate::{GateOptions, OutlierCheck, WriteGate};
 use super::{
-    run_session_with, save_session, summary, SessionControl, SessionEvent, SessionFit, SessionObserver, SessionOptions,
-    SessionSummary, VerdictLevel,
+    run_session_with, save_session, summary, SessionControl, SessionEvent, SessionFit,
+    SessionObserver, SessionOptions, SessionSummary, VerdictLevel,
 };
 use crate::device::{DeviceClient, ParamsFile};
 use crate::history::{record_calibration, CalibrationRecord, RecordId, RecordVerdict};
@@ -266,8 +266,7 @@ fn run_board(
         save_dir: Some(dir.clone()),
         ..SessionControl::default()
     };
-    let outcome = match run_session_with(&mut client, &options.session, &mut observer, &control)
-    {
+    let outcome = match run_session_with(&mut client, &options.session, &mut observer, &control) {
         Ok(outcome) => outcome,
         Err(e) => {
             gate.depart(index);
