@@ -15,6 +15,7 @@ use serde::Serialize;
 use super::args::CalibrateArgs;
 use super::calibrate::{field_reference, session_options, unix_now};
 use super::calibrate_sim::Simulated;
+use super::write_policy::{check_outputs, Output};
 
 /// Longest wait at the write gate for the slowest board's fit: a whole session's phases.
 fn gate_timeout(args: &CalibrateArgs) -> Duration {
@@ -61,6 +62,18 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         "--analyze works on one board; calibrate the batch first, then run \
          `imucal calibrate --analyze --port P` on the board to analyse"
     );
+    anyhow::ensure!(
+        args.resume.is_none(),
+        "--resume continues one board's session; resume a board of the batch with \
+         `imucal calibrate --resume BATCH_DIR/DEVICE_ID --port P`"
+    );
+    // Each board's session directory is `out_dir/<device id>`: refused before any board
+    // starts when it holds an earlier batch.
+    let out_dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("imucal-batch-{}", unix_now())));
+    check_outputs(&[Output::Dir(&out_dir)], &[], args.force)?;
     let simulated: Vec<Simulated> = match args.sim_boards {
         Some(boards) => {
             anyhow::ensure!(
@@ -86,10 +99,6 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         args.port.clone()
     };
     let field_ut = field_reference(args)?.or(simulated.first().map(Simulated::field_ut));
-    let out_dir = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("imucal-batch-{}", unix_now())));
     let options = BatchOptions {
         session: session_options(args, field_ut)?,
         accept_outlier: args.accept_outlier,
