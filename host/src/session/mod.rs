@@ -30,6 +30,8 @@
 //! Every request has the device client's timeouts and retries; each phase has its own wall-clock
 //! limit, and every failure is a [`SessionError`] sentence.
 
+pub mod batch;
+pub mod batch_gate;
 mod capture;
 pub mod coverage;
 mod error;
