@@ -4,6 +4,8 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+use super::board::BoardProtocol;
+
 /// IMU calibration: fit calibration models to recordings and inspect still intervals.
 #[derive(Debug, Parser)]
 #[command(name = "imucal", version, about, propagate_version = true)]
@@ -322,16 +324,6 @@ impl CalibrateArgs {
     pub fn is_batch(&self) -> bool {
         self.sim_boards.is_some() || self.ports.is_some() || self.port.len() > 1
     }
-}
-
-/// What a board runs, so which protocol talks to it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum BoardProtocol {
-    /// imucal's firmware (binary frames, poses averaged on the board).
-    #[default]
-    Imucal,
-    /// A sketch for PJRC's MotionCal (`Raw:`/`Uni:` lines, the 68-byte calibration packet).
-    Motioncal,
 }
 
 /// Arguments of `imucal calibrate`.

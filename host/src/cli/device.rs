@@ -1,16 +1,14 @@
 //! Board commands: `ports`, `info`, `flash`, with `stream` and `record` in `device_stream.rs`
 //! and `params` in `params.rs`. Thin wrappers over `imucal::device`; `--sim` puts the simulated
-//! board of `device_sim.rs` behind the port.
+//! board of `board.rs` behind the port.
 
 use std::path::PathBuf;
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use clap::{Args, Subcommand};
-use imucal::device::{choose_port, list_ports, DeviceClient, ParamsFile};
+use imucal::device::{list_ports, DeviceClient, ParamsFile};
 use imucal_protocol::{CalibrationSet, SensorSet, StreamKind, Welcome};
 
-use super::args::BoardProtocol;
-use super::device_sim::SimBoard;
+use super::board::{connect, describe_params, PortArgs};
 use super::device_stream::{record, stream, RecordArgs, StreamArgs};
 use super::params::ParamsCommand;
 
@@ -48,52 +46,6 @@ pub enum DeviceCommand {
     /// Read the board's active parameters into a file, or reset them to identity.
     #[command(subcommand)]
     Params(ParamsCommand),
-}
-
-/// Which port to use.
-#[derive(Debug, Args)]
-pub struct PortArgs {
-    /// Serial port, e.g. /dev/ttyACM0, COM3, or a pseudo-terminal of the simulator (default:
-    /// the only likely board from `imucal ports`).
-    #[arg(long, short = 'p', conflicts_with = "sim")]
-    pub port: Option<String>,
-    /// Use a simulated board started in-process (real time, identity parameters at start).
-    #[arg(long)]
-    pub sim: bool,
-    /// Simulator: seed of the board's sensor errors, noise and device id.
-    #[arg(long, default_value_t = 1, requires = "sim")]
-    pub sim_seed: u64,
-}
-
-/// The serial port a command opens, and with `--sim` the simulated board serving it, which
-/// lives as long as this value.
-pub struct BoardPort {
-    /// The port's path.
-    pub path: String,
-    _sim: Option<SimBoard>,
-}
-
-impl PortArgs {
-    /// The port given, the simulated board's (running `protocol`), or the only likely board
-    /// (announced on stderr).
-    pub(super) fn open_board(&self, protocol: BoardProtocol) -> anyhow::Result<BoardPort> {
-        if self.sim {
-            let sim = SimBoard::start(self.sim_seed, protocol)?;
-            return Ok(BoardPort {
-                path: sim.port(),
-                _sim: Some(sim),
-            });
-        }
-        let path = match &self.port {
-            Some(port) => port.clone(),
-            None => {
-                let chosen = choose_port(&list_ports()?)?.path.clone();
-                eprintln!("using port {chosen}");
-                chosen
-            }
-        };
-        Ok(BoardPort { path, _sim: None })
-    }
 }
 
 /// Arguments of `imucal flash`.
@@ -169,13 +121,6 @@ fn ports() -> anyhow::Result<()> {
         Err(reason) => println!("without --port, imucal cannot choose: {reason}"),
     }
     Ok(())
-}
-
-/// A client of the board running imucal's firmware at `args`; keep the [`BoardPort`] while
-/// the client is in use.
-pub(super) fn connect(args: &PortArgs) -> anyhow::Result<(DeviceClient, BoardPort)> {
-    let board = args.open_board(BoardProtocol::Imucal)?;
-    Ok((DeviceClient::open(&board.path)?, board))
 }
 
 fn sensor_list(sensors: &SensorSet) -> String {
@@ -257,25 +202,6 @@ fn info(args: &PortArgs) -> anyhow::Result<()> {
         rtt.as_secs_f64() * 1e3
     );
     Ok(())
-}
-
-pub(super) fn describe_params(set: &CalibrationSet) -> String {
-    let identity = CalibrationSet::identity();
-    if set.accel == identity.accel && set.gyro == identity.gyro && set.mag == identity.mag {
-        return "identity (uncalibrated)".to_string();
-    }
-    let age = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|now| now.as_secs().saturating_sub(set.created_unix_s))
-        .unwrap_or(0);
-    let r = set.residuals;
-    format!(
-        "calibrated {} days ago; fit residual RMS accel {} m/s², gyro {} rad/s, mag {} µT",
-        age / 86_400,
-        r.accel_rms,
-        r.gyro_rms,
-        r.mag_rms
-    )
 }
 
 fn flash(args: &FlashArgs) -> anyhow::Result<()> {

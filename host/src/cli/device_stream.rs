@@ -15,8 +15,8 @@ use imucal::compat::MotionCalClient;
 use imucal::device::{DeviceClient, RecordingWriter, UnitSample};
 use imucal_protocol::{SensorSet, StreamKind};
 
-use super::args::BoardProtocol;
-use super::device::{connect, BoardPort, PortArgs};
+use super::board::BoardProtocol;
+use super::board::{connect, BoardPort, PortArgs};
 use super::write_policy::{check_outputs, Output};
 
 /// What the board runs (imucal's firmware unless told).

@@ -2,6 +2,7 @@
 
 pub mod analyze;
 pub mod args;
+mod board;
 pub mod calibrate;
 pub mod calibrate_batch;
 mod calibrate_extend;
@@ -9,7 +10,6 @@ pub mod calibrate_motioncal;
 mod calibrate_sim;
 mod calibrate_view;
 pub mod device;
-mod device_sim;
 pub mod device_stream;
 pub mod export;
 pub mod fit;

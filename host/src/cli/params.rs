@@ -11,7 +11,7 @@ use imucal::device::params_json::Provenance;
 use imucal::device::ParamsFile;
 use imucal_protocol::CalibrationSet;
 
-use super::device::{connect, describe_params, PortArgs};
+use super::board::{connect, describe_params, PortArgs};
 use super::write_policy::{check_outputs, Confirmation, Output};
 
 /// `imucal params …`.
