@@ -16,6 +16,7 @@ pub mod frosio;
 pub mod gyro_bias;
 pub mod gyro_scale;
 pub mod li;
+pub mod li_loo;
 pub mod li_moments;
 pub mod linalg;
 pub mod lm;

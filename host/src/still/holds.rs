@@ -68,13 +68,12 @@ pub(super) fn interval(
             .and_then(|x| pose_of(rows.iter().filter_map(|&i| x.get(i)), label))
     };
     let mag = recording.mag.as_ref().and_then(|m| {
-        let inside = m
-            .time
-            .iter()
-            .zip(&m.samples)
-            .filter(|(t, _)| **t >= t_start && **t <= t_end)
-            .map(|(_, x)| x);
-        pose_of(inside, label)
+        // Time stamps are non-decreasing (the reader refuses any that go back), so the samples
+        // inside the hold are one contiguous run found by two binary searches, not a scan of
+        // the whole stream per hold.
+        let first = m.time.partition_point(|t| *t < t_start);
+        let last = m.time.partition_point(|t| *t <= t_end).max(first);
+        pose_of(m.samples.get(first..last)?.iter(), label)
     });
     let temp = recording.temp_c.as_ref().and_then(|t| {
         let values: Vec<f64> = rows.iter().filter_map(|&i| t.get(i).copied()).collect();
