@@ -27,15 +27,7 @@ pub fn li_leave_one_out_rms(points: &[Vec3], reference: f64) -> Option<f64> {
     if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
-    let as_poses: Vec<Pose> = points
-        .iter()
-        .map(|p| Pose {
-            mean: *p,
-            var: Vec3::zeros(),
-            n: 1,
-            label: None,
-        })
-        .collect();
+    let as_poses: Vec<Pose> = points.iter().map(|p| Pose::single(*p)).collect();
     held_out_rms(&as_poses, reference, |i| {
         let without = moments.without(&points[i], &centre);
         calibration_from_scatter(&without.scatter(scale), &centre, scale, reference)

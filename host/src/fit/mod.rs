@@ -49,6 +49,17 @@ pub struct Pose {
 }
 
 impl Pose {
+    /// One reading as a pose of one sample (no within-pose variance), for pose-based methods
+    /// and leave-one-out run on single samples.
+    pub fn single(sample: Vec3) -> Self {
+        Self {
+            mean: sample,
+            var: Vec3::zeros(),
+            n: 1,
+            label: None,
+        }
+    }
+
     /// Variance of the pose mean per axis (`var / n`).
     pub fn var_of_mean(&self) -> Vec3 {
         self.var / (self.n.max(1) as f64)

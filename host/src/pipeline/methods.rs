@@ -96,15 +96,7 @@ fn means(poses: &[Pose]) -> Vec<Vec3> {
 
 /// Single samples as poses of one sample each, for pose-based methods run on points.
 fn as_poses(points: &[Vec3]) -> Vec<Pose> {
-    points
-        .iter()
-        .map(|p| Pose {
-            mean: *p,
-            var: Vec3::zeros(),
-            n: 1,
-            label: None,
-        })
-        .collect()
+    points.iter().map(|p| Pose::single(*p)).collect()
 }
 
 fn not_for(method: Method, sensor: &str) -> FitError {
