@@ -12,8 +12,8 @@ use crate::still::{find_still, StillOptions, StillReport};
 
 use super::methods::thin;
 
-/// How to form the fitting input from a recording.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// How to form the fitting input from a recording. The default keeps every magnetometer sample.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct InputOptions {
     /// Still-interval detection (its `min_hold_s` and `direction_angle_deg` also drive the checks).
     pub still: StillOptions,
@@ -21,15 +21,6 @@ pub struct InputOptions {
     /// the fits take one pass per iteration over the samples, and thinning to 2000 cost up to
     /// 0.3 % of held-out accuracy on real recordings, `docs/RESULTS.md` "Speed at scale").
     pub max_mag_samples: usize,
-}
-
-impl Default for InputOptions {
-    fn default() -> Self {
-        Self {
-            still: StillOptions::default(),
-            max_mag_samples: 0,
-        }
-    }
 }
 
 /// The recording with the checks' verdicts.
