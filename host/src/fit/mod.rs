@@ -23,6 +23,7 @@ pub mod lm;
 pub mod loo;
 pub mod merayo;
 pub mod minmax;
+pub(crate) mod norm_jacobian;
 pub mod norm_lm;
 pub mod six_position;
 pub mod uncertainty;
