@@ -2,7 +2,8 @@
 # Runs the calibration-history tests against a throw-away PostgreSQL server.
 # Installs Debian's postgresql when missing, starts a private server as the `postgres` user
 # (initdb refuses root) on its own port and Unix-socket directory, runs the history tests and
-# the write-time bench with IMUCAL_TEST_PG_URL pointing at it, and always stops it.
+# the write-time bench with IMUCAL_TEST_PG_URL pointing at it (the batch test records a
+# simulated batch there too), and always stops it.
 # Usage: scripts/ci-postgres.sh [release|dev]   (the cargo profile of the tests, default release)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -36,5 +37,5 @@ as_postgres "$bin/pg_ctl" -D "$dir/data" -l "$dir/socket/server.log" -w -t 60 \
 export IMUCAL_TEST_PG_URL="postgres://postgres@/postgres?host=$dir/socket&port=$port"
 echo "PostgreSQL $("$bin/postgres" --version | awk '{print $3}') on $IMUCAL_TEST_PG_URL"
 
-cargo test "${profile[@]}" -p imucal --test history --test history_fleet
+cargo test "${profile[@]}" -p imucal --test history --test history_fleet --test batch_sim
 cargo bench -p imucal --bench history_write

@@ -9,6 +9,7 @@ pub mod bmi270_chip;
 pub mod board;
 pub mod effects;
 pub mod error;
+pub mod faults;
 pub mod feed;
 pub mod link_faults;
 pub mod lsm9ds1_chip;

@@ -36,6 +36,7 @@ fn run(cli: Cli) -> ExitCode {
         Command::Fit(args) => cli::fit::run(&args),
         // A board running the MotionCal sketch has a session of its own.
         Command::Calibrate(args) if args.talks_motioncal() => cli::calibrate_motioncal::run(&args),
+        Command::Calibrate(args) if args.is_batch() => cli::calibrate_batch::run(&args),
         Command::Calibrate(args) => cli::calibrate::run(&args),
         Command::Still(args) => cli::still::run(&args),
         Command::Analyze(args) => cli::analyze::run(&args),

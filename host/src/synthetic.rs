@@ -14,6 +14,7 @@ use nalgebra::{Rotation3, Unit, UnitQuaternion};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::fit::validate::face_directions;
 use crate::fit::{Calibration, Mat3, Pose, Vec3};
 
 pub use rand::rngs::StdRng;
@@ -231,14 +232,7 @@ pub fn mag_samples<R: Rng + ?Sized>(
 }
 
 fn six_faces() -> Vec<Vec3> {
-    vec![
-        Vec3::x(),
-        -Vec3::x(),
-        Vec3::y(),
-        -Vec3::y(),
-        Vec3::z(),
-        -Vec3::z(),
-    ]
+    face_directions().to_vec()
 }
 
 fn gauss<R: Rng + ?Sized>(rng: &mut R) -> f64 {

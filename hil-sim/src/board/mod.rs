@@ -111,6 +111,8 @@ pub struct BoardConfig {
     pub lsm9ds1_odr_error: Option<f64>,
     /// Unique id the board reports.
     pub device_id: u64,
+    /// A hardware fault of this board (none by default).
+    pub fault: Option<crate::faults::HardwareFault>,
 }
 
 impl BoardConfig {
@@ -132,6 +134,7 @@ impl BoardConfig {
             sensor: SensorChip::Lsm9ds1,
             lsm9ds1_odr_error: None,
             device_id: 0x5349_4d00_0000_0000 | (seed & 0xFFFF_FFFF),
+            fault: None,
         }
     }
 
@@ -213,13 +216,16 @@ impl SimBoard {
             config.seed,
         )?;
         let expected_duration_s = world.trajectory.duration_s() + tumble.trajectory.duration_s();
-        let truth = ImuTruth::draw(
+        let mut truth = ImuTruth::draw(
             config.seed,
             &config.error_ranges,
             &config.effects,
             rate,
             expected_duration_s,
         )?;
+        if let Some(fault) = &config.fault {
+            fault.apply(&mut truth);
+        }
         let physics = ImuPhysics::new(truth, config.seed)?;
         let (device_link, link) = link_pair();
         let mut board = Self {

@@ -20,10 +20,12 @@
 //! confirm it (a cool-down or a second warm-up). A pure time drift is still not written as
 //! temperature when the recording also holds a decorrelated part: then |ρ| is below the limit
 //! and the two are compared on the data. Candidates whose model cannot be fitted on every
-//! held-out fold are reported `not_fittable`, with the number of poses still needed. A time or temperature effect must also pass a form check: a bias free
-//! in shape over the same variable (constant within each of 8 quantile bins) must not predict the
-//! held-out poses better by the same rule; otherwise the dependence has another form (a step,
-//! hysteresis) and the effect is rejected rather than accepted as an approximation.
+//! held-out fold are reported `not_fittable`, with the number of poses still needed. A time or
+//! temperature effect must also pass a form check: a bias free in shape over the same variable
+//! (constant within each of 8 quantile bins), added to it, must not both fit significantly better
+//! (lack-of-fit F test at [`crossval::FORM_ALPHA`]) and predict the held-out poses better by the
+//! worth-having gain; otherwise the dependence has another form (a step, hysteresis) and the
+//! effect is rejected rather than accepted as an approximation.
 
 pub mod crossval;
 pub mod dataset;

@@ -316,6 +316,12 @@ impl CalibrateArgs {
         };
         protocol == BoardProtocol::Motioncal
     }
+
+    /// Whether several boards on one fixture are calibrated together (`--sim-boards`,
+    /// `--ports auto`, or more than one `--port`).
+    pub fn is_batch(&self) -> bool {
+        self.sim_boards.is_some() || self.ports.is_some() || self.port.len() > 1
+    }
 }
 
 /// What a board runs, so which protocol talks to it.
@@ -330,21 +336,37 @@ pub enum BoardProtocol {
 
 /// Arguments of `imucal calibrate`.
 #[derive(Debug, Args)]
+#[command(group(clap::ArgGroup::new("simulated").args(["sim", "sim_boards"])))]
 pub struct CalibrateArgs {
-    /// Serial port of the board (default: the only likely board from `imucal ports`).
-    #[arg(long, short = 'p', conflicts_with = "sim")]
-    pub port: Option<String>,
+    /// Serial port of the board (default: the only likely board from `imucal ports`). Repeat it
+    /// for boards mounted together on one fixture: they are calibrated as one batch.
+    #[arg(long, short = 'p', conflicts_with_all = ["simulated", "ports"])]
+    pub port: Vec<String>,
+    /// `auto`: calibrate every recognised board (known board or board vendor) as one batch.
+    #[arg(long, value_parser = ["auto"], conflicts_with = "simulated")]
+    pub ports: Option<String>,
     /// Calibrate the simulated board, started in-process on a pseudo-terminal.
     #[arg(long)]
     pub sim: bool,
+    /// Calibrate this many simulated boards as one batch (seeds from --sim-seed on, each with
+    /// its own device id, sensor errors and noise).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
+    pub sim_boards: Option<u16>,
+    /// Simulator: give this many of the --sim-boards a hardware fault (accelerometer axis
+    /// offset or gain, a magnet next to the magnetometer, gyroscope noise), the last ones.
+    #[arg(long, default_value_t = 0, requires = "sim_boards")]
+    pub sim_faulty: u16,
+    /// Write a board's parameters even when it is an outlier against its fleet or batch.
+    #[arg(long)]
+    pub accept_outlier: bool,
     /// Simulator: seed of the board's errors, noise and the simulated person.
-    #[arg(long, default_value_t = 1, requires = "sim")]
+    #[arg(long, default_value_t = 1, requires = "simulated")]
     pub sim_seed: u64,
     /// Simulator: switch a hidden effect on (repeatable), `[sensor.]name[=size]`.
-    #[arg(long = "sim-effect", requires = "sim")]
+    #[arg(long = "sim-effect", requires = "simulated")]
     pub sim_effects: Vec<String>,
     /// Simulator: sensor chip, lsm9ds1 (Nano 33 BLE Sense) or bmi270 (BMI270 + BMM150, Rev2).
-    #[arg(long, value_enum, default_value = "lsm9ds1", requires = "sim")]
+    #[arg(long, value_enum, default_value = "lsm9ds1", requires = "simulated")]
     #[cfg(feature = "sim")]
     pub sim_chip: imucal_hil_sim::board::SensorChip,
     /// Simulator: what the simulated board runs, imucal's firmware or Adafruit's MotionCal
@@ -359,7 +381,7 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = 100.0)]
     pub sketch_rate: f64,
     /// Simulator: simulated seconds per wall second.
-    #[arg(long, default_value_t = 15.0, requires = "sim")]
+    #[arg(long, default_value_t = 15.0, requires = "simulated")]
     pub speed: f64,
     /// Simulator: the LSM9DS1 converts on its own clock, this relative error off its nominal
     /// output data rates (e.g. -0.005), so reads repeat or miss conversions as on hardware and
@@ -368,7 +390,7 @@ pub struct CalibrateArgs {
     pub sim_odr_error: Option<f64>,
     /// Simulator: die temperature, `constant` (the person's ambient) or `sweep[:LOW:HIGH:PERIOD]`
     /// (°C, °C, s; `sweep` alone is 10–40 °C every 90 s).
-    #[arg(long, default_value = "constant", requires = "sim")]
+    #[arg(long, default_value = "constant", requires = "simulated")]
     pub sim_temperature: String,
     /// Capture the twelve positions this many times over (the simulated person repeats them).
     /// Spreading the poses over time and temperature lets `--analyze` see temperature effects;

@@ -7,7 +7,8 @@
 //! session's poses follows, and the effects it accepts are written as the firmware's extended
 //! terms (`imucal::session::extend`). The screen is `calibrate_view.rs`, the `--analyze` step
 //! `calibrate_extend.rs`, the simulated board `calibrate_sim.rs`, boards that run a MotionCal
-//! sketch `calibrate_motioncal.rs`.
+//! sketch `calibrate_motioncal.rs`, several boards on one fixture `calibrate_batch.rs` (both
+//! chosen where commands are dispatched).
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -37,7 +38,7 @@ fn duration_arg(name: &str, seconds: f64) -> anyhow::Result<Duration> {
     Ok(Duration::from_secs_f64(seconds))
 }
 
-fn unix_now() -> u64 {
+pub(super) fn unix_now() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_secs())
@@ -157,7 +158,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let port = match (&simulated, &args.port) {
+    let port = match (&simulated, args.port.first()) {
         (Some(sim), _) => sim.port(),
         (None, Some(port)) => port.clone(),
         (None, None) => choose_port(&list_ports()?)?.path.clone(),

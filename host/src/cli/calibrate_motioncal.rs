@@ -25,6 +25,11 @@ const ECHO_TIMEOUT: Duration = Duration::from_secs(10);
 /// Run the session on a MotionCal sketch board.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
+        !args.is_batch(),
+        "a batch (--sim-boards, several --port, or --ports auto) needs boards running imucal's \
+         firmware; calibrate MotionCal sketch boards one at a time with one --port"
+    );
+    anyhow::ensure!(
         args.resume.is_none(),
         "--resume continues sessions of imucal's firmware; a MotionCal sketch session is short, \
          start it again"
@@ -42,7 +47,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let port = match (&simulated, &args.port) {
+    let port = match (&simulated, args.port.first()) {
         (Some(sim), _) => sim.port(),
         (None, Some(port)) => port.clone(),
         (None, None) => choose_port(&list_ports()?)?.path.clone(),

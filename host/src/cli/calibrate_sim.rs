@@ -43,13 +43,27 @@ pub(super) fn temperature_profile(
 #[cfg(feature = "sim")]
 pub(super) struct Simulated {
     handle: imucal_hil_sim::serve::SimHandle,
+    fault: Option<imucal_hil_sim::faults::HardwareFault>,
 }
 
 #[cfg(feature = "sim")]
 impl Simulated {
     pub(super) fn start(args: &CalibrateArgs) -> anyhow::Result<Self> {
+        Self::start_board(args, args.sim_seed, None)
+    }
+
+    /// A board of a simulated batch: its own seed (errors, noise, device id) and, with
+    /// `fault: Some(i)`, the `i`-th realistic hardware fault.
+    pub(super) fn start_board(
+        args: &CalibrateArgs,
+        seed: u64,
+        fault: Option<usize>,
+    ) -> anyhow::Result<Self> {
+        use imucal_hil_sim::faults::HardwareFault;
         use imucal_hil_sim::serve::{SimOptions, SimServer};
-        let mut options = SimOptions::new(args.sim_seed);
+        let mut options = SimOptions::new(seed);
+        let fault = fault.map(HardwareFault::realistic);
+        options.board.fault = fault;
         options.speed = args.speed;
         options.board.sensor = args.sim_chip;
         if let Some(error) = args.sim_odr_error {
@@ -71,7 +85,12 @@ impl Simulated {
             .collect::<Result<_, _>>()
             .context("a --sim-effect is not understood")?;
         let handle = SimServer::start(options).context("the simulated board could not start")?;
-        Ok(Self { handle })
+        Ok(Self { handle, fault })
+    }
+
+    /// The board's hardware fault in words, if it has one.
+    pub(super) fn fault_text(&self) -> Option<String> {
+        self.fault.map(|f| f.describe())
     }
 
     pub(super) fn port(&self) -> String {
@@ -96,11 +115,23 @@ pub(super) enum Simulated {}
 
 #[cfg(not(feature = "sim"))]
 impl Simulated {
-    pub(super) fn start(_args: &CalibrateArgs) -> anyhow::Result<Self> {
+    pub(super) fn start(args: &CalibrateArgs) -> anyhow::Result<Self> {
+        Self::start_board(args, 0, None)
+    }
+
+    pub(super) fn start_board(
+        _args: &CalibrateArgs,
+        _seed: u64,
+        _fault: Option<usize>,
+    ) -> anyhow::Result<Self> {
         anyhow::bail!(
             "this imucal was built without the simulator; rebuild with the default features \
-             (cargo build -p imucal) to use --sim, or give --port"
+             (cargo build -p imucal) to use --sim or --sim-boards, or give --port"
         )
+    }
+
+    pub(super) fn fault_text(&self) -> Option<String> {
+        match *self {}
     }
 
     pub(super) fn port(&self) -> String {

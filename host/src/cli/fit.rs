@@ -268,7 +268,8 @@ fn chain_json(chain: &imucal::pipeline::ChainChoice) -> Value {
         .collect();
     json!({
         "chosen": chain.fit.method.name(),
-        "rule": "leave-one-pose-out norm error, simplest model within one standard error of the best",
+        "rule": "leave-one-pose-out norm error, simplest model within one standard error of the \
+                 best; the mean of min/max and axis-aligned when both are",
         "reason": chain.reason,
         "candidates": candidates,
     })

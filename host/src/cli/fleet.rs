@@ -14,9 +14,10 @@ pub struct FleetArgs {
     /// Probability that a fault-free board is flagged (sets the threshold).
     #[arg(long, default_value_t = FleetOptions::default().false_alarm_per_board)]
     pub false_alarm: f64,
-    /// Fewest boards to compare against.
-    #[arg(long, default_value_t = FleetOptions::default().min_boards)]
-    pub min_boards: usize,
+    /// Fewest values a parameter's spread may rest on: its own (one per board), or in a small
+    /// fleet those of its sensor's axes of the same kind pooled.
+    #[arg(long, default_value_t = FleetOptions::default().min_spread_values)]
+    pub min_spread_values: usize,
     /// Print JSON instead of tables.
     #[arg(long)]
     pub json: bool,
@@ -30,13 +31,13 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         args.false_alarm
     );
     anyhow::ensure!(
-        args.min_boards >= 3,
-        "--min-boards is {}, but a median and MAD need at least 3 boards",
-        args.min_boards
+        args.min_spread_values >= 3,
+        "--min-spread-values is {}, but a median and MAD need at least 3 values",
+        args.min_spread_values
     );
     let options = FleetOptions {
         false_alarm_per_board: args.false_alarm,
-        min_boards: args.min_boards,
+        min_spread_values: args.min_spread_values,
     };
     let mut store = HistoryStore::open_url(args.db.as_deref())?;
     let report = fleet_report(&mut store, &options)?;
@@ -47,7 +48,7 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "Fleet of {} boards in {}\nMethod: {}\nThreshold |z| > {:.2} (false-alarm rate {} per board)\n",
+        "Fleet of {} boards in {}\nMethod: {}\nThreshold |z| > {:.2} at most (false-alarm rate {} per board)\n",
         report.boards,
         store.location().display(),
         report.method,
@@ -55,8 +56,8 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         report.false_alarm_per_board
     );
     println!(
-        "{:<16} {:>6} {:>13} {:>11} {:>13} {:>13}",
-        "parameter", "boards", "median", "robust sd", "min", "max"
+        "{:<16} {:>6} {:>13} {:>11} {:>7} {:>13} {:>13}",
+        "parameter", "boards", "median", "robust sd", "|z| >", "min", "max"
     );
     for p in &report.parameters {
         let sd = if p.log_scale {
@@ -65,8 +66,8 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
             format!("{:.4e}", p.robust_sd)
         };
         println!(
-            "{:<16} {:>6} {:>13.6} {:>11} {:>13.6} {:>13.6}",
-            p.parameter, p.boards, p.median, sd, p.min, p.max
+            "{:<16} {:>6} {:>13.6} {:>11} {:>7.1} {:>13.6} {:>13.6}",
+            p.parameter, p.boards, p.median, sd, p.threshold_z, p.min, p.max
         );
     }
     let outliers: Vec<_> = report.results.iter().filter(|b| b.outlier).collect();

@@ -3,6 +3,7 @@
 pub mod analyze;
 pub mod args;
 pub mod calibrate;
+pub mod calibrate_batch;
 mod calibrate_extend;
 pub mod calibrate_motioncal;
 mod calibrate_sim;

@@ -283,6 +283,7 @@ fn no_ellipsoid(why: &str) -> FitError {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::li_moments::explicit_design;
 
     /// The fit as first written: the explicit N×10 design matrix, `S = DᵀD` by matrix product and
     /// the condition number by its SVD.
@@ -294,22 +295,7 @@ mod tests {
             .sum::<f64>()
             / points.len() as f64)
             .sqrt();
-        let design = DMatrix::from_fn(points.len(), 10, |i, j| {
-            let q = (points[i] - centre) / scale;
-            let (x, y, z) = (q.x, q.y, q.z);
-            [
-                x * x,
-                y * y,
-                z * z,
-                2.0 * y * z,
-                2.0 * x * z,
-                2.0 * x * y,
-                2.0 * x,
-                2.0 * y,
-                2.0 * z,
-                1.0,
-            ][j]
-        });
+        let design = explicit_design(points, &centre, scale);
         let sv = singular_values(&design);
         let v = constrained_quadric(&(design.transpose() * &design)).expect("quadric");
         let cal = calibration_from_quadric(&v, reference).expect("ellipsoid");

@@ -173,6 +173,28 @@ fn moment_index(e: [u8; 3]) -> usize {
     EXPONENTS.iter().position(|x| *x == e).unwrap_or(0)
 }
 
+/// The N×10 design matrix `D` written out row by row (seed 000 eq. 18) for the points moved by
+/// `−centre` and divided by `scale`: the reference the moment form is checked against.
+#[cfg(test)]
+pub(crate) fn explicit_design(points: &[Vec3], centre: &Vec3, scale: f64) -> DMatrix<f64> {
+    DMatrix::from_fn(points.len(), 10, |r, c| {
+        let q = (points[r] - centre) / scale;
+        let (x, y, z) = (q.x, q.y, q.z);
+        [
+            x * x,
+            y * y,
+            z * z,
+            2.0 * y * z,
+            2.0 * x * z,
+            2.0 * x * y,
+            2.0 * x,
+            2.0 * y,
+            2.0 * z,
+            1.0,
+        ][c]
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,22 +213,7 @@ mod tests {
             .collect();
         let centre = Vec3::new(0.5, -0.2, 1.0);
         let scale = 2.5;
-        let design = DMatrix::from_fn(points.len(), 10, |r, c| {
-            let q = (points[r] - centre) / scale;
-            let (x, y, z) = (q.x, q.y, q.z);
-            [
-                x * x,
-                y * y,
-                z * z,
-                2.0 * y * z,
-                2.0 * x * z,
-                2.0 * x * y,
-                2.0 * x,
-                2.0 * y,
-                2.0 * z,
-                1.0,
-            ][c]
-        });
+        let design = explicit_design(&points, &centre, scale);
         let explicit = design.transpose() * &design;
         let from_moments = Moments::about(&points, &centre).scatter(scale);
         // Only the order of the floating-point additions differs: agreement to ~1e-13 relative.

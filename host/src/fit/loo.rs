@@ -84,8 +84,12 @@ pub fn held_out_errors(
     Some(errors)
 }
 
-/// RMS of the errors, or `None` when any pose could not be predicted.
-fn rms_of_all(errors: Vec<Option<f64>>) -> Option<f64> {
+/// RMS of the held-out errors, or `None` when any pose could not be predicted (or there are
+/// none).
+pub fn rms_of_all(errors: Vec<Option<f64>>) -> Option<f64> {
     let errors = errors.into_iter().collect::<Option<Vec<f64>>>()?;
+    if errors.is_empty() {
+        return None;
+    }
     Some((errors.iter().map(|r| r * r).sum::<f64>() / errors.len() as f64).sqrt())
 }

@@ -198,6 +198,10 @@ pub enum Method {
     Merayo,
     /// Gyroscope scale and misalignment from rotations between still poses (Tedaldi et al. 2014).
     GyroScale,
+    /// The mean of the min/max and axis-aligned calibrations' outputs: the default accelerometer
+    /// chain's model when the data cannot tell those two 6-unknown models apart (not offered as
+    /// `--method`).
+    MinMaxAxisAlignedMean,
 }
 
 impl Method {
@@ -214,6 +218,7 @@ impl Method {
             Method::Frosio => "frosio",
             Method::Merayo => "merayo",
             Method::GyroScale => "gyro-scale",
+            Method::MinMaxAxisAlignedMean => "minmax+axis-aligned",
         }
     }
 }

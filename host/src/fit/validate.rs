@@ -12,6 +12,19 @@ use crate::stats::descriptive::median;
 /// Names of the six faces, in the order `+X, −X, +Y, −Y, +Z, −Z`.
 pub const FACE_NAMES: [&str; 6] = ["+X", "−X", "+Y", "−Y", "+Z", "−Z"];
 
+/// The unit direction of each face's axis, in [`FACE_NAMES`] order (the index [`face_of`]
+/// returns).
+pub fn face_directions() -> [Vec3; 6] {
+    [
+        Vec3::x(),
+        -Vec3::x(),
+        Vec3::y(),
+        -Vec3::y(),
+        Vec3::z(),
+        -Vec3::z(),
+    ]
+}
+
 /// A pose counts as a face when its direction is within this angle of the face's axis.
 pub const FACE_TOLERANCE_DEG: f64 = 30.0;
 

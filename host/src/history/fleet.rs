@@ -1,21 +1,36 @@
 //! Fleet statistics and the robust outlier test: is a board's calibration far outside the
-//! population of boards calibrated before it?
+//! population of boards calibrated before it (or of the other boards of its batch)?
 //!
 //! Method: per parameter, the fleet's centre is the median and its spread the scaled median
 //! absolute deviation `s = 1.4826·MAD` (a consistent estimate of σ for normal data). Both have a
 //! 50 % breakdown point: up to half the fleet may be faulty without moving them much, unlike a
 //! mean and standard deviation that a single gross fault inflates until it hides itself. A
-//! board's distance is the robust z `z = (x − median) / √(s² + σ²)`, where `σ` is the board's own
-//! fit uncertainty of that parameter (an uncertain fit is not evidence of a fault). Noise and
+//! board's distance is the robust z `z = (x − median) / √(s²·(1 + π/2n) + σ²)`, where `σ` is the
+//! board's own fit uncertainty of that parameter (an uncertain fit is not evidence of a fault)
+//! and `π/2n` the variance of the median of `n` boards in units of `s²` (it matters in a small
+//! fleet). For `n` below 10 the MAD is corrected by Croux & Rousseeuw's small-sample factors
+//! (1992, "Time-efficient algorithms for two highly robust estimators of scale"), above by
+//! `n/(n − 0.8)`: the MAD about a sample median is biased low for few values. Noise and
 //! residual parameters are positive and multiplicative, so they are compared as logarithms.
 //!
 //! Threshold: a board is flagged when any `|z|` exceeds `z*`, chosen so that a fault-free board
 //! is flagged with probability at most `α` (the false-alarm rate per board, default 0.1 %):
 //! Bonferroni over the `m` parameters tested gives a two-sided `α/m` per parameter, and because
-//! `s` is itself estimated from `n` boards with the MAD's efficiency of 37 %, the quantile is
-//! Student's t with `ν = 0.37·n` degrees of freedom instead of the normal's. `z*` thus follows
-//! from `α`, `m` and `n`, never from the data's values. Fewer than [`FleetOptions::min_boards`]
-//! boards give too uncertain a spread to test against.
+//! `s` is itself estimated from `k` values with the MAD's efficiency of 37 %, the quantile is
+//! Student's t with `ν = 0.37·k` degrees of freedom instead of the normal's. `z*` thus follows
+//! from `α`, `m` and `k`, never from the data's values.
+//!
+//! Small fleets: every spread must rest on at least [`FleetOptions::min_spread_values`] values
+//! (20, ν ≈ 7). A parameter that at least that many boards have gets its own spread. In a
+//! smaller fleet (a first batch on an empty history) the MAD of one parameter over a handful of
+//! boards is too uncertain (its t tail needs `|z|` of 50–100 at α/m), so the deviations of the
+//! axes of one sensor's parameter of one kind (offsets x, y, z; gain diagonal; cross-axis
+//! terms; noise) are pooled, each from its own median: the axes of one part share one datasheet
+//! tolerance (e.g. the LSM9DS1's ±90 mg zero-g offset for all three axes), so they share a
+//! population spread. Seven boards then give 21 values per offset. Parameters without such
+//! axes (residuals) are tested only once the fleet is large enough for their own spread.
+
+use std::collections::BTreeMap;
 
 use serde::Serialize;
 
@@ -27,6 +42,23 @@ use super::HistoryError;
 /// Consistency factor of the MAD for the normal distribution: `1/Φ⁻¹(3/4)`.
 const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
+/// Croux & Rousseeuw's small-sample correction of the MAD about the sample median of `n`
+/// values (their table for n ≤ 9, `n/(n − 0.8)` above).
+fn mad_small_sample_factor(n: usize) -> f64 {
+    match n {
+        0..=1 => 1.0,
+        2 => 1.196,
+        3 => 1.495,
+        4 => 1.363,
+        5 => 1.206,
+        6 => 1.200,
+        7 => 1.140,
+        8 => 1.129,
+        9 => 1.107,
+        _ => n as f64 / (n as f64 - 0.8),
+    }
+}
+
 /// Asymptotic efficiency of the MAD relative to the standard deviation (normal data).
 const MAD_EFFICIENCY: f64 = 0.367_4;
 
@@ -35,8 +67,9 @@ const MAD_EFFICIENCY: f64 = 0.367_4;
 pub struct FleetOptions {
     /// Probability that a fault-free board is flagged.
     pub false_alarm_per_board: f64,
-    /// Fewest boards to test against.
-    pub min_boards: usize,
+    /// Fewest values a spread may rest on: a parameter's own values (one per board), or in a
+    /// small fleet those of its sensor's axes of the same kind, pooled.
+    pub min_spread_values: usize,
 }
 
 impl Default for FleetOptions {
@@ -44,7 +77,7 @@ impl Default for FleetOptions {
         Self {
             false_alarm_per_board: 1e-3,
             // ν = 0.37·20 ≈ 7 degrees of freedom: below that the spread is too uncertain.
-            min_boards: 20,
+            min_spread_values: 20,
         }
     }
 }
@@ -58,7 +91,7 @@ pub struct ParameterStats {
     pub boards: usize,
     /// Median, in the parameter's unit.
     pub median: f64,
-    /// Robust standard deviation `1.4826·MAD`: in the parameter's unit, or of its natural
+    /// Robust standard deviation `1.4826·MAD` (small-sample corrected): in the parameter's unit, or of its natural
     /// logarithm (a relative spread) when `log_scale`.
     pub robust_sd: f64,
     /// Smallest value.
@@ -67,6 +100,11 @@ pub struct ParameterStats {
     pub max: f64,
     /// Whether the test compares logarithms (noise, residuals).
     pub log_scale: bool,
+    /// Values the spread rests on: `boards`, or more when pooled with the sensor's other axes
+    /// of the same kind (a small fleet).
+    pub spread_values: usize,
+    /// The threshold on `|z|` of this parameter (Student's t, `ν = 0.37·spread_values`).
+    pub threshold_z: f64,
 }
 
 /// One parameter of one board outside the fleet.
@@ -80,6 +118,8 @@ pub struct Finding {
     pub fleet_median: f64,
     /// Robust distance `z`.
     pub robust_z: f64,
+    /// The threshold on `|z|` of this parameter.
+    pub threshold_z: f64,
     /// The likely cause, in words.
     pub likely_cause: String,
 }
@@ -108,7 +148,8 @@ pub struct FleetReport {
     pub method: String,
     /// False-alarm rate per board the threshold was set for.
     pub false_alarm_per_board: f64,
-    /// The threshold on `|z|`.
+    /// The largest threshold on `|z|` over the parameters (each parameter's own is in
+    /// `parameters`; parameters with a pooled spread have smaller ones).
     pub threshold_z: f64,
     /// Per parameter.
     pub parameters: Vec<ParameterStats>,
@@ -125,7 +166,7 @@ pub struct FleetCheck {
     pub outlier: bool,
     /// Boards it was compared with.
     pub fleet_boards: usize,
-    /// The threshold on `|z|` (0 when not tested).
+    /// The largest threshold on `|z|` over the parameters tested (0 when not tested).
     pub threshold_z: f64,
     /// The parameters beyond it, farthest first.
     pub findings: Vec<Finding>,
@@ -140,7 +181,7 @@ pub enum FleetError {
     #[error(transparent)]
     History(#[from] HistoryError),
     /// Too few boards for a robust spread.
-    #[error("the history holds {boards} boards; the outlier test needs at least {needed} for a trustworthy spread, so calibrate more boards first")]
+    #[error("the fleet holds {boards} boards; the outlier test needs at least {needed} for a trustworthy spread (the three axes of a sensor pooled), so calibrate more boards first")]
     TooFewBoards {
         /// Boards found.
         boards: usize,
@@ -162,73 +203,141 @@ fn transformed(parameter: &str, value: f64) -> Option<f64> {
     }
 }
 
+/// The parameters whose spreads may be pooled in a small fleet: one sensor's axes of one kind
+/// (`accel.b`, `accel.A.diagonal`, `accel.A.cross`, `gyro.noise`, …); a residual is alone.
+fn axis_family(parameter: &str) -> String {
+    let mut parts = parameter.splitn(3, '.');
+    let (sensor, kind, axis) = (
+        parts.next().unwrap_or_default(),
+        parts.next().unwrap_or_default(),
+        parts.next().unwrap_or_default(),
+    );
+    match (kind, axis.as_bytes()) {
+        ("A", [row, col]) if row == col => format!("{sensor}.A.diagonal"),
+        ("A", _) => format!("{sensor}.A.cross"),
+        (_, []) => parameter.to_string(),
+        _ => format!("{sensor}.{kind}"),
+    }
+}
+
+/// One parameter's values on the test's scale, their median and absolute deviations.
+struct Column {
+    name: String,
+    raw: Vec<f64>,
+    centre: f64,
+    deviations: Vec<f64>,
+}
+
+impl Column {
+    fn new(name: String, raw: Vec<f64>) -> Option<Self> {
+        let mut scaled: Vec<f64> = raw.iter().filter_map(|v| transformed(&name, *v)).collect();
+        let centre = median(&mut scaled)?;
+        let deviations: Vec<f64> = scaled.iter().map(|v| (v - centre).abs()).collect();
+        // A parameter every board shares exactly (not fitted) cannot tell boards apart.
+        let varies = deviations.iter().any(|d| *d > 0.0);
+        varies.then_some(Self {
+            name,
+            raw,
+            centre,
+            deviations,
+        })
+    }
+
+    /// `1.4826·MAD` of `deviations` about medians of `boards` values each, corrected for few
+    /// boards; `None` when it is zero.
+    fn spread(deviations: &[f64], boards: usize) -> Option<f64> {
+        let mad = median(&mut deviations.to_vec())?;
+        let spread = MAD_TO_SIGMA * mad_small_sample_factor(boards) * mad;
+        (spread > 0.0 && spread.is_finite()).then_some(spread)
+    }
+}
+
 /// The fitted population: per parameter its median and robust spread.
 #[derive(Debug, Clone)]
 pub struct FleetModel {
     boards: usize,
     parameters: Vec<ParameterStats>,
-    threshold_z: f64,
 }
 
 impl FleetModel {
     /// The model of `records` (one per board), or why none can be made.
     pub fn fit(records: &[&CalibrationRecord], options: &FleetOptions) -> Result<Self, FleetError> {
         let boards = records.len();
-        if boards < options.min_boards {
-            return Err(FleetError::TooFewBoards {
-                boards,
-                needed: options.min_boards,
-            });
-        }
-        let mut columns: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+        let mut values: BTreeMap<String, Vec<f64>> = BTreeMap::new();
         for record in records {
             for (name, value) in record.parameters() {
                 if value.is_finite() {
-                    columns.entry(name).or_default().push(value);
+                    values.entry(name).or_default().push(value);
                 }
             }
         }
+        let columns: Vec<Column> = values
+            .into_iter()
+            .filter_map(|(name, raw)| Column::new(name, raw))
+            .collect();
+        let mut pooled: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        for column in &columns {
+            pooled
+                .entry(axis_family(&column.name))
+                .or_default()
+                .extend(&column.deviations);
+        }
+        // A pooled spread still needs a median per axis from enough boards: as many as make the
+        // smallest pool (three axes) reach the minimum.
+        let min_pooled_boards = options.min_spread_values.div_ceil(3).max(3);
         let mut parameters = Vec::new();
-        for (name, values) in columns {
-            let mut z: Vec<f64> = values
-                .iter()
-                .filter_map(|v| transformed(&name, *v))
-                .collect();
-            if z.len() < options.min_boards {
+        for column in columns {
+            let own = column.deviations.len();
+            let family = pooled
+                .get(&axis_family(&column.name))
+                .map_or(&[][..], Vec::as_slice);
+            let (deviations, spread_values) = if own >= options.min_spread_values {
+                (column.deviations.as_slice(), own)
+            } else if own >= min_pooled_boards && family.len() >= options.min_spread_values {
+                (family, family.len())
+            } else {
                 continue;
-            }
-            let centre = median(&mut z).unwrap_or_default();
-            let mut deviations: Vec<f64> = z.iter().map(|v| (v - centre).abs()).collect();
-            let spread = MAD_TO_SIGMA * median(&mut deviations).unwrap_or_default();
-            // A parameter every board shares exactly (not fitted) cannot tell boards apart.
-            if spread <= 0.0 || !spread.is_finite() {
+            };
+            let Some(spread) = Column::spread(deviations, own) else {
                 continue;
-            }
-            let log_scale = is_log_scale(&name);
+            };
+            let log_scale = is_log_scale(&column.name);
             parameters.push(ParameterStats {
-                boards: z.len(),
-                median: if log_scale { centre.exp() } else { centre },
+                boards: own,
+                median: if log_scale {
+                    column.centre.exp()
+                } else {
+                    column.centre
+                },
                 robust_sd: spread,
-                min: values.iter().copied().fold(f64::INFINITY, f64::min),
-                max: values.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                min: column.raw.iter().copied().fold(f64::INFINITY, f64::min),
+                max: column.raw.iter().copied().fold(f64::NEG_INFINITY, f64::max),
                 log_scale,
-                parameter: name,
+                spread_values,
+                threshold_z: 0.0,
+                parameter: column.name,
             });
         }
-        let tests = parameters.len().max(1) as f64;
-        let dof = MAD_EFFICIENCY * boards as f64;
-        let threshold_z =
-            t_upper_quantile(options.false_alarm_per_board / (2.0 * tests), dof.max(1.0));
-        Ok(Self {
-            boards,
-            parameters,
-            threshold_z,
-        })
+        if parameters.is_empty() {
+            return Err(FleetError::TooFewBoards {
+                boards,
+                needed: min_pooled_boards,
+            });
+        }
+        let per_parameter = options.false_alarm_per_board / (2.0 * parameters.len() as f64);
+        for stats in &mut parameters {
+            let dof = MAD_EFFICIENCY * stats.spread_values as f64;
+            stats.threshold_z = t_upper_quantile(per_parameter, dof.max(1.0));
+        }
+        Ok(Self { boards, parameters })
     }
 
-    /// The threshold on `|z|`.
+    /// The largest threshold on `|z|` over the parameters.
     pub fn threshold_z(&self) -> f64 {
-        self.threshold_z
+        self.parameters
+            .iter()
+            .map(|p| p.threshold_z)
+            .fold(0.0, f64::max)
     }
 
     /// `|z|` of every parameter of `record` against the fleet, largest first, as findings
@@ -245,12 +354,15 @@ impl FleetModel {
                 // The fit's own σ, moved to the log scale by d(ln x) = dx / x.
                 let own = record.sigma.get(&stats.parameter).copied().unwrap_or(0.0);
                 let own = if stats.log_scale { own / value } else { own };
-                let z = (x - centre) / stats.robust_sd.hypot(own);
+                let centre_variance = std::f64::consts::PI / (2.0 * stats.boards as f64);
+                let fleet_sd = stats.robust_sd * (1.0 + centre_variance).sqrt();
+                let z = (x - centre) / fleet_sd.hypot(own);
                 Some(Finding {
                     parameter: stats.parameter.clone(),
                     value,
                     fleet_median: stats.median,
                     robust_z: z,
+                    threshold_z: stats.threshold_z,
                     likely_cause: likely_cause(&stats.parameter),
                 })
             })
@@ -262,7 +374,7 @@ impl FleetModel {
     /// The findings of `record` beyond the threshold, farthest first.
     pub fn outlying(&self, record: &CalibrationRecord) -> Vec<Finding> {
         let mut findings = self.distances(record);
-        findings.retain(|f| f.robust_z.abs() > self.threshold_z);
+        findings.retain(|f| f.robust_z.abs() > f.threshold_z);
         findings
     }
 }
@@ -313,7 +425,7 @@ pub fn fleet_report(
         boards: model.boards,
         method: METHOD.into(),
         false_alarm_per_board: options.false_alarm_per_board,
-        threshold_z: model.threshold_z,
+        threshold_z: model.threshold_z(),
         parameters: model.parameters.clone(),
         results,
     })
@@ -321,16 +433,18 @@ pub fn fleet_report(
 
 /// The method in one sentence, for reports.
 pub const METHOD: &str = "per parameter: median and 1.4826·MAD of the fleet (50 % breakdown), \
-    robust z = (x − median)/√(s² + σ_fit²), logarithms for noise and residuals; flagged when \
-    |z| exceeds the Student-t (ν = 0.37·boards) quantile for the false-alarm rate per board \
-    split over the parameters tested (Bonferroni)";
+    robust z = (x − median)/√(s²(1 + π/2n) + σ_fit²), logarithms for noise and residuals; flagged when \
+    |z| exceeds the Student-t (ν = 0.37·values) quantile for the false-alarm rate per board \
+    split over the parameters tested (Bonferroni); a parameter's own spread when ≥ 20 boards \
+    have it, else the deviations of its sensor's axes of the same kind pooled (one datasheet \
+    tolerance per part)";
 
 fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
     let distances = model.distances(&stored.record);
     let max_abs_z = distances.first().map_or(0.0, |f| f.robust_z.abs());
     let findings: Vec<Finding> = distances
         .into_iter()
-        .filter(|f| f.robust_z.abs() > model.threshold_z)
+        .filter(|f| f.robust_z.abs() > f.threshold_z)
         .collect();
     BoardResult {
         device_id: stored.record.device_id.clone(),
@@ -361,7 +475,7 @@ pub fn is_outlier_against_fleet(
                 tested: true,
                 outlier: !findings.is_empty(),
                 fleet_boards: others.len(),
-                threshold_z: model.threshold_z,
+                threshold_z: model.threshold_z(),
                 findings,
                 note: None,
             }

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::device::params_json::SensorJson;
 use crate::device::ParamsFile;
-use crate::session::{CapturedPose, SessionSummary};
+use crate::session::{CapturedPose, SessionFit, SessionSummary, Uncertainties};
 
 /// What produced a calibration record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -151,29 +151,39 @@ impl CalibrationRecord {
             summary.params.clone(),
             crc,
         );
-        let u = &summary.uncertainties;
-        let g = summary.gravity_mps2;
-        for (i, axis) in AXES.iter().enumerate() {
-            record
-                .sigma
-                .insert(format!("accel.b.{axis}"), u.accel_bias_mg[i] * 1e-3 * g);
-            record
-                .sigma
-                .insert(format!("accel.A.{axis}{axis}"), u.accel_scale_ppm[i] * 1e-6);
-            record
-                .sigma
-                .insert(format!("gyro.b.{axis}"), u.gyro_bias_dps[i].to_radians());
-            record
-                .sigma
-                .insert(format!("mag.b.{axis}"), u.mag_bias_ut[i]);
-        }
-        record.sigma.retain(|_, s| s.is_finite() && *s > 0.0);
+        record.add_fit_sigma(&summary.uncertainties, summary.gravity_mps2);
         record.noise = still_noise(poses);
         record.temperatures = temperature_span(poses);
-        record.verdict = serde_json::to_value(&summary.verdict)
-            .ok()
-            .and_then(|v| serde_json::from_value(v).ok());
+        record.verdict = record_verdict(&summary.verdict);
         record
+    }
+
+    /// The record of a session's fit before it is written (set, CRC, σ, verdict; no noise or
+    /// temperatures): what a board is compared with its fleet on.
+    pub fn from_fit(device_id: &str, fit: &SessionFit) -> Self {
+        let mut record = Self::new(
+            device_id,
+            RecordSource::Guided,
+            ParamsFile::from(&fit.set),
+            fit.set.crc32(),
+        );
+        record.add_fit_sigma(&fit.uncertainties, fit.gravity_mps2);
+        record.verdict = record_verdict(&fit.verdict);
+        record
+    }
+
+    /// σ of the offsets and gains from the fit's uncertainties (`g`: gravity, m/s², for mg).
+    fn add_fit_sigma(&mut self, u: &Uncertainties, g: f64) {
+        for (i, axis) in AXES.iter().enumerate() {
+            self.sigma
+                .insert(format!("accel.b.{axis}"), u.accel_bias_mg[i] * 1e-3 * g);
+            self.sigma
+                .insert(format!("accel.A.{axis}{axis}"), u.accel_scale_ppm[i] * 1e-6);
+            self.sigma
+                .insert(format!("gyro.b.{axis}"), u.gyro_bias_dps[i].to_radians());
+            self.sigma.insert(format!("mag.b.{axis}"), u.mag_bias_ut[i]);
+        }
+        self.sigma.retain(|_, s| s.is_finite() && *s > 0.0);
     }
 
     /// Every named scalar parameter of the record: `SENSOR.b.AXIS` (offset), `SENSOR.A.ROWCOL`
@@ -277,4 +287,11 @@ fn temperature_span(poses: &[CapturedPose]) -> Option<TemperatureSpan> {
             .map(|s| f64::from(s.temp_max_c))
             .fold(f64::NEG_INFINITY, f64::max),
     })
+}
+
+/// The session's verdict as recorded.
+fn record_verdict(verdict: &crate::session::Verdict) -> Option<RecordVerdict> {
+    serde_json::to_value(verdict)
+        .ok()
+        .and_then(|v| serde_json::from_value(v).ok())
 }

@@ -131,7 +131,9 @@ pub fn fit_accel(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, 
         }
         Method::Frosio => fit::frosio::fit_frosio(&means(poses), reference, &FROSIO),
         Method::Merayo => fit::merayo::fit_merayo(&means(poses), reference, true),
-        Method::GyroBias | Method::GyroScale => Err(not_for(method, "accelerometer")),
+        Method::GyroBias | Method::GyroScale | Method::MinMaxAxisAlignedMean => {
+            Err(not_for(method, "accelerometer"))
+        }
     }
 }
 
@@ -150,9 +152,11 @@ pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, F
         Method::Merayo => fit::merayo::fit_merayo(points, reference, true),
         Method::AxisAligned => fit::axis_aligned::fit_axis_aligned(points, reference),
         Method::MinMax => fit::minmax::fit_minmax(&as_poses(points), reference),
-        Method::SixPosition | Method::Chen | Method::GyroBias | Method::GyroScale => {
-            Err(not_for(method, "magnetometer"))
-        }
+        Method::SixPosition
+        | Method::Chen
+        | Method::GyroBias
+        | Method::GyroScale
+        | Method::MinMaxAxisAlignedMean => Err(not_for(method, "magnetometer")),
     }
 }
 

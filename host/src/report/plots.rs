@@ -3,6 +3,7 @@
 //! Each function returns the SVG text of one figure, or a [`PlotError`] saying what could not
 //! be drawn. Data is thinned before drawing so that a page stays a few megabytes at most.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::fit::{Mat3, Vec3};
@@ -33,6 +34,27 @@ const SHAPE: RGBColor = RGBColor(30, 30, 30);
 
 /// Points drawn per scatter at most.
 pub const MAX_POINTS: usize = 1500;
+
+/// A residual plot's finish: a thin zero line across `x` and the legend in the upper right.
+fn zero_line_and_legend<'a>(
+    chart: &mut ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    x: std::ops::Range<f64>,
+    figure: &'static str,
+) -> Result<(), PlotError> {
+    chart
+        .draw_series(LineSeries::new(
+            [(x.start, 0.0), (x.end, 0.0)],
+            SHAPE.stroke_width(1),
+        ))
+        .map_err(plot_error(figure))?;
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(plot_error(figure))
+}
 
 /// Every `n`-th item so that at most `max` remain.
 pub fn thinned<T: Copy>(items: &[T], max: usize) -> Vec<T> {
@@ -195,19 +217,7 @@ pub fn pose_bars(
                 "before calibration"
             })
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled()));
-        chart
-            .draw_series(LineSeries::new(
-                [(-0.5, 0.0), (n as f64 - 0.5, 0.0)],
-                SHAPE.stroke_width(1),
-            ))
-            .map_err(plot_error(FIGURE))?;
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(plot_error(FIGURE))?;
+        zero_line_and_legend(&mut chart, -0.5..(n as f64 - 0.5), FIGURE)?;
         root.present().map_err(plot_error(FIGURE))?;
     }
     Ok(svg)
@@ -312,19 +322,7 @@ pub fn residual_against(
                 .map_err(plot_error(FIGURE))?
                 .label(label)
                 .legend(move |(x, y)| Circle::new((x + 5, y), 3, colour.filled()));
-            chart
-                .draw_series(LineSeries::new(
-                    [(xr.start, 0.0), (xr.end, 0.0)],
-                    SHAPE.stroke_width(1),
-                ))
-                .map_err(plot_error(FIGURE))?;
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
-                .map_err(plot_error(FIGURE))?;
+            zero_line_and_legend(&mut chart, xr.clone(), FIGURE)?;
         }
         root.present().map_err(plot_error(FIGURE))?;
     }

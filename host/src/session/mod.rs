@@ -30,6 +30,8 @@
 //! Every request has the device client's timeouts and retries; each phase has its own wall-clock
 //! limit, and every failure is a [`SessionError`] sentence.
 
+pub mod batch;
+pub mod batch_gate;
 mod capture;
 pub mod coverage;
 mod error;
@@ -40,6 +42,7 @@ pub mod gyro_moves;
 mod gyro_nuisance;
 pub mod hold;
 pub mod journal;
+mod mag_alignment;
 mod mag_phase;
 pub mod motion;
 pub mod motioncal;

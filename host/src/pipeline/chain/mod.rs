@@ -2,10 +2,10 @@
 //!
 //! Candidates, simplest first: the six-face min/max (6 unknowns: per-axis scale and offset from
 //! the face readings, seed 004), the axis-aligned ellipsoid (6 unknowns: the same parameters by
-//! least squares over every pose), the norm model solved by Levenberg–Marquardt (9: upper-triangular `A` and `b`) and the
-//! six-position least squares of seed 000 eq. 11–15 (12: full `A` and `b`, poses labelled by
-//! their nearest face). Each is first fitted on every pose with its own refusals (coverage,
-//! faces, closed ellipsoid).
+//! least squares over every pose), the norm model solved by Levenberg–Marquardt (9:
+//! upper-triangular `A` and `b`) and the six-position least squares of seed 000 eq. 11–15 (12:
+//! full `A` and `b`, poses labelled by their nearest face). Each is first fitted on every pose
+//! with its own refusals (coverage, faces, closed ellipsoid).
 //!
 //! **Choice by leave-one-pose-out (LOPO) error of the norm residual** `(|A(xᵢ − b)| − g)/g`,
 //! each pose predicted by the model fitted without it. This measures what a calibration is for —
@@ -19,9 +19,19 @@
 //! **One-standard-error rule** (Hastie, Tibshirani & Friedman, *Elements of Statistical
 //! Learning*, §7.10): the LOPO mean square error is itself an estimate, with standard error
 //! `sd(eᵢ²)/√n`. Among the models whose LOPO MSE is within one standard error of the best, the
-//! one with the fewest unknowns is chosen (between equally many, the lower error): the data
-//! cannot tell them apart, and the simpler one has the smaller variance on poses not seen. The rule has no tuned threshold: its margin is
+//! one with the fewest unknowns is chosen: the data cannot tell them apart, and the simpler one
+//! has the smaller variance on poses not seen. The rule has no tuned threshold: its margin is
 //! the sampling error of the data at hand.
+//!
+//! **A tie in unknowns is resolved by averaging, not by the lower score.** Min/max and the
+//! axis-aligned ellipsoid are two estimators of the same 6 unknowns. When both pass the rule,
+//! the data have just said that their LOPO difference is within its sampling error; picking the
+//! lower score anyway bets the whole calibration on that noise (model selection between near
+//! equals is unstable, Breiman 1996, *Ann. Statist.* 24:2350). The chain instead uses the mean of
+//! their outputs ([`mean`]), again an axis-aligned calibration: since `|·|²` is convex, its
+//! squared vector error on any pose is at most the mean of the two models' (to first order the
+//! same holds for the norm residual), so whichever of the two turns out better on poses not yet
+//! seen, the mean does no worse than their average. Its own LOPO error is reported alongside.
 //!
 //! **Models are compared on the same held-out poses.** A refit can be refused when a pose is
 //! left out (leaving out the only hold of a face leaves a norm model without that direction;
@@ -32,12 +42,15 @@
 //! no model can be validated (e.g. only six poses), the fitted model with the fewest unknowns is
 //! used. The output says which case applied.
 
+pub mod mean;
+
 use crate::fit::axis_aligned::{fit_axis_aligned, fit_axis_aligned_poses};
-use crate::fit::loo::leave_one_out_errors;
+use crate::fit::loo::{leave_one_out_errors, rms_of_all};
 use crate::fit::minmax::{fit_minmax, minmax_calibration};
 use crate::fit::norm_lm::fit_accel_lm_detailed;
 use crate::fit::six_position::{fit_six_position, nearest_axes, six_position_calibration};
 use crate::fit::{Calibration, Fit, FitError, Method, Pose, Vec3};
+use mean::{mean_calibration, mean_fit};
 
 /// Fewest held-out poses a comparison rests on: with fewer, the standard error of the mean square
 /// (from `n − 1` degrees of freedom) is not an estimate.
@@ -51,10 +64,14 @@ pub const CANDIDATES: [Method; 4] = [
     Method::SixPosition,
 ];
 
-/// Number of unknowns of a candidate model.
+/// The models whose mean is used when both pass the one-standard-error rule with the fewest
+/// unknowns (the only candidates with equally many).
+pub const TIED_PAIR: [Method; 2] = [Method::MinMax, Method::AxisAligned];
+
+/// Number of unknowns of a candidate model (or of the mean of [`TIED_PAIR`]).
 pub fn unknowns(method: Method) -> usize {
     match method {
-        Method::MinMax | Method::AxisAligned => 6,
+        Method::MinMax | Method::AxisAligned | Method::MinMaxAxisAlignedMean => 6,
         Method::Lm => 9,
         _ => 12,
     }
@@ -103,6 +120,7 @@ pub struct ChainChoice {
 
 /// Fit `poses` with the default chain (see the module comment) to gravity `reference`.
 pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice, FitError> {
+    let faces = face_labels(poses);
     let mut fits: Vec<(Method, Fit)> = Vec::new();
     let mut outcomes: Vec<(Method, Option<CandidateOutcome>)> = Vec::new();
     let mut folds: Vec<(Method, Vec<Option<f64>>)> = Vec::new();
@@ -110,15 +128,12 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
         match fit_full(method, poses, reference) {
             Err(e) => outcomes.push((method, Some(CandidateOutcome::Refused(e.to_string())))),
             Ok(mut fit) => {
-                let errors = held_out_errors(method, poses, reference);
+                let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
+                    refit(method, rest, rest_faces, reference)
+                });
                 if method == Method::Lm {
                     // The same held-out residuals `fit_accel_lm` would compute for itself.
-                    fit.loo_rms = errors
-                        .iter()
-                        .copied()
-                        .collect::<Option<Vec<f64>>>()
-                        .filter(|e| !e.is_empty())
-                        .map(|e| (e.iter().map(|r| r * r).sum::<f64>() / e.len() as f64).sqrt());
+                    fit.loo_rms = rms_of_all(errors.clone());
                 }
                 folds.push((method, errors));
                 fits.push((method, fit));
@@ -126,7 +141,8 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
             }
         }
     }
-    for (method, outcome) in compare(folds, poses.len()) {
+    let (common, scores) = compare(folds, poses.len());
+    for (method, outcome) in scores {
         if let Some(slot) = outcomes.iter_mut().find(|(m, _)| *m == method) {
             slot.1 = Some(outcome);
         }
@@ -140,22 +156,57 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
             })
         })
         .collect();
-    let Some(chosen) = choose(&candidates).or_else(|| fits.first().map(|(m, _)| *m)) else {
-        let reasons: Vec<String> = candidates
-            .iter()
-            .map(|c| format!("{}: {}", c.method.name(), describe(&c.outcome)))
-            .collect();
-        return Err(FitError::Underdetermined(format!(
-            "no accelerometer model fits these poses ({})",
-            reasons.join("; ")
-        )));
+    let passing = within_one_se(&candidates);
+    let fewest = passing.iter().map(|&m| unknowns(m)).min();
+    let simplest: Vec<Method> = passing
+        .iter()
+        .copied()
+        .filter(|&m| Some(unknowns(m)) == fewest)
+        .collect();
+    let fit_of = |m: Method| fits.iter().find(|(f, _)| *f == m).map(|(_, f)| f);
+    let (fit, mean_rms) = if simplest == TIED_PAIR {
+        let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
+            let members = TIED_PAIR
+                .iter()
+                .map(|&m| refit(m, rest, rest_faces, reference))
+                .collect::<Result<Vec<Calibration>, FitError>>()?;
+            mean_calibration(&members)
+        });
+        let on_common = rms_of_all(
+            common
+                .iter()
+                .map(|&i| errors.get(i).copied().flatten())
+                .collect(),
+        );
+        let members: Vec<&Fit> = TIED_PAIR.iter().filter_map(|&m| fit_of(m)).collect();
+        let fit = mean_fit(
+            Method::MinMaxAxisAlignedMean,
+            &members,
+            poses,
+            reference,
+            rms_of_all(errors),
+        )?;
+        (fit, on_common)
+    } else {
+        // One simplest model passes, or none is validated: then the fitted model with the
+        // fewest unknowns.
+        let chosen = simplest
+            .first()
+            .copied()
+            .or_else(|| fits.first().map(|(m, _)| *m));
+        let Some(fit) = chosen.and_then(fit_of) else {
+            let reasons: Vec<String> = candidates
+                .iter()
+                .map(|c| format!("{}: {}", c.method.name(), describe(&c.outcome)))
+                .collect();
+            return Err(FitError::Underdetermined(format!(
+                "no accelerometer model fits these poses ({})",
+                reasons.join("; ")
+            )));
+        };
+        (fit.clone(), None)
     };
-    let reason = explain(chosen, &candidates);
-    let fit = fits
-        .into_iter()
-        .find(|(m, _)| *m == chosen)
-        .map(|(_, f)| f)
-        .ok_or_else(|| FitError::Underdetermined("the chosen model has no fit".into()))?;
+    let reason = explain(fit.method, &passing, &candidates, mean_rms);
     Ok(ChainChoice {
         fit,
         candidates,
@@ -193,15 +244,23 @@ fn refit(
     }
 }
 
-/// The held-out error of every pose for a candidate that fitted every pose (`None` where the
-/// refit without that pose was refused).
-fn held_out_errors(method: Method, poses: &[Pose], reference: f64) -> Vec<Option<f64>> {
-    // Six-position keeps each pose's face from the full set, so a held-out pose is judged
-    // against the same label it had when all poses were fitted.
-    let faces: Vec<Vec3> = nearest_axes(poses)
+/// Each pose's face from the full set: six-position keeps it, so a held-out pose is judged
+/// against the same label it had when all poses were fitted.
+fn face_labels(poses: &[Pose]) -> Vec<Vec3> {
+    nearest_axes(poses)
         .into_iter()
         .map(|f| f.unwrap_or_else(Vec3::zeros))
-        .collect();
+        .collect()
+}
+
+/// The held-out error of every pose (`None` where the refit without it was refused), `refit`
+/// receiving the other poses and their face labels.
+fn held_out_errors(
+    poses: &[Pose],
+    faces: &[Vec3],
+    reference: f64,
+    refit: impl Fn(&[Pose], &[Vec3]) -> Result<Calibration, FitError>,
+) -> Vec<Option<f64>> {
     leave_one_out_errors(poses, reference, |i, rest| {
         let rest_faces: Vec<Vec3> = faces
             .iter()
@@ -209,17 +268,18 @@ fn held_out_errors(method: Method, poses: &[Pose], reference: f64) -> Vec<Option
             .filter(|&(j, _)| j != i)
             .map(|(_, f)| *f)
             .collect();
-        refit(method, rest, &rest_faces, reference)
+        refit(rest, &rest_faces)
     })
     .unwrap_or_default()
 }
 
 /// Score the candidates on the held-out poses they can all be refit without, setting aside the
-/// one with the fewest refits while fewer than [`MIN_COMMON_FOLDS`] such poses remain.
+/// one with the fewest refits while fewer than [`MIN_COMMON_FOLDS`] such poses remain. Returns
+/// those poses' indices and every candidate's outcome.
 fn compare(
     mut folds: Vec<(Method, Vec<Option<f64>>)>,
     n_poses: usize,
-) -> Vec<(Method, CandidateOutcome)> {
+) -> (Vec<usize>, Vec<(Method, CandidateOutcome)>) {
     let mut outcomes = Vec::new();
     loop {
         let common: Vec<usize> = (0..n_poses)
@@ -249,7 +309,7 @@ fn compare(
                     },
                 ));
             }
-            return outcomes;
+            return (common, outcomes);
         }
         // Set aside the candidate with the fewest successful refits (the most complex on a tie).
         let Some(worst) = folds
@@ -258,7 +318,7 @@ fn compare(
             .min_by_key(|(k, (_, e))| (e.iter().flatten().count(), usize::MAX - k))
             .map(|(k, _)| k)
         else {
-            return outcomes;
+            return (Vec::new(), outcomes);
         };
         let (method, errors) = folds.remove(worst);
         let refits = errors.iter().flatten().count();
@@ -272,8 +332,9 @@ fn compare(
     }
 }
 
-/// The one-standard-error choice among the scored candidates, or `None` when none is scored.
-fn choose(candidates: &[Candidate]) -> Option<Method> {
+/// The scored candidates whose LOPO mean square is within one standard error of the best, in
+/// [`CANDIDATES`] order (empty when none is scored).
+fn within_one_se(candidates: &[Candidate]) -> Vec<Method> {
     let scored: Vec<(Method, f64, f64)> = candidates
         .iter()
         .filter_map(|c| match c.outcome {
@@ -285,12 +346,15 @@ fn choose(candidates: &[Candidate]) -> Option<Method> {
             _ => None,
         })
         .collect();
-    let (_, best_mse, best_se) = scored.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let Some((_, best_mse, best_se)) = scored.iter().copied().min_by(|a, b| a.1.total_cmp(&b.1))
+    else {
+        return Vec::new();
+    };
     scored
         .iter()
         .filter(|(_, mse, _)| *mse <= best_mse + best_se)
-        .min_by(|a, b| unknowns(a.0).cmp(&unknowns(b.0)).then(a.1.total_cmp(&b.1)))
         .map(|(m, _, _)| *m)
+        .collect()
 }
 
 fn describe(outcome: &CandidateOutcome) -> String {
@@ -303,18 +367,50 @@ fn describe(outcome: &CandidateOutcome) -> String {
     }
 }
 
-/// Why `chosen` was chosen and the others were not.
-fn explain(chosen: Method, candidates: &[Candidate]) -> String {
-    let outcome_of = |m: Method| {
-        candidates
-            .iter()
-            .find(|c| c.method == m)
-            .map(|c| &c.outcome)
+/// Why `chosen` was chosen and the others were not; `passing` are the models within one
+/// standard error of the best, `mean_rms` the held-out error of the mean of [`TIED_PAIR`] on
+/// the compared poses when that mean was chosen.
+fn explain(
+    chosen: Method,
+    passing: &[Method],
+    candidates: &[Candidate],
+    mean_rms: Option<f64>,
+) -> String {
+    let scored = |m: Method| {
+        candidates.iter().find_map(|c| match c.outcome {
+            CandidateOutcome::Scored {
+                lopo_rms, folds, ..
+            } if c.method == m => Some((lopo_rms, folds)),
+            _ => None,
+        })
     };
-    let head = match outcome_of(chosen) {
-        Some(CandidateOutcome::Scored {
-            lopo_rms, folds, ..
-        }) => format!(
+    let members: &[Method] = if chosen == Method::MinMaxAxisAlignedMean {
+        &TIED_PAIR
+    } else {
+        std::slice::from_ref(&chosen)
+    };
+    let head = match (chosen, scored(chosen)) {
+        (Method::MinMaxAxisAlignedMean, _) => {
+            let each: Vec<String> = TIED_PAIR
+                .iter()
+                .filter_map(|&m| scored(m).map(|(e, _)| format!("{} {e:.3e}", m.name())))
+                .collect();
+            let folds = scored(Method::MinMax).map_or(0, |(_, n)| n);
+            format!(
+                "{} ({} unknowns), the mean of the min/max and axis-aligned models, chosen by \
+                 leave-one-pose-out error: both are within one standard error of the best with \
+                 the fewest unknowns, so the data cannot tell them apart ({} of g over the {} \
+                 poses every compared model could be refit without; their mean {})",
+                chosen.name(),
+                unknowns(chosen),
+                each.join(", "),
+                folds,
+                mean_rms.map_or("could not be refit on every one".into(), |e| format!(
+                    "{e:.3e}"
+                )),
+            )
+        }
+        (_, Some((lopo_rms, folds))) => format!(
             "{} ({} unknowns) chosen by leave-one-pose-out error: {:.3e} of g over the {} poses \
              every compared model could be refit without, the simplest model within one \
              standard error of the best",
@@ -332,23 +428,18 @@ fn explain(chosen: Method, candidates: &[Candidate]) -> String {
     };
     let others: Vec<String> = candidates
         .iter()
-        .filter(|c| c.method != chosen)
+        .filter(|c| !members.contains(&c.method))
         .map(|c| {
             let why = match &c.outcome {
+                CandidateOutcome::Scored { lopo_rms, .. } if passing.contains(&c.method) => {
+                    format!(
+                        "held-out error {lopo_rms:.3e}, no better within the standard error \
+                         for {} more unknowns",
+                        unknowns(c.method).saturating_sub(unknowns(chosen))
+                    )
+                }
                 CandidateOutcome::Scored { lopo_rms, .. } => {
-                    if unknowns(c.method) == unknowns(chosen) {
-                        format!("held-out error {lopo_rms:.3e}, higher for as many unknowns")
-                    } else if unknowns(c.method) > unknowns(chosen) {
-                        format!(
-                            "held-out error {lopo_rms:.3e}, no better within the standard error \
-                             for {} more unknowns",
-                            unknowns(c.method) - unknowns(chosen)
-                        )
-                    } else {
-                        format!(
-                            "held-out error {lopo_rms:.3e}, worse by more than its standard error"
-                        )
-                    }
+                    format!("held-out error {lopo_rms:.3e}, worse by more than its standard error")
                 }
                 other => describe(other),
             };
@@ -363,146 +454,4 @@ fn explain(chosen: Method, candidates: &[Candidate]) -> String {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::fit::Mat3;
-
-    /// Pose means of a sensor with `a_inv` (raw = a_inv·g·u + b) in directions `dirs`,
-    /// with a small deterministic perturbation of size `jitter` per pose.
-    fn poses(a_inv: &Mat3, b: &Vec3, dirs: &[Vec3], jitter: f64) -> Vec<Pose> {
-        dirs.iter()
-            .enumerate()
-            .map(|(i, d)| {
-                let wobble = Vec3::new(
-                    (i as f64 * 1.7).sin(),
-                    (i as f64 * 2.3).cos(),
-                    (i as f64 * 0.9).sin(),
-                ) * jitter;
-                Pose {
-                    mean: a_inv * (d.normalize() * 9.81) + b + wobble,
-                    var: Vec3::repeat(1e-6),
-                    n: 100,
-                    label: None,
-                }
-            })
-            .collect()
-    }
-
-    fn faces() -> Vec<Vec3> {
-        vec![
-            Vec3::x(),
-            -Vec3::x(),
-            Vec3::y(),
-            -Vec3::y(),
-            Vec3::z(),
-            -Vec3::z(),
-        ]
-    }
-
-    fn tilted_directions() -> Vec<Vec3> {
-        let mut dirs = Vec::new();
-        for x in [-1.0, 0.0, 1.0] {
-            for y in [-1.0, 0.0, 1.0] {
-                for z in [-1.0, 0.0, 1.0] {
-                    let d = Vec3::new(x, y, z);
-                    if d.norm() > 0.0 {
-                        dirs.push(d);
-                    }
-                }
-            }
-        }
-        dirs
-    }
-
-    #[test]
-    fn cross_axis_coupling_that_the_data_determine_selects_the_norm_model() {
-        // 26 well-spread directions and 2 % cross-axis terms: the axis-aligned model cannot
-        // predict held-out poses, lm can; six-position refuses poses far from the faces.
-        let a_inv = Mat3::new(1.02, 0.02, -0.015, 0.0, 0.98, 0.02, 0.0, 0.0, 1.01);
-        let set = poses(
-            &a_inv,
-            &Vec3::new(0.1, -0.2, 0.05),
-            &tilted_directions(),
-            1e-4,
-        );
-        let choice = default_accel_chain(&set, 9.81).expect("fits");
-        assert_eq!(choice.fit.method, Method::Lm, "{}", choice.reason);
-        assert!(
-            choice.reason.contains("six-position: refused"),
-            "{}",
-            choice.reason
-        );
-    }
-
-    #[test]
-    fn a_sensor_without_cross_coupling_gets_the_simpler_axis_aligned_model() {
-        // Diagonal truth: lm's three extra unknowns cannot lower the held-out error by more than
-        // its standard error, so parsimony picks the 6-unknown model.
-        let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
-        let set = poses(
-            &a_inv,
-            &Vec3::new(0.1, -0.2, 0.05),
-            &tilted_directions(),
-            1e-3,
-        );
-        let choice = default_accel_chain(&set, 9.81).expect("fits");
-        assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
-        assert!(
-            choice.reason.contains("lm: held-out error"),
-            "{}",
-            choice.reason
-        );
-    }
-
-    #[test]
-    fn six_faces_are_validated_only_by_six_position_which_is_chosen() {
-        // Without one face the norm models lose a direction; six-position, knowing the faces,
-        // can still be refit and so is the only model whose held-out error can be measured.
-        let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
-        let set = poses(&a_inv, &Vec3::new(0.1, -0.2, 0.05), &faces(), 1e-4);
-        let choice = default_accel_chain(&set, 9.81).expect("fits");
-        assert_eq!(choice.fit.method, Method::SixPosition, "{}", choice.reason);
-        assert!(
-            choice.reason.contains("axis-aligned: not validated"),
-            "{}",
-            choice.reason
-        );
-    }
-
-    #[test]
-    fn when_no_model_can_be_validated_the_fewest_unknowns_fit_is_used() {
-        // Five faces and one tilted pose: six-position refuses the tilted pose, lm has too few
-        // directions, and the axis-aligned model is exactly determined (no refit without a pose).
-        let mut dirs = faces()[..5].to_vec();
-        dirs.push(Vec3::new(1.0, 1.0, -1.0));
-        let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
-        let set = poses(&a_inv, &Vec3::new(0.1, -0.2, 0.05), &dirs, 1e-4);
-        let choice = default_accel_chain(&set, 9.81).expect("fits");
-        assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
-        assert!(
-            choice.reason.contains("no model could be validated"),
-            "{}",
-            choice.reason
-        );
-        // Exactly determined: the scale comes back to the jitter's order (1e-4 of g).
-        assert!((choice.fit.cal.a[(0, 0)] - 1.0 / 1.02).abs() < 1e-3);
-    }
-
-    #[test]
-    fn poses_that_no_model_fits_give_an_error_naming_every_model() {
-        let a_inv = Mat3::identity();
-        let set = poses(
-            &a_inv,
-            &Vec3::zeros(),
-            &[Vec3::z(), Vec3::z(), Vec3::z()],
-            1e-4,
-        );
-        let message = default_accel_chain(&set, 9.81)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
-        for name in ["axis-aligned", "lm", "six-position"] {
-            assert!(message.contains(name), "{message}");
-        }
-    }
-}
+mod tests;

@@ -1,0 +1,182 @@
+//! The default chain on synthetic poses with known truth.
+
+use super::*;
+use crate::fit::validate::face_directions;
+use crate::fit::Mat3;
+
+/// Pose means of a sensor with `a_inv` (raw = a_inv·g·u + b) in directions `dirs`,
+/// with a small deterministic perturbation of size `jitter` per pose.
+fn poses(a_inv: &Mat3, b: &Vec3, dirs: &[Vec3], jitter: f64) -> Vec<Pose> {
+    dirs.iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let wobble = Vec3::new(
+                (i as f64 * 1.7).sin(),
+                (i as f64 * 2.3).cos(),
+                (i as f64 * 0.9).sin(),
+            ) * jitter;
+            Pose {
+                mean: a_inv * (d.normalize() * 9.81) + b + wobble,
+                var: Vec3::repeat(1e-6),
+                n: 100,
+                label: None,
+            }
+        })
+        .collect()
+}
+
+fn faces() -> Vec<Vec3> {
+    face_directions().to_vec()
+}
+
+fn tilted_directions() -> Vec<Vec3> {
+    let mut dirs = Vec::new();
+    for x in [-1.0, 0.0, 1.0] {
+        for y in [-1.0, 0.0, 1.0] {
+            for z in [-1.0, 0.0, 1.0] {
+                let d = Vec3::new(x, y, z);
+                if d.norm() > 0.0 {
+                    dirs.push(d);
+                }
+            }
+        }
+    }
+    dirs
+}
+
+#[test]
+fn cross_axis_coupling_that_the_data_determine_selects_the_norm_model() {
+    // 26 well-spread directions and 2 % cross-axis terms: the axis-aligned model cannot
+    // predict held-out poses, lm can; six-position refuses poses far from the faces.
+    let a_inv = Mat3::new(1.02, 0.02, -0.015, 0.0, 0.98, 0.02, 0.0, 0.0, 1.01);
+    let set = poses(
+        &a_inv,
+        &Vec3::new(0.1, -0.2, 0.05),
+        &tilted_directions(),
+        1e-4,
+    );
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    assert_eq!(choice.fit.method, Method::Lm, "{}", choice.reason);
+    assert!(
+        choice.reason.contains("six-position: refused"),
+        "{}",
+        choice.reason
+    );
+    // The two 6-unknown models lose by more than their standard error: no mean is formed.
+    for name in ["minmax", "axis-aligned"] {
+        let phrase = format!("{name}: held-out error");
+        assert!(choice.reason.contains(&phrase), "{}", choice.reason);
+    }
+    assert!(
+        choice
+            .reason
+            .contains("worse by more than its standard error"),
+        "{}",
+        choice.reason
+    );
+}
+
+#[test]
+fn a_sensor_without_cross_coupling_gets_the_simpler_axis_aligned_model() {
+    // Diagonal truth: lm's three extra unknowns cannot lower the held-out error by more than
+    // its standard error, so parsimony picks the 6-unknown model.
+    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
+    let set = poses(
+        &a_inv,
+        &Vec3::new(0.1, -0.2, 0.05),
+        &tilted_directions(),
+        1e-3,
+    );
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
+    assert!(
+        choice.reason.contains("lm: held-out error"),
+        "{}",
+        choice.reason
+    );
+}
+
+#[test]
+fn six_faces_are_validated_only_by_six_position_which_is_chosen() {
+    // Without one face the norm models lose a direction; six-position, knowing the faces,
+    // can still be refit and so is the only model whose held-out error can be measured.
+    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
+    let set = poses(&a_inv, &Vec3::new(0.1, -0.2, 0.05), &faces(), 1e-4);
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    assert_eq!(choice.fit.method, Method::SixPosition, "{}", choice.reason);
+    assert!(
+        choice.reason.contains("axis-aligned: not validated"),
+        "{}",
+        choice.reason
+    );
+}
+
+#[test]
+fn when_no_model_can_be_validated_the_fewest_unknowns_fit_is_used() {
+    // Five faces and one tilted pose: six-position refuses the tilted pose, lm has too few
+    // directions, and the axis-aligned model is exactly determined (no refit without a pose).
+    let mut dirs = faces()[..5].to_vec();
+    dirs.push(Vec3::new(1.0, 1.0, -1.0));
+    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
+    let set = poses(&a_inv, &Vec3::new(0.1, -0.2, 0.05), &dirs, 1e-4);
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
+    assert!(
+        choice.reason.contains("no model could be validated"),
+        "{}",
+        choice.reason
+    );
+    // Exactly determined: the scale comes back to the jitter's order (1e-4 of g).
+    assert!((choice.fit.cal.a[(0, 0)] - 1.0 / 1.02).abs() < 1e-3);
+}
+
+#[test]
+fn poses_that_no_model_fits_give_an_error_naming_every_model() {
+    let a_inv = Mat3::identity();
+    let set = poses(
+        &a_inv,
+        &Vec3::zeros(),
+        &[Vec3::z(), Vec3::z(), Vec3::z()],
+        1e-4,
+    );
+    let message = default_accel_chain(&set, 9.81)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    for name in ["axis-aligned", "lm", "six-position"] {
+        assert!(message.contains(name), "{message}");
+    }
+}
+
+#[test]
+fn equally_simple_models_the_data_cannot_tell_apart_are_averaged() {
+    // Each face held twice and one tilted hold (which six-position cannot label and which leaves
+    // lm with 7 directions for 9 unknowns), a small wobble and a diagonal truth: min/max and
+    // the axis-aligned ellipsoid estimate the same 6 unknowns and predict held-out holds alike.
+    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
+    let b = Vec3::new(0.1, -0.2, 0.05);
+    let dirs: Vec<Vec3> = faces()
+        .into_iter()
+        .chain(faces())
+        .chain([Vec3::new(1.0, 1.0, 1.0)])
+        .collect();
+    let set = poses(&a_inv, &b, &dirs, 1e-3);
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    assert_eq!(
+        choice.fit.method,
+        Method::MinMaxAxisAlignedMean,
+        "{}",
+        choice.reason
+    );
+    assert!(
+        choice.reason.contains("cannot tell them apart"),
+        "{}",
+        choice.reason
+    );
+    // The mean of two axis-aligned calibrations is axis-aligned and as close to the truth as
+    // the wobble allows (1e-3 m/s² per axis ≈ 1e-4 of g in scale, 1e-3 m/s² in offset).
+    let truth = a_inv.try_inverse().expect("invertible");
+    assert!((choice.fit.cal.a - truth).norm() < 1e-3);
+    assert!((choice.fit.cal.b - b).norm() < 3e-3);
+    assert!(choice.fit.loo_rms.is_some());
+}

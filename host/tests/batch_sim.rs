@@ -1,0 +1,101 @@
+//! The production line end to end: `imucal calibrate --sim-boards 8 --sim-faulty 1 --yes --json`
+//! on an empty history. With no fleet to compare with, each board is compared with the other
+//! seven of its batch (median/MAD with the spread pooled over a sensor's axes). Seven boards are
+//! written and verified, the faulty one (a gross accelerometer offset) is refused before its
+//! write as an outlier with its cause in words, all eight attempts are recorded (the refused one
+//! too), and `imucal fleet --json` lists the faulty board as an outlier. Runs on SQLite, and on
+//! PostgreSQL when `IMUCAL_TEST_PG_URL` is set.
+
+mod history_support;
+
+use std::process::Command;
+
+use history_support::{databases, scratch_dir, url};
+use imucal::history::HistoryStore;
+
+/// Simulated seconds per wall second: high, so that the test stays short on a loaded CI machine.
+const SPEED: &str = "20";
+
+#[test]
+fn a_batch_of_eight_on_an_empty_history_verifies_seven_and_refuses_the_faulty_one() {
+    for location in databases("batch") {
+        let db = url(&location);
+        let out_dir = scratch_dir("batch-sessions");
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["calibrate", "--sim-boards", "8", "--sim-faulty", "1"])
+            .args(["--speed", SPEED, "--yes", "--json", "--db", &db, "--out"])
+            .arg(&out_dir)
+            .output()
+            .expect("imucal runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        // One board is refused, so the batch as a whole reports failure.
+        assert!(!out.status.success(), "{stderr}");
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("JSON on stdout ({e}): {stderr}"));
+        let boards = report["boards"].as_array().expect("boards");
+        assert_eq!(boards.len(), 8, "{report}");
+        assert_eq!(report["verified"], 7, "{report}\n{stderr}");
+        let faults = report["simulated_faults"].as_array().expect("faults");
+        for (board, fault) in boards.iter().zip(faults) {
+            let expected = if fault.is_null() {
+                "verified"
+            } else {
+                "refused_outlier"
+            };
+            assert_eq!(board["status"], expected, "{board}\n{stderr}");
+            assert_eq!(board["outlier_check"]["basis"], "batch", "{board}");
+            assert!(board["recorded_as"].is_number(), "{board}");
+        }
+        let faulty = &boards[7];
+        let finding = &faulty["outlier_check"]["findings"][0];
+        assert_eq!(finding["parameter"], "accel.b.x", "{faulty}");
+        assert!(
+            finding["likely_cause"]
+                .as_str()
+                .is_some_and(|c| c.contains("gross accelerometer offset on axis x")),
+            "{finding}"
+        );
+        assert!(
+            stderr.contains("OUTLIER") && stderr.contains("accelerometer offset"),
+            "{stderr}"
+        );
+        // The refused board's parameters were saved but not written.
+        let dir = out_dir.join(faulty["device_id"].as_str().expect("device id"));
+        assert!(dir.join("params.json").is_file(), "{}", dir.display());
+        assert_eq!(faulty["summary"]["verified"], false, "{faulty}");
+
+        let recorded = HistoryStore::open(&location)
+            .expect("open")
+            .records(None)
+            .expect("read");
+        assert_eq!(recorded.len(), 8);
+        let refused = recorded
+            .iter()
+            .find(|r| r.record.device_id == faulty["device_id"])
+            .expect("the refused attempt is recorded");
+        let reasons = &refused.record.verdict.as_ref().expect("verdict").reasons;
+        assert!(
+            reasons.iter().any(|r| r.contains("not written: outlier")),
+            "{reasons:?}"
+        );
+
+        let fleet = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["fleet", "--db", &db, "--json"])
+            .output()
+            .expect("imucal fleet runs");
+        let fleet_err = String::from_utf8_lossy(&fleet.stderr);
+        assert!(fleet.status.success(), "{fleet_err}");
+        let fleet: serde_json::Value = serde_json::from_slice(&fleet.stdout).expect("JSON");
+        assert_eq!(fleet["boards"], 8, "{fleet}");
+        let results = fleet["results"].as_array().expect("results");
+        for listed in results {
+            let is_faulty = listed["device_id"] == faulty["device_id"];
+            assert_eq!(listed["outlier"], is_faulty, "{listed}");
+        }
+        let listed = results
+            .iter()
+            .find(|b| b["device_id"] == faulty["device_id"])
+            .expect("the faulty board is in the fleet");
+        assert_eq!(listed["findings"][0]["parameter"], "accel.b.x", "{listed}");
+    }
+}
