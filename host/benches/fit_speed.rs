@@ -1,11 +1,12 @@
 //! Speed of the fits: Li's ellipsoid and the norm-model LM on 10⁶ magnetometer samples, the
 //! 12-pose accelerometer LM, the 300-sample magnetometer LM, and the leave-one-out of the
-//! sample-level min/max and the pose-level axis-aligned fits.
+//! sample-level min/max and the pose-level axis-aligned and Li fits.
 //! Run: `cargo bench -p imucal --bench fit_speed`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use imucal::fit::axis_aligned::fit_axis_aligned_poses;
 use imucal::fit::li::{fit_li, LiOptions};
+use imucal::fit::li_loo::li_leave_one_out_rms;
 use imucal::fit::minmax::fit_minmax;
 use imucal::fit::norm_lm::{fit_accel_lm_detailed, fit_mag_lm};
 use imucal::fit::Pose;
@@ -60,15 +61,7 @@ fn bench_fits(c: &mut Criterion) {
     group.finish();
     // Magnetometer samples as one-sample poses, as `fit --method minmax` passes them.
     let as_poses = |points: &[imucal::fit::Vec3]| -> Vec<Pose> {
-        points
-            .iter()
-            .map(|p| Pose {
-                mean: *p,
-                var: imucal::fit::Vec3::zeros(),
-                n: 1,
-                label: None,
-            })
-            .collect()
+        points.iter().map(|p| Pose::single(*p)).collect()
     };
     let samples2000 = as_poses(&million[..2000]);
     c.bench_function("minmax_2000_mag_samples_with_loo", |b| {
@@ -78,6 +71,11 @@ fn bench_fits(c: &mut Criterion) {
     let poses100 = accel_poses(&mut r, &accel_truth, &dirs100, 9.81, 0.02, 100);
     c.bench_function("axis_aligned_100_poses_with_loo", |b| {
         b.iter(|| fit_axis_aligned_poses(&poses100, 9.81).map(|f| f.loo_rms))
+    });
+    // Li's leave-one-out by moment downdate: one 10×10 solve per point, none over the others.
+    let means100: Vec<imucal::fit::Vec3> = poses100.iter().map(|p| p.mean).collect();
+    c.bench_function("li_leave_one_out_100_poses", |b| {
+        b.iter(|| li_leave_one_out_rms(&means100, 9.81))
     });
     c.bench_function("lm_accel_12_poses", |b| {
         b.iter(|| fit_accel_lm_detailed(&poses, 9.81).map(|o| o.fit.cal))

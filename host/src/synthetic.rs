@@ -1,6 +1,7 @@
 //! Seeded synthetic truth data for testing the fits: random true calibrations, accelerometer
 //! pose sets (six faces, the twelve positions of seed 003, random directions, half sphere) and
-//! magnetometer sample clouds (full sphere or a partial cap).
+//! magnetometer sample clouds (full sphere or a partial cap), and long whole recordings as CSV
+//! text for measuring the pipeline at scale.
 //!
 //! Compiled only with the `synthetic` feature: the library never needs it at run time; the
 //! tests, examples and benches enable it through their dev-dependency on this crate.
@@ -9,7 +10,7 @@
 //! with white noise `e ~ N(0, σ²)` per axis, so that the true calibration in the library's
 //! convention `y = A·(x − b)` is exactly `(A_true, b_true)`.
 
-use nalgebra::Unit;
+use nalgebra::{Rotation3, Unit, UnitQuaternion};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -253,4 +254,82 @@ fn random_unit<R: Rng + ?Sized>(rng: &mut R) -> Unit<Vec3> {
             return u;
         }
     }
+}
+
+/// Seconds of each hold of [`write_long_recording`].
+const LONG_HOLD_S: f64 = 20.0;
+/// Seconds of each rotation between holds of [`write_long_recording`].
+const LONG_MOVE_S: f64 = 5.0;
+/// Row rate of [`write_long_recording`].
+const LONG_RATE_HZ: f64 = 100.0;
+
+/// Write a seeded 11-column recording (`t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c`) of `rows` rows
+/// at 100 Hz, for measuring the whole fit at scale: 20 s holds in random orientations joined by
+/// 5 s rotations; accelerometer in m/s² with a true scale, cross-axis and offset error, gyroscope
+/// in rad/s with a bias, magnetometer in µT with hard- and soft-iron error, white noise on
+/// every axis, printed with the digits a logger writes.
+pub fn write_long_recording<W: std::io::Write>(rows: usize, w: &mut W) -> std::io::Result<()> {
+    let mut rng = rng(2024);
+    let accel_truth = Calibration {
+        a: Mat3::new(1.02, 0.01, -0.005, 0.0, 0.98, 0.008, 0.0, 0.0, 1.01),
+        b: Vec3::new(0.12, -0.08, 0.2),
+    };
+    let mag_truth = Calibration {
+        a: Mat3::new(1.1, 0.05, 0.02, 0.05, 0.9, -0.03, 0.02, -0.03, 1.05),
+        b: Vec3::new(12.0, -30.0, 8.0),
+    };
+    let gravity = Vec3::new(0.0, 0.0, 9.80665);
+    let field = Vec3::new(20.0, 0.0, -40.0);
+    let gyro_bias = Vec3::new(0.01, -0.02, 0.005);
+    let random_orientation = |rng: &mut StdRng| {
+        let axis = Vec3::new(gauss(rng), gauss(rng), gauss(rng));
+        UnitQuaternion::from_scaled_axis(
+            axis.normalize() * rng.gen_range(0.0..std::f64::consts::PI),
+        )
+    };
+    let mut from = random_orientation(&mut rng);
+    let mut to = random_orientation(&mut rng);
+    let cycle = ((LONG_HOLD_S + LONG_MOVE_S) * LONG_RATE_HZ) as usize;
+    let hold = (LONG_HOLD_S * LONG_RATE_HZ) as usize;
+    let dt = 1.0 / LONG_RATE_HZ;
+    writeln!(w, "t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c")?;
+    for i in 0..rows {
+        let phase = i % cycle;
+        if phase == 0 && i > 0 {
+            from = to;
+            to = random_orientation(&mut rng);
+        }
+        // Body orientation (body → world) and body angular rate.
+        let (q, rate) = if phase < hold {
+            (from, Vec3::zeros())
+        } else {
+            let s = (phase - hold) as f64 / (cycle - hold) as f64;
+            let q = from.slerp(&to, s);
+            let delta = from.rotation_to(&to).scaled_axis() / LONG_MOVE_S;
+            (q, q.inverse() * delta)
+        };
+        let r: Rotation3<f64> = q.to_rotation_matrix();
+        let g_body = r.inverse() * gravity;
+        let m_body = r.inverse() * field;
+        let noise = |rng: &mut StdRng, s: f64| Vec3::new(gauss(rng), gauss(rng), gauss(rng)) * s;
+        let a = raw_from_true(&accel_truth, &g_body).unwrap_or(g_body) + noise(&mut rng, 0.01);
+        let g = rate + gyro_bias + noise(&mut rng, 0.002);
+        let m = raw_from_true(&mag_truth, &m_body).unwrap_or(m_body) + noise(&mut rng, 0.3);
+        writeln!(
+            w,
+            "{:.2},{:.5},{:.5},{:.5},{:.6},{:.6},{:.6},{:.3},{:.3},{:.3},{:.2}",
+            i as f64 * dt,
+            a.x,
+            a.y,
+            a.z,
+            g.x,
+            g.y,
+            g.z,
+            m.x,
+            m.y,
+            m.z,
+            25.0 + 0.1 * gauss(&mut rng)
+        )?;
+    }
+    Ok(())
 }

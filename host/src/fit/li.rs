@@ -119,17 +119,7 @@ pub(crate) fn fit_li_unchecked(
              {condition_number:.1e}); fit with mean subtraction"
         )));
     }
-    let v = constrained_quadric(&scatter)?;
-    let cal_q = calibration_from_quadric(&v, reference)?;
-    // Undo the normalisation: q = (x − centre)/scale.
-    let cal = Calibration {
-        a: cal_q.a / scale,
-        b: centre + cal_q.b * scale,
-    };
-    if !cal.a.iter().chain(cal.b.iter()).all(|x| x.is_finite()) {
-        return Err(no_ellipsoid("the fitted parameters are not finite"));
-    }
-
+    let cal = calibration_from_scatter(&scatter, &centre, scale, reference)?;
     Ok(Fit::closed_form(
         Method::Li,
         cal,
@@ -236,6 +226,27 @@ fn constrained_quadric(s: &DMatrix<f64>) -> Result<DVector<f64>, FitError> {
         10,
         v1.iter().chain(v2.iter()).copied(),
     ))
+}
+
+/// The calibration from the scatter matrix of the points taken about `centre` and scaled by
+/// `1/scale`: the constrained quadric, then `A` and `b` mapped back to the data's coordinates.
+pub(super) fn calibration_from_scatter(
+    scatter: &DMatrix<f64>,
+    centre: &Vec3,
+    scale: f64,
+    reference: f64,
+) -> Result<Calibration, FitError> {
+    let v = constrained_quadric(scatter)?;
+    let cal_q = calibration_from_quadric(&v, reference)?;
+    // Undo the normalisation: q = (x − centre)/scale.
+    let cal = Calibration {
+        a: cal_q.a / scale,
+        b: centre + cal_q.b * scale,
+    };
+    if !cal.a.iter().chain(cal.b.iter()).all(|x| x.is_finite()) {
+        return Err(no_ellipsoid("the fitted parameters are not finite"));
+    }
+    Ok(cal)
 }
 
 /// Centre, `C` and `A = (ref/√C)·M^½` from the quadric coefficients (eq. 19–29).

@@ -16,12 +16,14 @@ pub mod frosio;
 pub mod gyro_bias;
 pub mod gyro_scale;
 pub mod li;
+pub mod li_loo;
 pub mod li_moments;
 pub mod linalg;
 pub mod lm;
 pub mod loo;
 pub mod merayo;
 pub mod minmax;
+pub(crate) mod norm_jacobian;
 pub mod norm_lm;
 pub mod six_position;
 pub mod uncertainty;
@@ -48,6 +50,17 @@ pub struct Pose {
 }
 
 impl Pose {
+    /// One reading as a pose of one sample (no within-pose variance), for pose-based methods
+    /// and leave-one-out run on single samples.
+    pub fn single(sample: Vec3) -> Self {
+        Self {
+            mean: sample,
+            var: Vec3::zeros(),
+            n: 1,
+            label: None,
+        }
+    }
+
     /// Variance of the pose mean per axis (`var / n`).
     pub fn var_of_mean(&self) -> Vec3 {
         self.var / (self.n.max(1) as f64)

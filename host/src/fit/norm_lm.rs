@@ -35,6 +35,7 @@ use super::li::{fit_li, LiOptions};
 use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::leave_one_out_rms;
+use super::norm_jacobian::{jacobian_row, summed_normal_equations};
 use super::six_position::fit_six_position;
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{check_finite_points, check_finite_poses};
@@ -153,7 +154,7 @@ impl LeastSquaresProblem for NormProblem {
         j
     }
 
-    /// `JᵀJ` and `Jᵀr` accumulated row by row (45 + 9 multiply-adds a sample), never holding `J`.
+    /// `JᵀJ` and `Jᵀr` accumulated row by row, never holding `J` ([`summed_normal_equations`]).
     fn normal_equations(
         &self,
         p: &DVector<f64>,
@@ -161,25 +162,8 @@ impl LeastSquaresProblem for NormProblem {
     ) -> (DMatrix<f64>, DVector<f64>) {
         let r = upper_from_params(p);
         let b = Vec3::new(p[6], p[7], p[8]);
-        let mut upper = [0.0; 45];
-        let mut grad = [0.0; 9];
-        for (((x, w), k), ri) in self
-            .points
-            .iter()
-            .zip(&self.weights)
-            .zip(&self.tangential)
-            .zip(res.iter())
-        {
-            let row = jacobian_row(&r, &b, x, *w, *k);
-            let mut at = 0;
-            for i in 0..9 {
-                grad[i] += row[i] * ri;
-                for j in i..9 {
-                    upper[at] += row[i] * row[j];
-                    at += 1;
-                }
-            }
-        }
+        let (upper, grad) =
+            summed_normal_equations(&r, &b, &self.points, &self.weights, &self.tangential, res);
         let mut jtj = DMatrix::zeros(9, 9);
         let mut at = 0;
         for i in 0..9 {
@@ -191,34 +175,6 @@ impl LeastSquaresProblem for NormProblem {
         }
         (jtj, DVector::from_row_slice(&grad))
     }
-}
-
-/// One row of the Jacobian: the derivative of `w·(n − k/n − 1)`, `n = |R(x − b)|`, with respect
-/// to `R11 R12 R13 R22 R23 R33 b1 b2 b3`. Zero at the centre, where the norm is not
-/// differentiable.
-#[inline(always)]
-fn jacobian_row(r: &Mat3, b: &Vec3, x: &Vec3, w: f64, k: f64) -> [f64; 9] {
-    let u = x - b;
-    let v = r * u;
-    let n = v.norm();
-    if n == 0.0 {
-        return [0.0; 9];
-    }
-    // d(n − k/n)/dn = 1 + k/n².
-    let w = w * (1.0 + k / (n * n));
-    let vh = v / n;
-    let db = -(r.transpose() * vh);
-    [
-        w * vh[0] * u[0],
-        w * vh[0] * u[1],
-        w * vh[0] * u[2],
-        w * vh[1] * u[1],
-        w * vh[1] * u[2],
-        w * vh[2] * u[2],
-        w * db[0],
-        w * db[1],
-        w * db[2],
-    ]
 }
 
 fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> {

@@ -68,26 +68,38 @@ pub fn calibrate(
     };
     let field_ut = references.field_ut.or(field_model.map(|m| m.total_ut));
     let recording = &input.recording;
-    let mut sensors: Vec<SensorOutcome> = input
-        .sensors
-        .iter()
-        .map(|&sensor| {
-            let unit = recording.units.symbol(sensor);
-            match input.refusal(sensor) {
-                Some(reason) => SensorOutcome::without_fit(sensor, unit, reason.to_string()),
-                None => {
-                    let context = SensorContext {
-                        input,
-                        references: &references,
-                        field_ut,
-                        field_model,
-                        method: options.method(sensor),
-                    };
-                    context.fit(sensor)
-                }
+    let fit_one = |sensor: Sensor| {
+        let unit = recording.units.symbol(sensor);
+        match input.refusal(sensor) {
+            Some(reason) => SensorOutcome::without_fit(sensor, unit, reason.to_string()),
+            None => {
+                let context = SensorContext {
+                    input,
+                    references: &references,
+                    field_ut,
+                    field_model,
+                    method: options.method(sensor),
+                };
+                context.fit(sensor)
             }
-        })
-        .collect();
+        }
+    };
+    // The sensors' fits share nothing but the input, so each runs on its own thread: on a
+    // long recording the magnetometer's pass over every sample overlaps the accelerometer's
+    // chain. The outcomes keep the order of `input.sensors`.
+    let mut sensors: Vec<SensorOutcome> = std::thread::scope(|scope| {
+        let fits: Vec<_> = input
+            .sensors
+            .iter()
+            .map(|&sensor| scope.spawn(move || fit_one(sensor)))
+            .collect();
+        fits.into_iter()
+            .map(|fit| {
+                fit.join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
+            .collect()
+    });
     align_outcomes(&mut sensors, input.still.as_ref());
 
     let methods = sensors

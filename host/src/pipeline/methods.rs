@@ -96,15 +96,7 @@ fn means(poses: &[Pose]) -> Vec<Vec3> {
 
 /// Single samples as poses of one sample each, for pose-based methods run on points.
 fn as_poses(points: &[Vec3]) -> Vec<Pose> {
-    points
-        .iter()
-        .map(|p| Pose {
-            mean: *p,
-            var: Vec3::zeros(),
-            n: 1,
-            label: None,
-        })
-        .collect()
+    points.iter().map(|p| Pose::single(*p)).collect()
 }
 
 fn not_for(method: Method, sensor: &str) -> FitError {
@@ -122,13 +114,21 @@ pub fn fit_accel(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, 
         Method::Chen => fit::chen::fit_chen(poses, reference),
         Method::MinMax => fit::minmax::fit_minmax(poses, reference),
         Method::AxisAligned => fit::axis_aligned::fit_axis_aligned_poses(poses, reference),
-        Method::Li => fit::li::fit_li(
-            &means(poses),
-            reference,
-            fit::li::LiOptions {
-                subtract_mean: true,
-            },
-        ),
+        Method::Li => {
+            let means = means(poses);
+            fit::li::fit_li(
+                &means,
+                reference,
+                fit::li::LiOptions {
+                    subtract_mean: true,
+                },
+            )
+            .map(|mut fit| {
+                // Exact leave-one-pose-out by downdating the moment sums (`fit::li_loo`).
+                fit.loo_rms = fit::li_loo::li_leave_one_out_rms(&means, reference);
+                fit
+            })
+        }
         Method::Frosio => fit::frosio::fit_frosio(&means(poses), reference, &FROSIO),
         Method::Merayo => fit::merayo::fit_merayo(&means(poses), reference, true),
         Method::GyroBias | Method::GyroScale | Method::MinMaxAxisAlignedMean => {

@@ -59,12 +59,12 @@ pub fn hold_samples(
         }
         Sensor::Mag => {
             let mag = recording.mag.as_ref()?;
-            mag.time
-                .iter()
-                .zip(&mag.samples)
-                .filter(|(t, _)| **t >= t_start && **t <= t_end)
-                .map(|(_, x)| *x)
-                .collect()
+            // Time stamps are non-decreasing (the reader refuses any that go back), so the
+            // samples inside the hold are one contiguous run found by two binary searches, not
+            // a scan of the whole stream per hold.
+            let first = mag.time.partition_point(|t| *t < t_start);
+            let last = mag.time.partition_point(|t| *t <= t_end).max(first);
+            mag.samples.get(first..last)?.to_vec()
         }
     };
     let screening = screen_vectors(&raw);
