@@ -15,5 +15,3 @@ pub mod ram_flash;
 pub mod sampling;
 pub mod stillness;
 pub mod store;
-#[cfg(test)]
-mod test_scales;

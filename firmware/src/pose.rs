@@ -329,7 +329,7 @@ mod tests {
             // ±2 g on a 16-bit part is 32 768 counts: the rail is the limit.
             accel_range_mps2: 19.613,
             gyro_range_rads: 4.363,
-            ..crate::test_scales::lsm9ds1_like()
+            ..imucal_protocol::SensorScales::EXAMPLE_LSM9DS1
         }
     }
 

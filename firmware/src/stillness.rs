@@ -185,7 +185,7 @@ mod tests {
     use super::*;
 
     fn scales() -> SensorScales {
-        crate::test_scales::lsm9ds1_like()
+        imucal_protocol::SensorScales::EXAMPLE_LSM9DS1
     }
 
     fn sample(accel: [i16; 3], gyro: [i16; 3]) -> RawSample {

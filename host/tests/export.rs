@@ -17,17 +17,7 @@ use imucal_protocol::{
 };
 
 /// An LSM9DS1-like board: ±2 g, ±250 °/s, ±4 gauss, 16 counts per °C about 25 °C.
-const SCALES: SensorScales = SensorScales {
-    accel_mps2_per_count: 0.000_598_5,
-    gyro_rads_per_count: 0.000_152_7,
-    mag_ut_per_count: 0.014,
-    temp_c_per_count: 1.0 / 16.0,
-    temp_offset_c: 25.0,
-    accel_range_mps2: 19.6,
-    gyro_range_rads: 4.36,
-    mag_range_ut: 400.0,
-    sample_rate_hz: 100.0,
-};
+const SCALES: SensorScales = SensorScales::EXAMPLE_LSM9DS1;
 
 /// A set with `A` and `b` only.
 fn plain_set() -> CalibrationSet {

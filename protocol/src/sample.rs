@@ -49,6 +49,22 @@ pub struct SensorScales {
     pub sample_rate_hz: f32,
 }
 
+impl SensorScales {
+    /// The scales of an LSM9DS1-class part at ±2 g, ±245 °/s, ±4 gauss and 100 Hz, 16 counts
+    /// per °C about 25 °C: an example for documentation and tests (a board reports its own).
+    pub const EXAMPLE_LSM9DS1: Self = Self {
+        accel_mps2_per_count: 0.000_598_5,
+        gyro_rads_per_count: 0.000_152_7,
+        mag_ut_per_count: 0.014,
+        temp_c_per_count: 1.0 / 16.0,
+        temp_offset_c: 25.0,
+        accel_range_mps2: 19.6,
+        gyro_range_rads: 4.36,
+        mag_range_ut: 400.0,
+        sample_rate_hz: 100.0,
+    };
+}
+
 /// Which sensors a board has fitted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 pub struct SensorSet {

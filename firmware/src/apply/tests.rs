@@ -4,7 +4,7 @@ use super::*;
 use imucal_protocol::{model, BiasTemperature, NominalSample, Nonlinearity, SensorKind};
 
 fn scales() -> SensorScales {
-    crate::test_scales::lsm9ds1_like()
+    imucal_protocol::SensorScales::EXAMPLE_LSM9DS1
 }
 
 /// A set using every extended term, with magnitudes of a poor but real MEMS part.

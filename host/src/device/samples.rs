@@ -187,14 +187,8 @@ mod tests {
     fn scales() -> SensorScales {
         SensorScales {
             accel_mps2_per_count: 0.000_598_55,
-            gyro_rads_per_count: 0.000_152_7,
-            mag_ut_per_count: 0.014,
-            temp_c_per_count: 1.0 / 16.0,
-            temp_offset_c: 25.0,
-            accel_range_mps2: 19.6,
-            gyro_range_rads: 4.36,
-            mag_range_ut: 400.0,
             sample_rate_hz: 119.0,
+            ..SensorScales::EXAMPLE_LSM9DS1
         }
     }
 
