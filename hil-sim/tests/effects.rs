@@ -94,6 +94,12 @@ fn expected_change(
         EffectKind::ThermalHysteresis | EffectKind::BiasRandomWalk => {
             unreachable!("effects with memory are checked by their own tests")
         }
+        EffectKind::TemperatureRateBias
+        | EffectKind::CrossAxisNonlinearity
+        | EffectKind::BumpedHold
+        | EffectKind::SteelNearHold => {
+            unreachable!("out-of-family effects are checked in tests/out_of_family.rs")
+        }
     }
 }
 

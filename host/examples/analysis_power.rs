@@ -8,9 +8,11 @@
 //!
 //! ```text
 //! cargo run --release -p imucal --example analysis_power -- [--quick] [--seeds N] [--threads N]
-//!     [--section controls|power|out-of-family|all] [--short]
+//!     [--section controls|power|out-of-family|all] [--short] [--oof-seeds N] [--oof-size S]
+//! cargo run --release -p imucal --example analysis_power -- --show gyro.bias_random_walk=5 --seed 3
 //! ```
-//! `--quick`: 4 seeds and the short recording. Output: Markdown tables on stdout.
+//! `--quick`: 4 seeds and the short recording. Output: Markdown tables on stdout. `--show`: the
+//! text report of one simulated recording (effects as on the simulator's command line).
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -19,20 +21,26 @@ use imucal::open_world::{
     analyse_simulated, base_chi2, detectable_size, parallel_map, Case, Outcome, RecordingShape,
     OUT_OF_FAMILY_CASES, POWER_CASES,
 };
+use imucal::analysis::report;
 use imucal::recording::Sensor;
+use imucal_hil_sim::effects::EffectRequest;
 
 /// Multiples of the detectable size in the power sweep.
 const MULTIPLES: [f64; 6] = [0.5, 1.0, 2.0, 5.0, 10.0, 20.0];
-/// Sizes (× the simulator's typical part) of the out-of-family effects.
-const OUT_OF_FAMILY_SIZES: [f64; 2] = [1.0, 5.0];
 /// Seeds used to measure each detectable size.
-const CALIBRATION_SEEDS: usize = 6;
+const CALIBRATION_SEEDS: usize = 3;
 
 struct Options {
     seeds: usize,
     threads: usize,
     section: String,
     shape: RecordingShape,
+    show: Vec<EffectRequest>,
+    seed: u64,
+    /// Seeds of the out-of-family cells.
+    oof_seeds: usize,
+    /// Sizes (× the simulator's typical part) of the out-of-family effects.
+    oof_sizes: Vec<f64>,
 }
 
 fn parse_options() -> Result<Options, String> {
@@ -41,6 +49,10 @@ fn parse_options() -> Result<Options, String> {
         threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
         section: "all".into(),
         shape: RecordingShape::FULL,
+        show: Vec::new(),
+        seed: 0,
+        oof_seeds: 20,
+        oof_sizes: vec![1.0, 5.0],
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -48,6 +60,7 @@ fn parse_options() -> Result<Options, String> {
         match a.as_str() {
             "--quick" => {
                 o.seeds = 4;
+                o.oof_seeds = 4;
                 o.shape = RecordingShape::SHORT;
             }
             "--short" => o.shape = RecordingShape::SHORT,
@@ -62,6 +75,20 @@ fn parse_options() -> Result<Options, String> {
                     .map_err(|_| "--threads takes a number")?
             }
             "--section" => o.section = value("--section")?,
+            "--oof-seeds" => {
+                o.oof_seeds = value("--oof-seeds")?
+                    .parse()
+                    .map_err(|_| "--oof-seeds takes a number")?
+            }
+            "--oof-size" => o.oof_sizes = vec![value("--oof-size")?
+                .parse()
+                .map_err(|_| "--oof-size takes a number")?],
+            "--show" => o.show.push(value("--show")?.parse().map_err(|e| format!("{e}"))?),
+            "--seed" => {
+                o.seed = value("--seed")?
+                    .parse()
+                    .map_err(|_| "--seed takes a number")?
+            }
             other => return Err(format!("unknown argument `{other}`")),
         }
     }
@@ -119,6 +146,13 @@ fn main() {
             std::process::exit(2);
         }
     };
+    if !o.show.is_empty() {
+        match analyse_simulated(&o.shape.config(o.seed, &o.show)) {
+            Ok(a) => println!("{}", report::to_text(&a)),
+            Err(e) => eprintln!("analysis_power: {e}"),
+        }
+        return;
+    }
     let started = Instant::now();
     let seeds: Vec<u64> = (0..o.seeds as u64).collect();
     println!(
@@ -158,7 +192,8 @@ fn main() {
         power_sweep(&seeds, &clean, &o);
     }
     if all || o.section == "out-of-family" {
-        out_of_family(&seeds, &o);
+        let oof_seeds: Vec<u64> = (0..o.oof_seeds as u64).collect();
+        out_of_family(&oof_seeds, &o);
     }
     eprintln!("done in {:.0} s", started.elapsed().as_secs_f64());
 }
@@ -235,7 +270,7 @@ fn power_sweep(
 fn out_of_family(seeds: &[u64], o: &Options) {
     println!("## Out-of-family effects: verdicts\n\n| effect | sensor | size (× typical) | verdicts | a family accepted with residual left |\n|---|---|---|---|---|");
     for case in &OUT_OF_FAMILY_CASES {
-        for size in OUT_OF_FAMILY_SIZES {
+        for &size in &o.oof_sizes {
             let v = outcomes(case, size, seeds, o);
             let partial = v
                 .iter()

@@ -132,9 +132,8 @@ pub fn host_sensor(sensor: SensorKind) -> Sensor {
 }
 
 /// The five families of the power sweep, each on the sensor where it matters most: the four
-/// norm-model families on the accelerometer, g-sensitivity (and the gyroscope's own temperature
-/// and drift terms) on the gyroscope.
-pub const POWER_CASES: [Case; 7] = [
+/// norm-model families on the accelerometer, g-sensitivity on the gyroscope.
+pub const POWER_CASES: [Case; 5] = [
     Case {
         effect: SimEffect::BiasTemperature,
         sensor: SensorKind::Accel,
@@ -150,14 +149,6 @@ pub const POWER_CASES: [Case; 7] = [
     Case {
         effect: SimEffect::ScaleNonlinearity,
         sensor: SensorKind::Accel,
-    },
-    Case {
-        effect: SimEffect::BiasTemperature,
-        sensor: SensorKind::Gyro,
-    },
-    Case {
-        effect: SimEffect::BiasDrift,
-        sensor: SensorKind::Gyro,
     },
     Case {
         effect: SimEffect::GSensitivity,

@@ -2,7 +2,9 @@
 //! [`super`]): the base fit, every candidate tested by held-out error, the accepted ones refitted
 //! jointly, temperature and time told apart only when they decorrelate.
 
-use super::crossval::{extend_start, held_out, observations_needed, Comparison, HeldOut};
+use super::crossval::{
+    extend_start, held_out, observations_needed, Comparison, HeldOut, ALPHA,
+};
 use super::dataset::Observation;
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
 use super::extended_fit::{
@@ -10,6 +12,7 @@ use super::extended_fit::{
     ExtendedFit, Problem,
 };
 use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, SensorAnalysis};
+use super::time_structure::{follows_time_p, timed_residuals, without_effect};
 use crate::fit::{Calibration, Vec3};
 use crate::recording::Sensor;
 use crate::stats::chi_square::ChiSquareTest;
@@ -283,28 +286,55 @@ pub fn analyse_observations(
         let (kind, _, fit, ho) = round.swap_remove(w);
         remaining.retain(|r| r.name() != kind.name());
         if time_or_temp {
-            // Form check: a bias free in shape over the same variable must not predict better.
-            let binned = EffectKind::BinnedBias(kind.needs_temperature());
-            let mut effects = current.0.effects.clone();
-            effects.push(binned);
-            let start = extend_start(&current.0.params, binned.param_count());
-            if let Some((_, binned_ho)) = evaluate(&problem, &effects, &start) {
+            // Form check: a bias free in shape over the same variable must not predict better;
+            // nor, for a temperature effect, one free in shape over time (the recording is
+            // sequential, so any slow change of the bias is a function of time).
+            let mut checks = vec![EffectKind::BinnedBias(kind.needs_temperature())];
+            if kind.needs_temperature() {
+                checks.push(EffectKind::BinnedBias(false));
+            }
+            let better = checks.into_iter().find_map(|binned| {
+                let mut effects = current.0.effects.clone();
+                effects.push(binned);
+                let start = extend_start(&current.0.params, binned.param_count());
+                let (_, binned_ho) = evaluate(&problem, &effects, &start)?;
                 let cmp = Comparison::new(&ho, &binned_ho, components);
-                if cmp.passes(1) {
-                    wrong_form.push((
-                        kind.name(),
-                        format!(
-                            "explains part of the residual, but a bias free in shape over {} predicts held-out poses better \
-                             (signed-rank p = {:.1e}): the dependence has another form (a step, hysteresis), so it is not accepted",
-                            kind.variable(),
-                            cmp.p_value
-                        ),
-                    ));
-                    continue;
-                }
+                cmp.passes(1).then_some((binned, cmp.p_value))
+            });
+            if let Some((binned, p_value)) = better {
+                wrong_form.push((
+                    kind.name(),
+                    format!(
+                        "explains part of the residual, but a bias free in shape over {} predicts held-out poses better \
+                         (signed-rank p = {p_value:.1e}): the dependence has another form (a step, hysteresis, a random walk), \
+                         so it is not accepted",
+                        binned.variable(),
+                    ),
+                ));
+                continue;
             }
         }
         current = (fit, ho);
+    }
+
+    // A drift whose residual still follows time is the straight-line part of a random walk or
+    // of steps, not a drift (see `time_structure`): take it out and refit.
+    if let Some(index) = current.0.effects.iter().position(|k| *k == EffectKind::BiasDrift) {
+        let p = follows_time_p(&timed_residuals(&problem, &current.0, &times));
+        let (effects, start) = without_effect(&problem, &current.0, index);
+        if p <= ALPHA {
+            if let Some(refit) = evaluate(&problem, &effects, &start) {
+                wrong_form.push((
+                    EffectKind::BiasDrift.name(),
+                    format!(
+                        "a linear trend improves held-out error, but the residual after it still follows time \
+                         (neighbours-in-time permutation p = {p:.1e}): the bias wanders (a random walk, steps, hysteresis) \
+                         rather than drifting linearly, so it is not accepted"
+                    ),
+                ));
+                current = refit;
+            }
+        }
     }
 
     let final_fit = current.0.clone();
