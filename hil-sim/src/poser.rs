@@ -224,6 +224,56 @@ fn twelve_positions(
     Ok(builder)
 }
 
+/// The eight corner directions `(±1, ±1, ±1)/√3` in a Gray-code order: each differs from the
+/// one before in one sign, a 70.5° turn.
+pub fn corner_up_directions() -> [Vector3<f64>; 8] {
+    let s = 1.0 / 3.0_f64.sqrt();
+    [
+        (1.0, 1.0, 1.0),
+        (1.0, 1.0, -1.0),
+        (1.0, -1.0, -1.0),
+        (1.0, -1.0, 1.0),
+        (-1.0, -1.0, 1.0),
+        (-1.0, -1.0, -1.0),
+        (-1.0, 1.0, -1.0),
+        (-1.0, 1.0, 1.0),
+    ]
+    .map(|(x, y, z)| Vector3::new(x, y, z) * s)
+}
+
+/// A position as a person holds it.
+#[derive(Debug, Clone)]
+pub struct PlacedHold {
+    /// Orientation, body to world (placement error and heading included).
+    pub orientation: UnitQuaternion<f64>,
+    /// Hand tremor, if the person has any.
+    pub tremor: Option<Tremor>,
+}
+
+/// The eight corner positions as a person holds them,
+/// placed and headed like the twelve ([`PoserOptions`]), drawn from `seed` on a stream of its
+/// own so the twelve positions of a seed stay as they were.
+pub fn corner_holds(options: &PoserOptions, seed: u64) -> Result<Vec<PlacedHold>, SimError> {
+    options.validate()?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(3);
+    let mut heading: f64 = rng.gen_range(-PI..PI);
+    Ok(corner_up_directions()
+        .iter()
+        .map(|up| {
+            heading += rng.gen_range(-1.0..=1.0) * options.heading_spread_deg.to_radians();
+            let error = random_unit(&mut rng)
+                * rng.gen_range(0.0..=1.0)
+                * options.placement_error_deg.to_radians();
+            PlacedHold {
+                orientation: UnitQuaternion::from_scaled_axis(error)
+                    * orientation_with_up(up, heading),
+                tremor: options.tremor.then(|| hand_tremor(&mut rng)),
+            }
+        })
+        .collect())
+}
+
 /// Waypoints whose body-frame field direction follows a pole-to-pole spiral.
 fn tumble_waypoints(count: usize, field: &EarthField) -> Vec<UnitQuaternion<f64>> {
     let field_world = field.world_vector_ut();

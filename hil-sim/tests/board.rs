@@ -2,8 +2,11 @@
 //! in-memory link, pose captures against the truth, parameters across reboots and power cuts.
 
 use imucal_firmware::lsm9ds1;
-use imucal_hil_sim::board::{BoardConfig, PersonPhase, PersonSchedule, SimBoard};
+use imucal_hil_sim::board::{
+    BoardConfig, PersonPhase, PersonSchedule, SimBoard, CORNER_PATIENCE_S,
+};
 use imucal_hil_sim::physics::{lsm9ds1_scales, SensorKind};
+use imucal_hil_sim::poser::{corner_holds, PoserOptions};
 use imucal_protocol::{
     encode_frame, CalibrationSet, DeviceMessage, Event, FrameDecoder, PoseStats, Request,
     RequestBody, ResponseBody, StillThresholds, StreamKind, MAX_FRAME,
@@ -220,7 +223,7 @@ fn pose_capture_at_a_hold_matches_the_true_reading_within_four_standard_errors()
 }
 
 #[test]
-fn the_person_holds_each_position_until_captured_then_tumbles_and_rests() {
+fn the_person_holds_each_position_until_captured_then_an_asked_corner_then_tumbles_and_rests() {
     let mut config = BoardConfig::new(4);
     config.schedule = PersonSchedule::Guided;
     let mut board = SimBoard::new(config).unwrap();
@@ -232,10 +235,7 @@ fn the_person_holds_each_position_until_captured_then_tumbles_and_rests() {
     let g = board.truth().world.gravity_mps2;
     for (index, q) in orientations.iter().enumerate() {
         let stats = host.capture(&mut board);
-        // After the last position no prompt follows: the person moves on by themselves.
-        if index + 1 < orientations.len() {
-            host.prompt_next(&mut board);
-        }
+        host.prompt_next(&mut board);
         let expected = true_reading(&board, q, SensorKind::Accel);
         let mean = Vector3::from(stats.accel_mean.map(f64::from));
         // Hand sway of up to 0.3° tilts gravity by up to g·sin 0.3° ≈ 0.05 m/s²; bound 0.1.
@@ -249,10 +249,21 @@ fn the_person_holds_each_position_until_captured_then_tumbles_and_rests() {
             mean.norm()
         );
     }
-    board.run_for(5.0).unwrap();
+    // The host asks for a corner: the person holds the first of the corners.
+    let stats = host.capture(&mut board);
+    let corner = corner_holds(&PoserOptions::default(), 4).unwrap()[0].orientation;
+    let expected = true_reading(&board, &corner, SensorKind::Accel);
+    let mean = Vector3::from(stats.accel_mean.map(f64::from));
+    assert!(
+        (mean - expected).norm() < 0.1,
+        "corner: accel mean {mean:?}, expected {expected:?}"
+    );
+    // No capture is asked for at the next corner: after the patience the person tumbles.
+    // Moving on (1 s), the ramp (0.3 s), a turn of ≈70° (≈1 s), the patience and the ramp.
+    board.run_for(3.0 + CORNER_PATIENCE_S).unwrap();
     assert!(
         matches!(board.person().phase(), PersonPhase::Tumble { .. }),
-        "after twelve captures the person tumbles, not {:?}",
+        "after a corner the host did not ask for the person tumbles, not {:?}",
         board.person().phase()
     );
     board.run_for(600.0).unwrap();

@@ -79,11 +79,11 @@ fn assert_matches_truth(name: &str, fit: &imucal::fit::Fit, truth: &SensorTruth,
 }
 
 /// The gyroscope's written `A` against the truth in the accelerometer's output frame
-/// (`Qᵀ·A_true`): scale within 0.1 % (the product's target), misalignment within 0.1° (twice
-/// the 0.05° target, which the session meets on 6 of 10 simulator seeds: docs/RESULTS.md), each
-/// within K_SIGMA of the fit's own σ, and a 360° turn about each axis within 0.4° (twice the
-/// 0.2° target, met on 9 of 10 seeds: docs/RESULTS.md; the session's timing follows the host's, so
-/// one run is one draw). A gyroscope left at `A = I` fails: the board's true scale is 0.974, and
+/// (`Qᵀ·A_true`): scale within 0.1 % (the product's target, met on 10 of 10 simulator seeds,
+/// worst 0.086 %), misalignment within 0.1° (twice the 0.05° target, which the session meets on 8
+/// of 10 seeds, worst 0.063°: docs/RESULTS.md), each within K_SIGMA of the fit's own σ, and a
+/// 360° turn about each axis within 0.4° (twice the 0.2° target, met on 7 of 10 seeds, worst
+/// 0.34°; the session's timing follows the host's, so one run is one draw). A gyroscope left at `A = I` fails: the board's true scale is 0.974, and
 /// uncalibrated turns are off by 5–20°.
 fn assert_gyro_matches_truth(outcome: &SessionOutcome, truth: &imucal_hil_sim::physics::ImuTruth) {
     let gyro = outcome
@@ -163,8 +163,15 @@ fn run_calibration(seed: u64, chip: SensorChip) -> (SimHandle, DeviceClient, Ses
 fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
     let truth = sim.truth();
     let fit = &outcome.fit;
-    // Twelve positions, each captured once; the verified write.
-    assert_eq!(outcome.poses.len(), 12, "{}", outcome.extra_positions_note);
+    // Twelve positions, each captured once, and at most four corners when the accelerometer
+    // fit's covariance asked for them; the verified write.
+    let extra = SessionOptions::default().max_extra_poses;
+    assert!(
+        (12..=12 + extra).contains(&outcome.poses.len()),
+        "{} poses: {}",
+        outcome.poses.len(),
+        outcome.extra_positions_note
+    );
     assert!(outcome.verified && outcome.written);
     assert_eq!(outcome.lost_samples, 0);
 

@@ -81,7 +81,11 @@ const FITTABLE: [(&str, &[&str], &[&str]); 5] = [
 
 /// `fit --params-out` and the parameter file it wrote (which must parse as `flash` reads it).
 fn fit_params(name: &str, flags: &[&str]) -> (String, ParamsFile) {
-    let path = temp_file(&format!("{name}.json"));
+    // One file per call: tests fitting the same recording run in parallel, and `fit` refuses
+    // to replace an existing file.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = temp_file(&format!("{name}-{call}.json"));
     let recording = real(name);
     let out = imucal(
         &[

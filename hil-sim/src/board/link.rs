@@ -32,6 +32,9 @@ pub struct LinkObservations {
     pub stream_starts: u64,
     /// `StopStream` requests that reached the firmware.
     pub stream_stops: u64,
+    /// Whether the last stream request was a start: a stop sent while no stream runs (hosts
+    /// send one to be sure) leaves the counts unbalanced but this false.
+    pub streaming: bool,
     /// The latest `PoseStats` sent.
     pub last_pose: Option<PoseStats>,
     /// Bytes the firmware took from the host.
@@ -171,11 +174,17 @@ impl Read for DeviceLink {
                     Ok(Request {
                         body: RequestBody::StartStream { .. },
                         ..
-                    }) => buffers.observed.stream_starts += 1,
+                    }) => {
+                        buffers.observed.stream_starts += 1;
+                        buffers.observed.streaming = true;
+                    }
                     Ok(Request {
                         body: RequestBody::StopStream,
                         ..
-                    }) => buffers.observed.stream_stops += 1,
+                    }) => {
+                        buffers.observed.stream_stops += 1;
+                        buffers.observed.streaming = false;
+                    }
                     _ => {}
                 }
             }

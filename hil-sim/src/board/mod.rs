@@ -36,7 +36,7 @@ pub use link::{link_pair, DeviceLink, LinkEnd, LinkObservations, TX_BUFFER_LIMIT
 pub use parts::{
     BoardFlash, SharedChip, SharedFlash, SimClock, FLASH_SECTOR, FLASH_SIZE, FLASH_WORD,
 };
-pub use person::{Person, PersonPhase, PersonSchedule, Prompts};
+pub use person::{Person, PersonPhase, PersonSchedule, Prompts, CORNER_PATIENCE_S};
 
 /// Size of each of the two parameter slots: one flash sector.
 pub const SLOT_SIZE: u32 = FLASH_SECTOR as u32;
@@ -448,6 +448,7 @@ impl SimBoard {
                 poses_captured: observed.poses_captured,
                 stream_starts: observed.stream_starts,
                 stream_stops: observed.stream_stops,
+                streaming: observed.streaming,
             },
         )?;
         let state = self.world_state(t_s);

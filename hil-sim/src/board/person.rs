@@ -13,12 +13,17 @@
 //!    request), then the person turns to the next one. A person does not know the order the tool
 //!    will prompt in; the host accepts poses in any order. The turns between positions tilt the
 //!    board (the twelve differ in their up direction), which the gyroscope's scale fit needs.
-//! 2. A tumble for the magnetometer that fills in what the turns between the positions have not
+//! 2. The eight corner positions (the board balanced on a corner, [`crate::poser::corner_holds`]),
+//!    which a host may ask for after the twelve: each is held like the twelve while the host
+//!    captures it; a corner the host has not asked to capture within [`CORNER_PATIENCE_S`] means it
+//!    wants something else, and the person goes on to the tumble from there.
+//! 3. A tumble for the magnetometer that fills in what the turns between the positions have not
 //!    shown yet: the waypoints of the `tumble` schedule whose body-frame field direction is more
 //!    than [`crate::poser::SEEN_ANGLE_DEG`] from every direction shown so far, nearest first
 //!    ([`crate::poser::fill_in_tumble`]), then the rest of the spiral. The person stops tumbling
-//!    as soon as the host stops the stream (it has the coverage it needs).
-//! 3. A rest in the first position, with the hand off the board (no tremor), until stopped: what
+//!    as soon as the host stops a stream it watched for at least [`WATCHED_TUMBLE_S`] (it has
+//!    the coverage it needs).
+//! 4. A rest in the first position, with the hand off the board (no tremor), until stopped: what
 //!    the host's at-rest verification needs.
 //!
 //! [`PersonSchedule::Rounds`] is the same with step 1 repeated: the twelve positions are gone
@@ -35,8 +40,11 @@ use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
-use crate::poser::{build_schedule, fill_in_tumble, PoserOptions, ScheduleKind, SEEN_ANGLE_DEG};
-use crate::world::{EarthField, Motion, Segment, Trajectory, TrajectoryBuilder, Tremor};
+use crate::poser::{
+    build_schedule, corner_holds, fill_in_tumble, PlacedHold, PoserOptions, ScheduleKind,
+    SEEN_ANGLE_DEG,
+};
+use crate::world::{EarthField, Motion, Segment, Trajectory, TrajectoryBuilder};
 
 /// Length given to a hold that ends only on an observation, s (about 30 years).
 const OPEN_HOLD_S: f64 = 1.0e9;
@@ -49,6 +57,11 @@ const WATCHED_TUMBLE_S: f64 = 1.0;
 
 /// Time from seeing a prompt to starting to move, s (a simple visual reaction time).
 pub const REACTION_S: f64 = 0.25;
+
+/// How long a person holds a corner the host has not asked to capture before concluding that
+/// the host wants something else, s: the host's stillness window (0.5 s) and settle time
+/// (0.15 s) after the hold's tremor ramp (0.3 s), plus a look at the screen.
+pub const CORNER_PATIENCE_S: f64 = 2.5;
 
 /// Body-frame field directions are remembered when they differ by more than this from the last
 /// one remembered, degrees (a tenth of the angle that counts as seen).
@@ -96,7 +109,8 @@ impl std::str::FromStr for PersonSchedule {
 /// Where the person is in the schedule.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PersonPhase {
-    /// Holding hold `index` of the schedule: position `index % 12` of the twelve.
+    /// Holding hold `index` of the schedule: position `index % 12` of the twelve, or after the
+    /// last round corner `index − 12·rounds`.
     Hold {
         /// Hold index (the position index in the first round).
         index: usize,
@@ -126,27 +140,31 @@ pub struct Prompts {
     pub stream_starts: u64,
     /// `StopStream` requests seen so far.
     pub stream_stops: u64,
-}
-
-#[derive(Debug, Clone)]
-struct HoldPlan {
-    orientation: UnitQuaternion<f64>,
-    tremor: Option<Tremor>,
+    /// Whether the host's last stream request started a stream.
+    pub streaming: bool,
 }
 
 /// The person and the motion they produce.
 #[derive(Debug, Clone)]
 pub struct Person {
-    holds: Vec<HoldPlan>,
+    holds: Vec<PlacedHold>,
     /// Holds in the whole schedule: the twelve times the rounds.
     hold_count: usize,
+    /// The eight corners, held after the last round while the host captures them.
+    corners: Vec<PlacedHold>,
+    /// `CapturePose` count when the current hold began.
+    hold_requests_at_start: u64,
+    /// Set when a corner went without a capture request: the tumble comes next.
+    corners_done: bool,
     /// Waypoints of the tumble schedule (the spiral).
     tumble: Vec<UnitQuaternion<f64>>,
     /// The order the tumble goes through, chosen when it begins.
     tumble_plan: Vec<UnitQuaternion<f64>>,
-    /// Since when the host has been streaming during the tumble, s: a stop after a stream of
-    /// at least [`WATCHED_TUMBLE_S`] means it has the directions it needs.
-    tumble_watched_since_s: Option<f64>,
+    /// Since when the host has been streaming during the tumble, s, and the `StopStream` count
+    /// then: a stop after a stream of at least [`WATCHED_TUMBLE_S`] means it has the directions
+    /// it needs. The stop is told by the count, as a host may start its next stream before the
+    /// next sample.
+    tumble_watched_since_s: Option<(f64, u64)>,
     /// Field direction in the world frame (unit), if there is a field.
     field_world: Option<Vector3<f64>>,
     /// Body-frame field directions shown so far.
@@ -186,7 +204,7 @@ impl Person {
         crate::error::require_positive("maximum hold time (s)", max_hold_s)?;
         let twelve = build_schedule(ScheduleKind::Twelve, options, field, seed)?;
         let tumble = build_schedule(ScheduleKind::Tumble, options, field, seed)?;
-        let holds: Vec<HoldPlan> = twelve
+        let holds: Vec<PlacedHold> = twelve
             .trajectory
             .segments()
             .iter()
@@ -195,7 +213,7 @@ impl Person {
                     orientation,
                     tremor,
                     ..
-                } => Some(HoldPlan {
+                } => Some(PlacedHold {
                     orientation: *orientation,
                     tremor: tremor.clone(),
                 }),
@@ -212,12 +230,16 @@ impl Person {
                 Segment::Hold { .. } => {}
             }
         }
+        let corners = corner_holds(options, seed)?;
         let first = holds.first().cloned().ok_or(SimError::EmptyTrajectory)?;
         let rest = first.orientation;
         let hold_count = holds.len() * schedule.rounds();
         let mut person = Self {
             holds,
             hold_count,
+            corners,
+            hold_requests_at_start: 0,
+            corners_done: false,
             tumble: waypoints,
             tumble_plan: Vec::new(),
             tumble_watched_since_s: None,
@@ -239,7 +261,7 @@ impl Person {
             first_prompt_s: None,
         };
         if hold_count > 0 {
-            person.begin_hold(0, 0.0, 0)?;
+            person.begin_hold(0, 0.0, Prompts::default())?;
         }
         Ok(person)
     }
@@ -276,23 +298,34 @@ impl Person {
             let timed_out = self
                 .first_prompt_s
                 .is_some_and(|first| t_s - first.max(self.segment_start_s) >= self.max_hold_s);
-            if prompted_on || timed_out {
+            let unwanted_corner = self.is_corner()
+                && prompts.capture_requests == self.hold_requests_at_start
+                && t_s - self.segment_start_s >= CORNER_PATIENCE_S;
+            if unwanted_corner {
+                self.corners_done = true;
+            }
+            if prompted_on || timed_out || unwanted_corner {
                 self.end_hold(t_s)?;
             }
         }
         if let PersonPhase::Tumble { .. } = self.phase {
-            let streaming = prompts.stream_starts > prompts.stream_stops;
-            match (streaming, self.tumble_watched_since_s) {
-                (true, None) => self.tumble_watched_since_s = Some(t_s),
-                (false, Some(since)) if t_s - since >= WATCHED_TUMBLE_S => {
-                    // The host has the directions it needs: put the board down from here.
-                    let here = self.motion_at(t_s).q_body_to_world;
-                    self.turn(here, self.rest, t_s)?;
-                    self.phase = PersonPhase::Rest;
-                    self.tumble_watched_since_s = None;
+            match self.tumble_watched_since_s {
+                None if prompts.streaming => {
+                    self.tumble_watched_since_s = Some((t_s, prompts.stream_stops));
                 }
-                // A stream stopped at once (the end of the positions) does not count.
-                (false, Some(_)) => self.tumble_watched_since_s = None,
+                Some((since, stops)) if prompts.stream_stops > stops => {
+                    if t_s - since >= WATCHED_TUMBLE_S {
+                        // The host has the directions it needs: put the board down from here.
+                        let here = self.motion_at(t_s).q_body_to_world;
+                        self.turn(here, self.rest, t_s)?;
+                        self.phase = PersonPhase::Rest;
+                        self.tumble_watched_since_s = None;
+                    } else {
+                        // A stream stopped at once (the end of the positions) does not count.
+                        self.tumble_watched_since_s =
+                            prompts.streaming.then_some((t_s, prompts.stream_stops));
+                    }
+                }
                 _ => {}
             }
         }
@@ -324,15 +357,23 @@ impl Person {
         self.segment.motion_at(t_s - self.segment_start_s)
     }
 
-    /// The plan of hold `index` of the schedule, `None` after the last round.
-    fn hold_plan(&self, index: usize) -> Option<&HoldPlan> {
+    /// The plan of hold `index` of the schedule: one of the twelve, then the corners; `None`
+    /// after the last corner.
+    fn hold_plan(&self, index: usize) -> Option<&PlacedHold> {
         if index >= self.hold_count {
-            return None;
+            return self.corners.get(index - self.hold_count);
         }
         self.holds.get(index.checked_rem(self.holds.len())?)
     }
 
-    fn begin_hold(&mut self, index: usize, start_s: f64, captures: u64) -> Result<(), SimError> {
+    /// Whether the current hold is one of the corners.
+    fn is_corner(&self) -> bool {
+        matches!(self.phase, PersonPhase::Hold { index } if index >= self.hold_count)
+    }
+
+    fn begin_hold(&mut self, index: usize, start_s: f64, prompts: Prompts) -> Result<(), SimError> {
+        let captures = prompts.poses_captured;
+        self.hold_requests_at_start = prompts.capture_requests;
         let Some(plan) = self.hold_plan(index) else {
             return self.begin_tumble(0, start_s);
         };
@@ -369,12 +410,15 @@ impl Person {
     }
 
     fn next_segment(&mut self, prompts: Prompts) -> Result<(), SimError> {
-        let captures = prompts.poses_captured;
         let start = self.segment_end_s;
         match self.phase {
             PersonPhase::Hold { index } => {
                 let from = self.hold_plan(index).map_or(self.rest, |h| h.orientation);
-                match self.hold_plan(index + 1) {
+                // After a corner the host did not want, the tumble.
+                let next = (!self.corners_done)
+                    .then(|| self.hold_plan(index + 1))
+                    .flatten();
+                match next {
                     Some(next) => {
                         let to = next.orientation;
                         self.turn(from, to, start)?;
@@ -386,7 +430,7 @@ impl Person {
                     }
                 }
             }
-            PersonPhase::TurnToHold { index } => self.begin_hold(index, start, captures)?,
+            PersonPhase::TurnToHold { index } => self.begin_hold(index, start, prompts)?,
             PersonPhase::Tumble { index } => self.begin_tumble(index + 1, start)?,
             PersonPhase::Rest => {
                 let here = self.segment.motion_at(self.segment.duration_s());

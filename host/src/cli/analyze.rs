@@ -15,6 +15,7 @@ use imucal::pipeline::gyro::gyro_unit_scale;
 use imucal::session::{analyse_poses, extend_set, load_poses};
 
 use super::args::{AnalyzeArgs, InputArgs};
+use super::write_policy::{check_outputs, Output};
 
 /// Analyse a session directory from its poses; optionally write the extended set.
 fn run_session_dir(args: &AnalyzeArgs, dir: &std::path::Path) -> anyhow::Result<()> {
@@ -106,6 +107,14 @@ fn resolve_input(path: &std::path::Path) -> anyhow::Result<PathBuf> {
 
 /// Run the command.
 pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
+    let outputs: Vec<Output> = [
+        args.report.as_deref().map(Output::Dir),
+        args.write_params.as_deref().map(Output::File),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    check_outputs(&outputs, &super::input_paths(&args.input), args.force)?;
     let references = super::references(&args.reference)?;
     if is_pose_session(&args.input.recording) {
         return run_session_dir(args, &args.input.recording);

@@ -30,7 +30,7 @@ pub enum Command {
     Still(StillArgs),
     /// Analyse the residual of the fitted models: noise floor, candidate effects, held-out error.
     Analyze(AnalyzeArgs),
-    /// Board commands: ports, info, flash, stream, record.
+    /// Board commands: ports, info, flash, stream, record, params.
     #[command(flatten)]
     Device(super::device::DeviceCommand),
     /// Guided calibration of a board (or `--sim`): positions, magnetometer, fit, write, verify.
@@ -227,6 +227,10 @@ pub struct FitArgs {
     /// and `imucal flash`; sensors not fitted are listed in it with the reason.
     #[arg(long, value_name = "FILE")]
     pub params_out: Option<PathBuf>,
+    /// Replace the --params-out file that already exist (an output that is also an input is never
+    /// replaced).
+    #[arg(long)]
+    pub force: bool,
     /// With --params-out: the board the recording came from, as the history names it
     /// (default: the device id in the recording's provenance, else the recording's file name).
     #[arg(long, value_name = "ID", requires = "params_out")]
@@ -254,6 +258,9 @@ pub struct ReportArgs {
     /// Directory for `report.html` (default: the session directory, or `<recording>_report`).
     #[arg(long, short = 'o')]
     pub out: Option<PathBuf>,
+    /// Replace a `report.html` already in the output directory.
+    #[arg(long)]
+    pub force: bool,
     /// History database whose records of the session's board are plotted over time
     /// (default: `$IMUCAL_DB`, else the default file when it exists).
     #[arg(long, value_name = "URL")]
@@ -282,6 +289,10 @@ pub struct AnalyzeArgs {
     ///          imucal flash extended.json
     #[arg(long, verbatim_doc_comment)]
     pub write_params: Option<PathBuf>,
+    /// Replace an existing --write-params file, or write into a --report directory that
+    /// already holds files.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Arguments of `imucal still`.
@@ -390,6 +401,10 @@ pub struct CalibrateArgs {
     /// was measured.
     #[arg(long, short = 'o', conflicts_with = "resume")]
     pub out: Option<PathBuf>,
+    /// Write the session into a directory that already holds files (by default such a
+    /// directory, e.g. an earlier session, is refused before the board is opened).
+    #[arg(long, conflicts_with = "resume")]
+    pub force: bool,
     /// Continue the unfinished session saved in SESSION_DIR on the same board: the positions
     /// already captured are not asked for again, and the directory is updated.
     #[arg(long, value_name = "SESSION_DIR")]

@@ -27,7 +27,7 @@ use super::args::CalibrateArgs;
 use super::calibrate_extend::close_the_loop;
 use super::calibrate_sim::Simulated;
 use super::calibrate_view::{before_after_table, Terminal};
-use super::write_policy::{refused_poor, WriteDecision, WritePolicy};
+use super::write_policy::{check_outputs, refused_poor, Output, WriteDecision, WritePolicy};
 
 fn duration_arg(name: &str, seconds: f64) -> anyhow::Result<Duration> {
     anyhow::ensure!(
@@ -135,8 +135,23 @@ pub(super) fn session_options(
     })
 }
 
+/// The session directory (`--resume`, `-o`, or a new `imucal-session-<unix time>`), refused
+/// before the board is opened when a new session would write into an earlier one's files.
+pub(super) fn checked_session_dir(args: &CalibrateArgs) -> anyhow::Result<PathBuf> {
+    if let Some(dir) = &args.resume {
+        return Ok(dir.clone());
+    }
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("imucal-session-{}", unix_now())));
+    check_outputs(&[Output::Dir(&dir)], &[], args.force)?;
+    Ok(dir)
+}
+
 /// Run `imucal calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let dir = checked_session_dir(args)?;
     let simulated = if args.sim {
         Some(Simulated::start(args)?)
     } else {
@@ -174,11 +189,6 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         welcome.firmware_version.patch,
         welcome.scales.sample_rate_hz
     );
-    let dir = args
-        .resume
-        .clone()
-        .or_else(|| args.out.clone())
-        .unwrap_or_else(|| PathBuf::from(format!("imucal-session-{}", unix_now())));
     let control = SessionControl {
         resume: match &args.resume {
             Some(dir) => resumed_poses(dir, &welcome.device_id.to_string())?,

@@ -4,7 +4,6 @@
 //! sketch board runs in-process behind a pseudo-terminal.
 
 use std::io::IsTerminal;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
@@ -16,7 +15,7 @@ use imucal::session::motioncal::{
 };
 
 use super::args::CalibrateArgs;
-use super::calibrate::{field_reference, session_options};
+use super::calibrate::{checked_session_dir, field_reference, session_options};
 use super::calibrate_view::Terminal;
 use super::write_policy::WritePolicy;
 
@@ -25,6 +24,12 @@ const ECHO_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// Run the session on a MotionCal sketch board.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.resume.is_none(),
+        "--resume continues sessions of imucal's firmware; a MotionCal sketch session is short, \
+         start it again"
+    );
+    let dir = checked_session_dir(args)?;
     let field_ut = field_reference(args)?;
     let options = MotionCalOptions {
         session: session_options(args, field_ut)?,
@@ -63,10 +68,6 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let outcome = run_motioncal_session(&mut client, &options, &mut terminal)?;
     terminal.bar.finish_and_clear();
 
-    let dir = args.out.clone().unwrap_or_else(|| {
-        let now = imucal::pipeline::calibrate::now_unix_s();
-        PathBuf::from(format!("imucal-session-{now}"))
-    });
     save_motioncal_session(&outcome, &dir).with_context(|| {
         format!(
             "the session directory `{}` could not be written",

@@ -1,16 +1,18 @@
-//! Board commands: `ports`, `info`, `flash`, `stream`, `record`. Thin wrappers over
-//! `imucal::device`.
+//! Board commands: `ports`, `info`, `flash`, with `stream` and `record` in `device_stream.rs`
+//! and `params` in `params.rs`. Thin wrappers over `imucal::device`; `--sim` puts the simulated
+//! board of `device_sim.rs` behind the port.
 
-use std::io::Write;
 use std::path::PathBuf;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
-use anyhow::Context;
 use clap::{Args, Subcommand};
-use imucal::device::{
-    choose_port, list_ports, DeviceClient, ParamsFile, RecordingWriter, SampleChunk, UnitSample,
-};
+use imucal::device::{choose_port, list_ports, DeviceClient, ParamsFile};
 use imucal_protocol::{CalibrationSet, SensorSet, StreamKind, Welcome};
+
+use super::args::BoardProtocol;
+use super::device_sim::SimBoard;
+use super::device_stream::{record, stream, RecordArgs, StreamArgs};
+use super::params::ParamsCommand;
 
 /// Commands that talk to a board.
 #[derive(Debug, Subcommand)]
@@ -30,15 +32,22 @@ pub enum DeviceCommand {
     /// Print the board's samples as they arrive (raw counts in units, or calibrated).
     #[command(
         after_help = "Examples:\n  imucal stream --port /dev/ttyACM0 --seconds 5\n  \
-        imucal stream --calibrated --csv --seconds 10 > check.csv"
+        imucal stream --calibrated --csv --seconds 10 > check.csv\n  \
+        imucal stream --port /dev/ttyACM0 --protocol motioncal      (a MotionCal sketch board)\n  \
+        imucal stream --sim --seconds 5"
     )]
     Stream(StreamArgs),
     /// Record the raw stream (in m/s², rad/s, µT, °C) to a recording CSV for `imucal fit`.
     #[command(
-        after_help = "Example:\n  imucal record --port /dev/ttyACM0 -o rest.csv --seconds 60\n\n\
-        Columns: t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c (sensors the board lacks are left out)."
+        after_help = "Examples:\n  imucal record --port /dev/ttyACM0 -o rest.csv --seconds 60\n  \
+        imucal record --port /dev/ttyACM0 --protocol motioncal -o sketch.csv --seconds 60\n\n\
+        Columns: t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c (sensors the board lacks are left out; a \
+        MotionCal sketch prints no temperature, and its times are counted at --sketch-rate)."
     )]
     Record(RecordArgs),
+    /// Read the board's active parameters into a file, or reset them to identity.
+    #[command(subcommand)]
+    Params(ParamsCommand),
 }
 
 /// Which port to use.
@@ -46,8 +55,45 @@ pub enum DeviceCommand {
 pub struct PortArgs {
     /// Serial port, e.g. /dev/ttyACM0, COM3, or a pseudo-terminal of the simulator (default:
     /// the only likely board from `imucal ports`).
-    #[arg(long, short = 'p')]
+    #[arg(long, short = 'p', conflicts_with = "sim")]
     pub port: Option<String>,
+    /// Use a simulated board started in-process (real time, identity parameters at start).
+    #[arg(long)]
+    pub sim: bool,
+    /// Simulator: seed of the board's sensor errors, noise and device id.
+    #[arg(long, default_value_t = 1, requires = "sim")]
+    pub sim_seed: u64,
+}
+
+/// The serial port a command opens, and with `--sim` the simulated board serving it, which
+/// lives as long as this value.
+pub struct BoardPort {
+    /// The port's path.
+    pub path: String,
+    _sim: Option<SimBoard>,
+}
+
+impl PortArgs {
+    /// The port given, the simulated board's (running `protocol`), or the only likely board
+    /// (announced on stderr).
+    pub(super) fn open_board(&self, protocol: BoardProtocol) -> anyhow::Result<BoardPort> {
+        if self.sim {
+            let sim = SimBoard::start(self.sim_seed, protocol)?;
+            return Ok(BoardPort {
+                path: sim.port(),
+                _sim: Some(sim),
+            });
+        }
+        let path = match &self.port {
+            Some(port) => port.clone(),
+            None => {
+                let chosen = choose_port(&list_ports()?)?.path.clone();
+                eprintln!("using port {chosen}");
+                chosen
+            }
+        };
+        Ok(BoardPort { path, _sim: None })
+    }
 }
 
 /// Arguments of `imucal flash`.
@@ -92,41 +138,6 @@ impl SensorArg {
     }
 }
 
-/// Arguments of `imucal stream`.
-#[derive(Debug, Args)]
-pub struct StreamArgs {
-    /// Which port to use.
-    #[command(flatten)]
-    pub port: PortArgs,
-    /// Stream samples calibrated by the board instead of raw counts × scale.
-    #[arg(long)]
-    pub calibrated: bool,
-    /// Print the recording CSV format instead of readable lines.
-    #[arg(long)]
-    pub csv: bool,
-    /// Stop after this many seconds (default: until interrupted).
-    #[arg(long)]
-    pub seconds: Option<f64>,
-    /// Send only every N-th sample.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
-    pub decimation: u16,
-}
-
-/// Arguments of `imucal record`.
-#[derive(Debug, Args)]
-pub struct RecordArgs {
-    /// Which port to use.
-    #[command(flatten)]
-    pub port: PortArgs,
-    /// Output CSV file.
-    #[arg(long, short = 'o')]
-    pub output: PathBuf,
-    /// Stop after this many seconds (default: until interrupted; the file is flushed as it
-    /// grows).
-    #[arg(long)]
-    pub seconds: Option<f64>,
-}
-
 /// Runs a board command.
 pub fn run(command: &DeviceCommand) -> anyhow::Result<()> {
     match command {
@@ -135,6 +146,7 @@ pub fn run(command: &DeviceCommand) -> anyhow::Result<()> {
         DeviceCommand::Flash(args) => flash(args),
         DeviceCommand::Stream(args) => stream(args),
         DeviceCommand::Record(args) => record(args),
+        DeviceCommand::Params(command) => super::params::run(command),
     }
 }
 
@@ -159,20 +171,11 @@ fn ports() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The port given, or the only likely board (announced on stderr).
-fn resolve_port(args: &PortArgs) -> anyhow::Result<String> {
-    if let Some(port) = &args.port {
-        return Ok(port.clone());
-    }
-    let ports = list_ports()?;
-    let chosen = choose_port(&ports)?.path.clone();
-    eprintln!("using port {chosen}");
-    Ok(chosen)
-}
-
-fn connect(args: &PortArgs) -> anyhow::Result<DeviceClient> {
-    let port = resolve_port(args)?;
-    Ok(DeviceClient::open(&port)?)
+/// A client of the board running imucal's firmware at `args`; keep the [`BoardPort`] while
+/// the client is in use.
+pub(super) fn connect(args: &PortArgs) -> anyhow::Result<(DeviceClient, BoardPort)> {
+    let board = args.open_board(BoardProtocol::Imucal)?;
+    Ok((DeviceClient::open(&board.path)?, board))
 }
 
 fn sensor_list(sensors: &SensorSet) -> String {
@@ -193,7 +196,7 @@ fn sensor_list(sensors: &SensorSet) -> String {
 }
 
 fn info(args: &PortArgs) -> anyhow::Result<()> {
-    let mut client = connect(args)?;
+    let (mut client, _board) = connect(args)?;
     let rtt = client.ping()?;
     let status = client.status()?;
     let params = client.get_params()?;
@@ -256,7 +259,7 @@ fn info(args: &PortArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn describe_params(set: &CalibrationSet) -> String {
+pub(super) fn describe_params(set: &CalibrationSet) -> String {
     let identity = CalibrationSet::identity();
     if set.accel == identity.accel && set.gyro == identity.gyro && set.mag == identity.mag {
         return "identity (uncalibrated)".to_string();
@@ -289,7 +292,7 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
         );
     }
     let mut set = file.to_calibration_set(&shown)?;
-    let mut client = connect(&args.port)?;
+    let (mut client, _board) = connect(&args.port)?;
     check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
     merge_with_active(&mut client, &file, &mut set, &args.reset, &shown)?;
     let status = client.write_params_verified(&set)?;
@@ -428,159 +431,5 @@ fn merge_with_active(
             sensor.key()
         );
     }
-    Ok(())
-}
-
-fn seconds_arg(seconds: Option<f64>) -> anyhow::Result<Option<Duration>> {
-    match seconds {
-        None => Ok(None),
-        Some(s) if s.is_finite() && s > 0.0 && s < 1e9 => Ok(Some(Duration::from_secs_f64(s))),
-        Some(s) => anyhow::bail!("--seconds {s} is not a positive number of seconds"),
-    }
-}
-
-/// Whether to go on streaming after a chunk.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Flow {
-    Continue,
-    Stop,
-}
-
-/// `Flow::Stop` when the reader of stdout has gone (e.g. `| head`), which ends a stream normally.
-fn output_flow(written: std::io::Result<()>) -> anyhow::Result<Flow> {
-    match written {
-        Ok(()) => Ok(Flow::Continue),
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(Flow::Stop),
-        Err(e) => Err(e.into()),
-    }
-}
-
-/// Streams until `limit` (or forever), handing each chunk to `on_chunk`; stops the stream at
-/// the end and reports lost samples.
-fn run_stream(
-    client: &mut DeviceClient,
-    kind: StreamKind,
-    decimation: u16,
-    limit: Option<Duration>,
-    on_chunk: &mut dyn FnMut(&SampleChunk) -> anyhow::Result<Flow>,
-) -> anyhow::Result<()> {
-    client.start_stream(kind, decimation)?;
-    let start = Instant::now();
-    // A stream silent this long has stopped: batches come several times a second.
-    let silence = Duration::from_secs(3);
-    let result = (|| loop {
-        let wait = match limit {
-            Some(limit) => limit.saturating_sub(start.elapsed()).min(silence),
-            None => silence,
-        };
-        if wait.is_zero() {
-            return Ok(());
-        }
-        match client.next_samples(wait)? {
-            Some(chunk) => {
-                for line in client.drain_logs() {
-                    eprintln!("board {:?}: {}", line.level, line.text);
-                }
-                if on_chunk(&chunk)? == Flow::Stop {
-                    return Ok(());
-                }
-            }
-            None if limit.is_some_and(|l| start.elapsed() >= l) => return Ok(()),
-            None => anyhow::bail!(
-                "{} sent no samples for {} s; check the board with `imucal info`",
-                client.port_name(),
-                silence.as_secs()
-            ),
-        }
-    })();
-    let stopped = client.stop_stream();
-    result?;
-    stopped?;
-    let lost = client.stats().lost_samples;
-    if lost > 0 {
-        eprintln!(
-            "{lost} samples were lost in transit (the link could not keep up; try --decimation)"
-        );
-    }
-    Ok(())
-}
-
-fn stream(args: &StreamArgs) -> anyhow::Result<()> {
-    let limit = seconds_arg(args.seconds)?;
-    let mut client = connect(&args.port)?;
-    let kind = if args.calibrated {
-        StreamKind::Calibrated
-    } else {
-        StreamKind::Raw
-    };
-    let stdout = std::io::stdout();
-    if args.csv {
-        let mut writer = RecordingWriter::new(stdout.lock(), client.welcome().sensors)?;
-        run_stream(&mut client, kind, args.decimation, limit, &mut |chunk| {
-            output_flow(chunk.samples.iter().try_for_each(|s| writer.write(s)))
-        })?;
-        // The reader may be gone; nothing is lost by not flushing to it.
-        let _ = writer.finish();
-    } else {
-        let mut out = stdout.lock();
-        run_stream(&mut client, kind, args.decimation, limit, &mut |chunk| {
-            output_flow(
-                chunk
-                    .samples
-                    .iter()
-                    .try_for_each(|s| writeln!(out, "{}", readable(s))),
-            )
-        })?;
-    }
-    Ok(())
-}
-
-fn readable(s: &UnitSample) -> String {
-    let v = |x: &[f64; 3]| format!("{:>9.4} {:>9.4} {:>9.4}", x[0], x[1], x[2]);
-    format!(
-        "t {:>10.4} s  a {} m/s²  g {} rad/s  m {} µT  T {:>6.2} °C",
-        s.t_s,
-        v(&s.accel),
-        v(&s.gyro),
-        v(&s.mag),
-        s.temp_c
-    )
-}
-
-fn record(args: &RecordArgs) -> anyhow::Result<()> {
-    let limit = seconds_arg(args.seconds)?;
-    let mut client = connect(&args.port)?;
-    let shown = args.output.display().to_string();
-    let file = std::fs::File::create(&args.output).with_context(|| {
-        format!("cannot create `{shown}`; check the directory exists and is writable")
-    })?;
-    let mut writer = RecordingWriter::new(std::io::BufWriter::new(file), client.welcome().sensors)
-        .with_context(|| format!("cannot write `{shown}`"))?;
-    let start = Instant::now();
-    let mut last_report = start;
-    run_stream(&mut client, StreamKind::Raw, 1, limit, &mut |chunk| {
-        // Flushed per batch so an interrupted recording is still a valid file.
-        chunk
-            .samples
-            .iter()
-            .try_for_each(|s| writer.write(s))
-            .and_then(|()| writer.flush())
-            .with_context(|| format!("cannot write `{shown}`; check the disk space"))?;
-        if last_report.elapsed() >= Duration::from_secs(1) {
-            last_report = Instant::now();
-            eprint!(
-                "\rrecording {shown}: {:.0} s, {} samples",
-                start.elapsed().as_secs_f64(),
-                writer.rows()
-            );
-        }
-        Ok(Flow::Continue)
-    })?;
-    let rows = writer.rows();
-    writer
-        .finish()
-        .with_context(|| format!("cannot write `{shown}`"))?;
-    eprintln!();
-    println!("recorded {rows} samples to {shown}");
     Ok(())
 }

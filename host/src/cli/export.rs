@@ -10,6 +10,8 @@ use imucal::device::ParamsFile;
 use imucal::export::{export_checked_as, ExportFormat};
 use imucal_protocol::{CalibrationSet, SensorCalibration};
 
+use super::write_policy::{check_outputs, Output};
+
 /// Examples shown by `imucal export --help`.
 pub const EXAMPLES: &str = "Examples:\n  \
     imucal export session/params.json --format c-header -o imucal_calibration.h\n  \
@@ -45,10 +47,20 @@ pub struct ExportArgs {
     /// Write to this file instead of standard output.
     #[arg(long, short = 'o')]
     pub out: Option<PathBuf>,
+    /// Replace the -o file when it exists (the parameter file read is never replaced).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Run the command.
 pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
+    if let Some(out) = &args.out {
+        check_outputs(
+            &[Output::File(out)],
+            std::slice::from_ref(&args.params),
+            args.force,
+        )?;
+    }
     let params = ParamsFile::load(&args.params)?;
     let shown = args.params.display().to_string();
     let set = params.to_calibration_set(&shown)?;

@@ -31,6 +31,7 @@ use serde_json::{json, Value};
 use imucal::report::gain::{gain, gain_text};
 
 use super::args::{FitArgs, SensorChoice};
+use super::write_policy::{check_outputs, Output};
 
 /// A 3×3 matrix as rows, the layout of the parameter file.
 fn rows(m: &Mat3) -> [[f64; 3]; 3] {
@@ -273,18 +274,8 @@ fn chain_json(chain: &imucal::pipeline::ChainChoice) -> Value {
     })
 }
 
-/// Write the parameter file, refusing to overwrite the recording it was fitted from.
-fn write_params(
-    calibration: &RecordingCalibration,
-    path: &Path,
-    source: &Path,
-) -> anyhow::Result<ParamsFile> {
-    if path == source {
-        bail!(
-            "--params-out `{}` is the recording itself; choose another file name",
-            path.display()
-        );
-    }
+/// Write the parameter file (checked as an output before the fit).
+fn write_params(calibration: &RecordingCalibration, path: &Path) -> anyhow::Result<ParamsFile> {
     let file = params_file(calibration);
     std::fs::write(path, file.to_json())
         .with_context(|| format!("could not write the parameter file `{}`", path.display()))?;
@@ -325,6 +316,13 @@ fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
 
 /// Run the command.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    if let Some(path) = &args.params_out {
+        check_outputs(
+            &[Output::File(path)],
+            &super::input_paths(&args.input),
+            args.force,
+        )?;
+    }
     let references = super::references(&args.reference)?;
     let recording = super::load(&args.input)?;
     let sensors = requested(args, &recording)?;
@@ -365,10 +363,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     }
     // Recorded once the parameter file holds the fit; a failure is returned last.
     let recorded = match &args.params_out {
-        Some(path) => record_fit(
-            args,
-            write_params(&calibration, path, &args.input.recording)?,
-        ),
+        Some(path) => record_fit(args, write_params(&calibration, path)?),
         None => Ok(()),
     };
     let failed = calibration.failures();

@@ -8,14 +8,19 @@ pub mod calibrate_motioncal;
 mod calibrate_sim;
 mod calibrate_view;
 pub mod device;
+mod device_sim;
+pub mod device_stream;
 pub mod export;
 pub mod fit;
 pub mod fleet;
 pub mod history;
 pub mod import;
+pub mod params;
 pub mod report;
 pub mod still;
 mod write_policy;
+
+use std::path::PathBuf;
 
 use anyhow::Context;
 use imucal::pipeline::{InputOptions, ReferenceError, References};
@@ -69,6 +74,32 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
         }),
     };
     Recording::load(&input.recording, &options).context("the recording could not be read")
+}
+
+/// The files a command reads for `input`: the recording (or a session directory's files), its
+/// magnetometer and gyroscope files. An output that is one of them is refused.
+pub fn input_paths(input: &InputArgs) -> Vec<PathBuf> {
+    let recording = &input.recording;
+    let mut paths = vec![recording.clone()];
+    if recording.is_dir() {
+        paths.extend(
+            [
+                "recording.csv",
+                "poses.json",
+                "params.json",
+                "params-base.json",
+            ]
+            .map(|name| recording.join(name)),
+        );
+    }
+    let mag = match &input.mag_file {
+        Some(path) => Some(path.clone()),
+        None if !input.no_mag_sibling => imucal::recording::sibling_mag_file(recording),
+        None => None,
+    };
+    paths.extend(mag);
+    paths.extend(input.gyro_file.clone());
+    paths
 }
 
 /// How the pipeline forms its input, from the command line.

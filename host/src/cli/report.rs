@@ -8,10 +8,11 @@ use imucal::fit::Vec3;
 use imucal::geomag::{local_field_today, LocalField, RadiusCheck};
 use imucal::pipeline::{calibrate, check_input, FitOptions};
 use imucal::report::recording::from_calibration;
-use imucal::report::{from_session_dir, write_report, ReportData};
+use imucal::report::{from_session_dir, write_report, ReportData, REPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::ReportArgs;
+use super::write_policy::{check_outputs, Output};
 
 fn progress(steps: u64) -> ProgressBar {
     let bar = ProgressBar::new(steps);
@@ -96,6 +97,17 @@ fn default_out(path: &Path, is_session: bool) -> PathBuf {
 
 /// Run the command.
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
+    let path = &args.input.recording;
+    let is_session = path.is_dir();
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| default_out(path, is_session));
+    check_outputs(
+        &[Output::FileInNewDir(&out.join(REPORT_FILE))],
+        &super::input_paths(&args.input),
+        args.force,
+    )?;
     super::references(&args.reference)?;
     let field = args
         .reference
@@ -103,8 +115,6 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         .as_ref()
         .map(local_field_today)
         .transpose()?;
-    let path = &args.input.recording;
-    let is_session = path.is_dir();
     let bar = progress(4);
     let mut data = if is_session {
         bar.set_message("reading the session directory");
@@ -132,10 +142,6 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         }
     }
     bar.set_message("drawing the plots");
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| default_out(path, is_session));
     let written = write_report(&data, &out)?;
     bar.inc(1);
     bar.finish_and_clear();

@@ -1,9 +1,14 @@
 //! Whether a fitted set may be written to a board: a poor verdict is never written unless the
 //! user says so (`--accept-poor`, or an explicit "y" at the prompt, whose default is "no").
+//! Whether a command may write its output files is [`outputs`].
 
 use std::io::{BufRead, IsTerminal, Write};
 
 use imucal::session::VerdictLevel;
+
+mod outputs;
+
+pub(super) use outputs::{check_outputs, Output};
 
 /// The user's standing answers for writing a set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -38,13 +43,10 @@ impl WritePolicy {
         } else {
             ("", "[Y/n]")
         };
-        eprint!("{question}{suffix}? {choices} ");
-        let _ = std::io::stderr().flush();
-        let mut answer = String::new();
-        if std::io::stdin().lock().read_line(&mut answer).is_err() {
+        let Some(answer) = ask(&format!("{question}{suffix}? {choices} ")) else {
             return WriteDecision::Declined;
-        }
-        match (answer.trim().to_lowercase().as_str(), poor) {
+        };
+        match (answer.as_str(), poor) {
             ("y" | "yes", _) => WriteDecision::Write,
             ("", false) => WriteDecision::Write,
             ("", true) => WriteDecision::RefusedPoor,
@@ -68,6 +70,41 @@ impl WritePolicy {
             })
         } else {
             None
+        }
+    }
+}
+
+/// Asks `prompt` on the terminal; the answer trimmed and in lower case, `None` when standard
+/// input cannot be read.
+fn ask(prompt: &str) -> Option<String> {
+    eprint!("{prompt}");
+    let _ = std::io::stderr().flush();
+    let mut answer = String::new();
+    std::io::stdin().lock().read_line(&mut answer).ok()?;
+    Some(answer.trim().to_lowercase())
+}
+
+/// Consent to a destructive step: `--yes`, or a "y" typed at the terminal (default "no").
+pub(super) struct Confirmation {
+    yes: bool,
+}
+
+impl Confirmation {
+    /// Refused at once, before anything is done, when there is neither `--yes` nor a terminal
+    /// to ask; `refusal` names the flag that confirms.
+    pub(super) fn possible(yes: bool, refusal: &str) -> anyhow::Result<Self> {
+        anyhow::ensure!(yes || std::io::stdin().is_terminal(), "{refusal}");
+        Ok(Self { yes })
+    }
+
+    /// Asks `question` unless `--yes` answered it; an answer other than "y" is an error.
+    pub(super) fn ask(&self, question: &str) -> anyhow::Result<()> {
+        if self.yes {
+            return Ok(());
+        }
+        match ask(&format!("{question}? [y/N] ")).as_deref() {
+            Some("y" | "yes") => Ok(()),
+            _ => anyhow::bail!("not confirmed; nothing was changed"),
         }
     }
 }

@@ -738,14 +738,17 @@ th{background:#f4f4f4;text-align:left}.std{color:#777}.small{color:#666;font-siz
 .verdict{font-size:18px;font-weight:bold;padding:8px 12px;display:inline-block;border-radius:4px}\
 .good{background:#d9f0d3}.marginal{background:#fee8c8}.poor{background:#f4c7c3}";
 
-/// Writes `report.html` into `dir` (created if missing) and returns its path.
+/// The name of the report file in its directory.
+pub const REPORT_FILE: &str = "report.html";
+
+/// Writes [`REPORT_FILE`] into `dir` (created if missing) and returns its path.
 pub fn write_report(data: &ReportData, dir: &Path) -> Result<PathBuf, ReportError> {
     let html = render_html(data)?;
     std::fs::create_dir_all(dir).map_err(|cause| ReportError::Write {
         path: dir.display().to_string(),
         cause,
     })?;
-    let path = dir.join("report.html");
+    let path = dir.join(REPORT_FILE);
     std::fs::write(&path, html).map_err(|cause| ReportError::Write {
         path: path.display().to_string(),
         cause,

@@ -3,7 +3,7 @@
 //! gyroscope's scale fit integrates it). The next orientation prompted is the one that most
 //! reduces the worst-direction error of the accelerometer fit ([`plan`]); each hold lasts until
 //! its mean is as good as the fit needs ([`hold`]). After the twelve, corner positions are asked
-//! for when the fit's covariance says they help.
+//! for when the fit's covariance says they help, and no more of them once it meets its target.
 
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
@@ -22,20 +22,26 @@ use crate::fit::norm_lm::fit_accel_lm;
 use crate::fit::{Pose, Vec3};
 
 impl<L: Read + Write> Runner<'_, L> {
-    /// Capture every target of `targets` not yet in `captured`. Returns `false` when
-    /// `timeout` passed without progress and `give_up_quietly` is set.
+    /// Capture the targets of `targets` not yet in `captured`, at most `most` of them, fewer
+    /// once `enough` says the poses captured so far suffice (it is asked after each capture).
+    /// Returns `false` when `timeout` passed without progress and `give_up_quietly` is set.
     pub(super) fn capture_targets(
         &mut self,
         targets: &[Target],
         captured: &mut Vec<CapturedPose>,
         timeout: Duration,
         give_up_quietly: bool,
+        most: usize,
+        enough: &dyn Fn(&[CapturedPose]) -> bool,
     ) -> Result<bool, SessionError> {
-        let total = captured.len()
-            + targets
-                .iter()
-                .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
-                .count();
+        let start = captured.len();
+        let total = start
+            + most.min(
+                targets
+                    .iter()
+                    .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
+                    .count(),
+            );
         self.start_watching()?;
         let mut last_progress = Instant::now();
         let mut prompted = None;
@@ -48,7 +54,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 .iter()
                 .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
                 .collect();
-            if needed.is_empty() {
+            if needed.is_empty() || captured.len() >= total || enough(captured) {
                 return Ok(true);
             }
             if choice.is_none_or(|(count, _)| count != captured.len()) {
@@ -189,19 +195,14 @@ impl<L: Read + Write> Runner<'_, L> {
         captured: &mut Vec<CapturedPose>,
     ) -> Result<String, SessionError> {
         let target_mg = self.options.budgets.accel_mg / 4.0;
-        let mg = 1000.0 / solve::STANDARD_GRAVITY;
-        let poses: Vec<Pose> = captured
-            .iter()
-            .map(|p| solve::pose_of(&p.stats, solve::accel_of))
-            .collect();
-        let fit = fit_accel_lm(&poses, self.options.gravity_mps2)?;
-        let Some(predicted) = solve::max_norm_sigma(&fit).map(|s| s * mg) else {
+        let predicted = expected_norm_error_mg(captured, self.options.gravity_mps2);
+        if !predicted.is_finite() {
             return Ok(
-                "the accelerometer fit gave no covariance, so the benefit of extra positions \
-                 could not be judged; none were asked for"
+                "the accelerometer fit of the positions failed or gave no covariance, so the \
+                 benefit of extra positions could not be judged; none were asked for"
                     .into(),
             );
-        };
+        }
         if predicted <= target_mg {
             return Ok(format!(
                 "{} positions give an expected |a| error of {predicted:.3} mg (1σ), within the \
@@ -217,37 +218,43 @@ impl<L: Read + Write> Runner<'_, L> {
                  target, but extra positions are switched off"
             ));
         }
-        let mut corners = targets::corner_positions(captured.len().max(12));
-        corners.sort_by(|a, b| {
-            let sa = solve::norm_sigma_at(&fit, &a.up).unwrap_or(0.0);
-            let sb = solve::norm_sigma_at(&fit, &b.up).unwrap_or(0.0);
-            sb.total_cmp(&sa)
-        });
-        corners.truncate(self.options.max_extra_poses);
+        // Any corner helps; the prompt names the one that helps most ([`plan`]), and the
+        // phase ends as soon as the expected error meets the target.
+        let corners = targets::corner_positions(captured.len().max(12));
+        let gravity = self.options.gravity_mps2;
+        let most = self.options.max_extra_poses;
+        let before = captured.len();
+        let enough =
+            move |poses: &[CapturedPose]| expected_norm_error_mg(poses, gravity) <= target_mg;
         self.observer.event(&SessionEvent::Note(format!(
             "the expected |a| error is {predicted:.3} mg (1σ), above the {target_mg:.2} mg \
-             target: {} more positions will help ({})",
-            corners.len(),
-            names(&corners.iter().collect::<Vec<_>>())
+             target: up to {most} corner positions will help (any corner; the phase ends once \
+             the target is met)"
         )));
-        let before = captured.len();
-        let complete =
-            self.capture_targets(&corners, captured, self.options.extra_pose_timeout, true)?;
+        let complete = self.capture_targets(
+            &corners,
+            captured,
+            self.options.extra_pose_timeout,
+            true,
+            most,
+            &enough,
+        )?;
         if complete {
             self.client.stop_stream()?;
         }
         let added = captured.len() - before;
+        let now = expected_norm_error_mg(captured, gravity);
         Ok(if complete {
             format!(
-                "the expected |a| error with 12 positions was {predicted:.3} mg (1σ), above the \
-                 {target_mg:.2} mg target; {added} corner positions were added"
+                "the expected |a| error with {before} positions was {predicted:.3} mg (1σ), above \
+                 the {target_mg:.2} mg target; {added} corner positions were added, giving \
+                 {now:.3} mg"
             )
         } else {
             format!(
-                "the expected |a| error with 12 positions was {predicted:.3} mg (1σ), above the \
-                 {target_mg:.2} mg target; {added} of {} corner positions were held before the \
-                 {:.0} s limit, so the fit goes on with what there is",
-                corners.len(),
+                "the expected |a| error with {before} positions was {predicted:.3} mg (1σ), above \
+                 the {target_mg:.2} mg target; {added} corner positions were held before the \
+                 {:.0} s limit ({now:.3} mg), so the fit goes on with what there is",
                 self.options.extra_pose_timeout.as_secs_f64()
             )
         })
@@ -268,6 +275,43 @@ impl<L: Read + Write> Runner<'_, L> {
                 self.observer.event(&SessionEvent::Note(text));
             }
             self.lacking_axis = axis;
+        }
+    }
+}
+
+/// The accelerometer norm fit's expected `|a|` error in its worst direction, mg (1σ), for
+/// `captured`; infinite when the fit fails or gives no covariance.
+fn expected_norm_error_mg(captured: &[CapturedPose], gravity: f64) -> f64 {
+    let poses: Vec<Pose> = captured
+        .iter()
+        .map(|p| solve::pose_of(&p.stats, solve::accel_of))
+        .collect();
+    fit_accel_lm(&poses, gravity)
+        .ok()
+        .and_then(|fit| solve::max_norm_sigma(&fit))
+        .map_or(f64::INFINITY, |s| s * 1000.0 / solve::STANDARD_GRAVITY)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::session::plan::tests::pose;
+    use crate::session::targets::{corner_positions, twelve_positions};
+
+    #[test]
+    fn each_corner_lowers_the_expected_norm_error_left_by_the_twelve() {
+        let g = 9.8;
+        let mut poses: Vec<CapturedPose> = twelve_positions().iter().map(|t| pose(t, g)).collect();
+        let mut before = expected_norm_error_mg(&poses, g);
+        assert!(before.is_finite() && before > 0.0, "{before}");
+        for corner in corner_positions(12).iter().take(4) {
+            poses.push(pose(corner, g));
+            let after = expected_norm_error_mg(&poses, g);
+            assert!(
+                after < before,
+                "{after} mg after a corner, {before} mg before"
+            );
+            before = after;
         }
     }
 }

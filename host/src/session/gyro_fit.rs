@@ -11,13 +11,18 @@
 //! Scale and misalignment: the moves' gravity directions depend on the gyroscope matrix through
 //! the sway correction of their still ends ([`super::gyro_moves`]), so the fit is run twice,
 //! the second time with the ends turned by the first result.
+//!
+//! The σ of `A` adds to the moves' scatter what the fit inherits from the accelerometer's
+//! calibration and the bias ([`super::gyro_nuisance`]): errors common to every move.
 
 use nalgebra::UnitQuaternion;
 use serde::Serialize;
 
 use super::gyro_moves::{motions_of, tilt_per_axis_deg};
+use super::gyro_nuisance::{inherited_covariance, Nuisance};
 use super::solve::{SessionFit, VerdictLevel};
 use crate::device::UnitSample;
+use crate::fit::covariance::{calibration_std, FULL_MATRIX_LAYOUT};
 use crate::fit::gyro_scale::{fit_gyro_scale, integrate_rotation};
 use crate::fit::{Calibration, CalibrationStd, Fit, FitError, Mat3, Vec3};
 
@@ -117,7 +122,12 @@ pub fn complete_gyro(
         Some(table) => combine(holds, table),
         None => holds,
     };
-    let result = fit_scale(moves, &fit.accel.cal, &bias, still_rate);
+    let nuisance = Nuisance {
+        accel: &fit.accel,
+        bias,
+        bias_sigma,
+    };
+    let result = fit_scale(moves, &nuisance, still_rate);
     let (scale_fit, summary) = match result {
         Ok(found) => found,
         Err(error) => {
@@ -151,17 +161,23 @@ pub fn complete_gyro(
     Ok(summary)
 }
 
-/// Tedaldi's fit on the usable moves, twice (see the module documentation).
+/// Tedaldi's fit on the usable moves, twice (see the module documentation), its covariance
+/// including what it inherits from `nuisance`.
 fn fit_scale(
     moves: &[Vec<UnitSample>],
-    accel: &Calibration,
-    bias: &Vec3,
+    nuisance: &Nuisance<'_>,
     still_rate: f64,
 ) -> Result<(Fit, GyroScale), FitError> {
+    let (accel, bias) = (&nuisance.accel.cal, &nuisance.bias);
     let first = motions_of(moves, accel, &Mat3::identity(), bias, still_rate);
     let rough = fit_gyro_scale(&first, None)?;
     let motions = motions_of(moves, accel, &rough.cal.a, bias, still_rate);
-    let fit = fit_gyro_scale(&motions, Some(&rough.cal.a))?;
+    let mut fit = fit_gyro_scale(&motions, Some(&rough.cal.a))?;
+    let inherited = inherited_covariance(moves, &fit.cal.a, nuisance, still_rate);
+    if let (Some(own), Some(inherited)) = (fit.covariance.as_mut(), inherited) {
+        *own += inherited;
+        fit.std = Some(calibration_std(own, &FULL_MATRIX_LAYOUT));
+    }
     let a = fit.cal.a;
     let sigma = fit.std.map_or(Mat3::zeros(), |s| s.a);
     let mut misalignment: f64 = 0.0;

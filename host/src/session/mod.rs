@@ -12,7 +12,8 @@
 //!    of every move between holds is kept for the gyroscope ([`gyro_moves`]). With
 //!    [`SessionOptions::rounds`] above 1 the twelve are captured that many times over. Afterwards, if the
 //!    covariance of the accelerometer fit says the expected `|a|` error exceeds a quarter of the
-//!    budget, up to four corner positions are asked for as well ([`targets::corner_positions`]).
+//!    budget, corner positions are asked for as well ([`targets::corner_positions`]), until it
+//!    meets that target or four are in.
 //! 2. Magnetometer ([`mag_phase`]): raw samples while the user turns the board, until every one
 //!    of 26 direction regions holds enough samples ([`coverage`]); the moves between the
 //!    positions count, so this only fills in what they left empty.
@@ -36,6 +37,7 @@ pub mod events;
 pub mod extend;
 pub mod gyro_fit;
 pub mod gyro_moves;
+mod gyro_nuisance;
 pub mod hold;
 pub mod journal;
 mod mag_phase;
@@ -116,6 +118,9 @@ pub struct SessionOutcome {
     pub session_seconds: f64,
     /// Wall time of the same span, s.
     pub wall_seconds: f64,
+    /// Wall time the host spent fitting (the board waits meanwhile), s. A simulated board
+    /// running `k`× faster than real time counts it `k` times in `session_seconds`.
+    pub fit_wall_seconds: f64,
     /// Calibrated samples per second of board time during the "after" measurement.
     pub stream_rate_hz: f64,
     /// Samples lost in transit over the whole session.
@@ -198,7 +203,14 @@ fn run_phases<L: Read + Write>(
         } else {
             Vec::new()
         };
-        runner.capture_targets(&twelve, &mut this_round, options.pose_timeout, false)?;
+        runner.capture_targets(
+            &twelve,
+            &mut this_round,
+            options.pose_timeout,
+            false,
+            twelve.len(),
+            &|_| false,
+        )?;
         runner.client.stop_stream()?;
         captured.append(&mut this_round);
     }
@@ -222,6 +234,7 @@ fn run_phases<L: Read + Write>(
         .filter(|m| m.phase != Phase::Rest)
         .map(|m| Vec3::from(m.mag))
         .collect();
+    let fit_start = Instant::now();
     let mut fit = fit_session(
         &captured,
         &solve::thin(&turning, options.mag_max_fit_samples),
@@ -243,6 +256,7 @@ fn run_phases<L: Read + Write>(
         options.gyro_budgets,
     )
     .ok();
+    let fit_wall_seconds = fit_start.elapsed().as_secs_f64();
     runner.journal.fitted(&fit.set)?;
     runner.observer.event(&SessionEvent::Fitted(&fit));
 
@@ -260,6 +274,7 @@ fn run_phases<L: Read + Write>(
         after: None,
         session_seconds: 0.0,
         wall_seconds: 0.0,
+        fit_wall_seconds,
         stream_rate_hz: 0.0,
         lost_samples: 0,
         fit,

@@ -88,12 +88,13 @@ pub fn most_informative<'t>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(in crate::session) mod tests {
     use super::*;
     use crate::session::targets::twelve_positions;
     use imucal_protocol::PoseStats;
 
-    fn pose(target: &Target, gravity: f64) -> CapturedPose {
+    /// A noise-free pose with `target`'s up direction.
+    pub(in crate::session) fn pose(target: &Target, gravity: f64) -> CapturedPose {
         let up = target.up * gravity;
         CapturedPose {
             target: target.clone(),

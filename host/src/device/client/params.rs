@@ -1,5 +1,5 @@
 //! Parameter transfer: read the active set, stage a set under the host's CRC, commit, reset,
-//! and the verified write that reads the committed set back and compares it value by value.
+//! and the verified write and reset that read the active set back and compare it value by value.
 
 use std::io::{Read, Write};
 
@@ -68,6 +68,32 @@ impl<L: Read + Write> DeviceClient<L> {
                 ),
             });
         }
+        self.verify_active(set)?;
+        Ok(committed)
+    }
+
+    /// Makes the identity set active and proves it: the active CRC the board reports and the
+    /// set read back are the identity set's.
+    pub fn reset_params_verified(&mut self) -> Result<ParamStatus, DeviceError> {
+        let identity = CalibrationSet::identity();
+        let status = self.reset_params()?;
+        if status.active_crc != identity.crc32() {
+            return Err(DeviceError::VerifyFailed {
+                port: self.port.clone(),
+                detail: format!(
+                    "active CRC {:#010x} after the reset, {:#010x} is the identity set's",
+                    status.active_crc,
+                    identity.crc32()
+                ),
+            });
+        }
+        self.verify_active(&identity)?;
+        Ok(status)
+    }
+
+    /// Reads the active set back and compares its CRC and every value with `set`.
+    fn verify_active(&mut self, set: &CalibrationSet) -> Result<(), DeviceError> {
+        let crc = set.crc32();
         let back = self.get_params()?;
         let differing: Vec<&str> = [
             ("format_version", back.format_version != set.format_version),
@@ -99,7 +125,7 @@ impl<L: Read + Write> DeviceClient<L> {
                 ),
             });
         }
-        Ok(committed)
+        Ok(())
     }
 
     fn param_request(
