@@ -511,13 +511,12 @@ pub fn draw_effects(
                     });
                 }
                 EffectKind::TemperatureRateBias => {
-                    effects.out_of_family.temperature_rate_bias =
-                        on.then(|| TemperatureRateBias {
-                            per_degree_per_second: signed3(
-                                &mut rng,
-                                size * typ.bias_tempco * THERMAL_LAG_S,
-                            ),
-                        });
+                    effects.out_of_family.temperature_rate_bias = on.then(|| TemperatureRateBias {
+                        per_degree_per_second: signed3(
+                            &mut rng,
+                            size * typ.bias_tempco * THERMAL_LAG_S,
+                        ),
+                    });
                 }
                 EffectKind::CrossAxisNonlinearity => {
                     let r = typ.nonlinearity_reference;

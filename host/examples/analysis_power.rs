@@ -17,11 +17,11 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+use imucal::analysis::report;
 use imucal::open_world::{
     analyse_simulated, base_chi2, detectable_size, parallel_map, Case, Outcome, RecordingShape,
     OUT_OF_FAMILY_CASES, POWER_CASES,
 };
-use imucal::analysis::report;
 use imucal::recording::Sensor;
 use imucal_hil_sim::effects::EffectRequest;
 
@@ -80,10 +80,14 @@ fn parse_options() -> Result<Options, String> {
                     .parse()
                     .map_err(|_| "--oof-seeds takes a number")?
             }
-            "--oof-size" => o.oof_sizes = vec![value("--oof-size")?
-                .parse()
-                .map_err(|_| "--oof-size takes a number")?],
-            "--show" => o.show.push(value("--show")?.parse().map_err(|e| format!("{e}"))?),
+            "--oof-size" => {
+                o.oof_sizes = vec![value("--oof-size")?
+                    .parse()
+                    .map_err(|_| "--oof-size takes a number")?]
+            }
+            "--show" => o
+                .show
+                .push(value("--show")?.parse().map_err(|e| format!("{e}"))?),
             "--seed" => {
                 o.seed = value("--seed")?
                     .parse()
@@ -126,13 +130,14 @@ fn outcomes(case: &Case, size: f64, seeds: &[u64], o: &Options) -> Vec<Outcome> 
 fn controls(seeds: &[u64], o: &Options) -> BTreeMap<u64, Vec<(Sensor, Outcome, Option<f64>)>> {
     let results = parallel_map(seeds, o.threads, |&seed| {
         let a = analyse_simulated(&o.shape.config(seed, &[]));
-        let per_sensor: Vec<(Sensor, Outcome, Option<f64>)> = [Sensor::Accel, Sensor::Gyro, Sensor::Mag]
-            .into_iter()
-            .map(|s| match &a {
-                Ok(a) => (s, Outcome::of_sensor(a, s), base_chi2(a, s)),
-                Err(e) => (s, Outcome::Failed(e.clone()), None),
-            })
-            .collect();
+        let per_sensor: Vec<(Sensor, Outcome, Option<f64>)> =
+            [Sensor::Accel, Sensor::Gyro, Sensor::Mag]
+                .into_iter()
+                .map(|s| match &a {
+                    Ok(a) => (s, Outcome::of_sensor(a, s), base_chi2(a, s)),
+                    Err(e) => (s, Outcome::Failed(e.clone()), None),
+                })
+                .collect();
         (seed, per_sensor)
     });
     results.into_iter().collect()
@@ -176,7 +181,11 @@ fn main() {
         for s in [Sensor::Accel, Sensor::Gyro, Sensor::Mag] {
             let v: Vec<Outcome> = clean
                 .values()
-                .flat_map(|r| r.iter().filter(|(k, _, _)| *k == s).map(|(_, o, _)| o.clone()))
+                .flat_map(|r| {
+                    r.iter()
+                        .filter(|(k, _, _)| *k == s)
+                        .map(|(_, o, _)| o.clone())
+                })
                 .collect();
             let accepted = v.iter().filter(|o| !o.accepted().is_empty()).count();
             println!(
@@ -252,7 +261,10 @@ fn power_sweep(
         for m in MULTIPLES {
             let v = outcomes(case, m * det.size, seeds, o);
             let hits = v.iter().filter(|x| x.accepted().contains(&family)).count();
-            detection.push_str(&format!(" {:.0} % |", 100.0 * hits as f64 / v.len().max(1) as f64));
+            detection.push_str(&format!(
+                " {:.0} % |",
+                100.0 * hits as f64 / v.len().max(1) as f64
+            ));
             eprintln!("  {m}×: {}", format_counts(&count(&v)));
             if m >= 2.0 {
                 pooled.extend(v);

@@ -251,9 +251,8 @@ pub fn analyse_simulated(config: &SimConfig) -> Result<RecordingAnalysis, String
     let written = std::fs::File::create(&path)
         .map_err(|e| e.to_string())
         .and_then(|f| write_csv(&rec, f).map_err(|e| e.to_string()));
-    let loaded = written.and_then(|()| {
-        Recording::load(&path, &LoadOptions::default()).map_err(|e| e.to_string())
-    });
+    let loaded = written
+        .and_then(|()| Recording::load(&path, &LoadOptions::default()).map_err(|e| e.to_string()));
     let _ = std::fs::remove_file(&path);
     let recording = loaded?;
     let field = config.earth_field.magnitude_ut;

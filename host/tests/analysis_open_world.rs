@@ -104,8 +104,7 @@ fn thermal_hysteresis_is_never_written_as_a_temperature_term() {
         for seed in 0..2 {
             let got = outcome(&case, 5.0, seed);
             assert!(
-                !got
-                    .accepted()
+                !got.accepted()
                     .iter()
                     .any(|f| *f == "bias_temperature" || *f == "scale_temperature"),
                 "{} seed {seed}: {}",

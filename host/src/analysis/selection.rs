@@ -2,9 +2,7 @@
 //! [`super`]): the base fit, every candidate tested by held-out error, the accepted ones refitted
 //! jointly, temperature and time told apart only when they decorrelate.
 
-use super::crossval::{
-    extend_start, held_out, observations_needed, Comparison, HeldOut, ALPHA,
-};
+use super::crossval::{extend_start, held_out, observations_needed, Comparison, HeldOut, ALPHA};
 use super::dataset::Observation;
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
 use super::extended_fit::{
@@ -319,7 +317,12 @@ pub fn analyse_observations(
 
     // A drift whose residual still follows time is the straight-line part of a random walk or
     // of steps, not a drift (see `time_structure`): take it out and refit.
-    if let Some(index) = current.0.effects.iter().position(|k| *k == EffectKind::BiasDrift) {
+    if let Some(index) = current
+        .0
+        .effects
+        .iter()
+        .position(|k| *k == EffectKind::BiasDrift)
+    {
         let p = follows_time_p(&timed_residuals(&problem, &current.0, &times));
         let (effects, start) = without_effect(&problem, &current.0, index);
         if p <= ALPHA {

@@ -40,7 +40,9 @@ fn statistic(obs: &[TimedResidual], order: &[usize]) -> f64 {
     let half = NEIGHBOURS / 2;
     let mut s = 0.0;
     for pos in 0..n {
-        let lo = pos.saturating_sub(half).min(n.saturating_sub(NEIGHBOURS + 1));
+        let lo = pos
+            .saturating_sub(half)
+            .min(n.saturating_sub(NEIGHBOURS + 1));
         let hi = (lo + NEIGHBOURS + 1).min(n);
         let mut normal = Matrix3::zeros();
         let mut rhs = Vec3::zeros();
@@ -57,7 +59,11 @@ fn statistic(obs: &[TimedResidual], order: &[usize]) -> f64 {
         };
         let e = inv * rhs;
         let o = &obs[order[pos]];
-        s += o.z.iter().zip(&o.h).map(|(z, h)| z * h.dot(&e)).sum::<f64>();
+        s +=
+            o.z.iter()
+                .zip(&o.h)
+                .map(|(z, h)| z * h.dot(&e))
+                .sum::<f64>();
     }
     s
 }
@@ -153,7 +159,9 @@ mod tests {
 
     /// Deterministic pseudo-noise in [−1, 1].
     fn noise(state: &mut u64) -> f64 {
-        *state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        *state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1);
         ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
 
