@@ -99,6 +99,9 @@ fn parse_options() -> Result<Options, String> {
     Ok(o)
 }
 
+/// Per seed without effects: each sensor's verdict and base χ².
+type CleanRuns = BTreeMap<u64, Vec<(Sensor, Outcome, Option<f64>)>>;
+
 /// Verdict counts, in a stable order.
 type Counts = BTreeMap<String, usize>;
 
@@ -127,7 +130,7 @@ fn outcomes(case: &Case, size: f64, seeds: &[u64], o: &Options) -> Vec<Outcome> 
     })
 }
 
-fn controls(seeds: &[u64], o: &Options) -> BTreeMap<u64, Vec<(Sensor, Outcome, Option<f64>)>> {
+fn controls(seeds: &[u64], o: &Options) -> CleanRuns {
     let results = parallel_map(seeds, o.threads, |&seed| {
         let a = analyse_simulated(&o.shape.config(seed, &[]));
         let per_sensor: Vec<(Sensor, Outcome, Option<f64>)> =
@@ -207,11 +210,7 @@ fn main() {
     eprintln!("done in {:.0} s", started.elapsed().as_secs_f64());
 }
 
-fn power_sweep(
-    seeds: &[u64],
-    clean: &BTreeMap<u64, Vec<(Sensor, Outcome, Option<f64>)>>,
-    o: &Options,
-) {
+fn power_sweep(seeds: &[u64], clean: &CleanRuns, o: &Options) {
     let mut detection = String::from(
         "## Power sweep: detection rate (the right family accepted)\n\n| family | sensor | detectable size (× typical) | λ_crit |",
     );

@@ -350,11 +350,11 @@ pub fn detectable_size(
     const TARGET: f64 = 400.0;
     let mut size = 1.0;
     let mut measured = mean_chi2_rise(case, shape, size, seeds, clean, threads)?;
-    if !(measured > 0.25 * TARGET && measured < 100.0 * TARGET) {
+    if measured.is_nan() || measured <= 0.25 * TARGET || measured >= 100.0 * TARGET {
         size *= (TARGET / measured.max(1e-6)).sqrt().clamp(1e-3, 1e3);
         measured = mean_chi2_rise(case, shape, size, seeds, clean, threads)?;
     }
-    if !(measured > 0.0) {
+    if measured.is_nan() || measured <= 0.0 {
         return Err(format!(
             "{}: the effect does not raise the base χ² (λ = {measured:.3e} at size {size})",
             case.label()
