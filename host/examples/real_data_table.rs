@@ -9,31 +9,12 @@ use std::path::{Path, PathBuf};
 use imucal::pipeline::methods;
 
 use imucal::fit::{Fit, FitError, Method};
-use imucal::recording::{AccelUnit, GyroUnit, LoadOptions, MagUnit, Recording, Sensor, Units};
+use imucal::recording::{LoadOptions, Recording, Sensor};
 use imucal::still::{find_still, StillOptions};
 
-/// Units of the known sets (from each set's provenance note); unknown files are read as SI.
-fn units_of(name: &str) -> Units {
-    let (accel, gyro, mag) = if name.starts_with("imutk_")
-        || name.starts_with("tsi_")
-        || name.starts_with("imucal_ferraris_raw")
-    {
-        (AccelUnit::Counts, GyroUnit::Counts, MagUnit::Ut)
-    } else if name.starts_with("imucal_nilspod") {
-        (AccelUnit::Mps2, GyroUnit::Dps, MagUnit::Ut)
-    } else if name.starts_with("sf_") {
-        (AccelUnit::G, GyroUnit::Dps, MagUnit::Gauss)
-    } else if name.starts_with("tsm_") {
-        (AccelUnit::Mps2, GyroUnit::Rads, MagUnit::Counts)
-    } else if name.starts_with("fusion_") {
-        (AccelUnit::G, GyroUnit::Dps, MagUnit::Ut)
-    } else if name.starts_with("ck_") {
-        (AccelUnit::G, GyroUnit::Rads, MagUnit::Gauss)
-    } else {
-        (AccelUnit::Mps2, GyroUnit::Rads, MagUnit::Ut)
-    };
-    Units { accel, gyro, mag }
-}
+#[path = "common/real_units.rs"]
+mod real_units;
+use real_units::units_of;
 
 fn short(error: &FitError) -> String {
     let text = error.to_string();

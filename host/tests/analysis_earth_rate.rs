@@ -88,3 +88,19 @@ fn xsens_g_sensitivity_absorbs_the_earth_rate_unless_the_latitude_is_given() {
         "shift {shift:e} vs Ω_E sin φ/g {earth_over_g:e}"
     );
 }
+
+#[test]
+fn xsens_gyro_held_out_residual_is_cut_at_least_threefold_by_g_sensitivity() {
+    let a = analyse_gyro(Some(LATITUDE_DEG));
+    let cut = a.heldout_rms_before / a.heldout_rms_after;
+    eprintln!(
+        "held-out {:.3e} → {:.3e} rad/s (cut {cut:.2}×), floor {:.3e}",
+        a.heldout_rms_before, a.heldout_rms_after, a.noise_floor
+    );
+    // The held-out RMS cannot fall below the floor (each held-out pose keeps its own noise):
+    // what is left must be within 1.5× the floor (parameters fitted on 11/12 of the poses add
+    // ≈ 6 % in RMS; the rest is hold-to-hold scatter of the bias, see docs/RESULTS.md).
+    assert!(cut >= 3.0, "cut {cut:.2}×");
+    assert!(a.heldout_rms_after >= a.noise_floor);
+    assert!(a.heldout_rms_after < 1.5 * a.noise_floor);
+}

@@ -108,7 +108,9 @@ fn poses_that_cannot_determine_cross_axis_terms_get_the_axis_aligned_model_and_s
     for phrase in [
         "axis-aligned (6 unknowns) chosen by leave-one-pose-out error",
         "lm: refused",
-        "uncertain by 6 %",
+        // 4 %, not 6 %: the knocks in these hand-held holds are screened out of the pose
+        // variances (median/MAD bound), which sets the noise the covariance is scaled by.
+        "uncertain by 4 %",
         "six-position: refused",
     ] {
         assert!(note.contains(phrase), "missing `{phrase}` in {note}");
@@ -282,12 +284,16 @@ fn magnetometer_is_rotated_into_the_accelerometer_frame_by_the_known_rotation() 
 }
 
 #[test]
-fn too_few_holds_with_magnetometer_data_leave_it_unrotated_and_say_so() {
+fn too_few_holds_with_magnetometer_data_leave_it_unrotated_say_so_and_fail_the_run() {
     let truth = truth();
     let dir = scratch("unaligned");
     let path = write_accel_mag(&dir, &truth, &[0, 2, 4]);
     let (ok, stdout, stderr) = imucal(&["fit", &path, "--field-ut", "50", "--json"]);
-    assert!(ok, "a refused alignment is not a failed fit: {stderr}");
+    assert!(!ok, "a failed alignment fails the run");
+    assert!(
+        stderr.contains("not aligned to the accelerometer") && stderr.contains("--sensor mag"),
+        "{stderr}"
+    );
     let mag = &json(&stdout)["mag"];
     assert_eq!(mag["alignment"]["applied"], false);
     let error = mag["alignment"]["error"]
@@ -304,6 +310,55 @@ fn too_few_holds_with_magnetometer_data_leave_it_unrotated_and_say_so() {
         table.contains("A is left in the magnetometer's own frame"),
         "{table}"
     );
+}
+
+#[test]
+fn a_magnetometer_spike_inside_a_hold_is_dropped_named_and_leaves_the_alignment_exact() {
+    let truth = truth();
+    let dir = scratch("spike");
+    let path = write_accel_mag(&dir, &truth, &(0..14).collect::<Vec<_>>());
+    // One corrupted read of 10⁵ µT in the middle of hold 5 (15–17 s).
+    let mag_path = dir.join("rec_mag.csv");
+    let text = std::fs::read_to_string(&mag_path).expect("written above");
+    let mut spiked = false;
+    let lines: Vec<String> = text
+        .lines()
+        .map(|line| {
+            let t: f64 = line
+                .split(',')
+                .next()
+                .and_then(|t| t.parse().ok())
+                .unwrap_or(-1.0);
+            if !spiked && (16.0..16.1).contains(&t) {
+                spiked = true;
+                let rest: Vec<&str> = line.split(',').skip(2).collect();
+                format!("{t:.4},100000.0,{}", rest.join(","))
+            } else {
+                line.to_string()
+            }
+        })
+        .collect();
+    assert!(spiked);
+    std::fs::write(&mag_path, lines.join("\n") + "\n").expect("writable");
+    let (ok, stdout, stderr) = imucal(&["fit", &path, "--field-ut", "50", "--json"]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("outliers dropped from its statistics: 1 of ")
+            && stderr.contains(" mag samples"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("hold at 15."),
+        "the warning names the hold: {stderr}"
+    );
+    let alignment = &json(&stdout)["mag"]["alignment"];
+    assert_eq!(alignment["applied"], true, "{alignment}");
+    // The same 0.1° budget as without the spike (see the test above): unscreened, the spike
+    // moves that hold's field mean by ~700 µT and the rotation by tens of degrees.
+    let angle = alignment["angle_deg"].as_f64().expect("angle");
+    assert!((angle - 7.0).abs() < 0.1, "angle {angle}°");
+    let dip = alignment["dip_deg"].as_f64().expect("dip");
+    assert!((dip - truth.dip_deg).abs() < 0.1, "dip {dip}°");
 }
 
 /// A magnetometer-only CSV in µT over the whole sphere with radius `radius_ut`.

@@ -1,44 +1,77 @@
 //! Held-out evaluation by pose and the rule that accepts an effect.
 //!
-//! Folds: leave-one-pose-out when there are at most [`MAX_FOLDS`] observations, otherwise
-//! `MAX_FOLDS` folds of interleaved poses (pose `i` in fold `i mod K`), so that every fold spans
-//! the whole recording in time and temperature. Each observation is predicted by the model
-//! fitted without its fold; its held-out loss is the squared residual in units of its own noise,
-//! `Lᵢ = Σₖ(rᵢₖ/σᵢₖ)²` (about 1 per component at the floor).
+//! Splits: leave-one-pose-out when there are at most [`MAX_FOLDS`] observations, otherwise
+//! [`REPEATS`] repetitions of `MAX_FOLDS` folds, each a different pseudo-random balanced
+//! assignment of the poses, so that every fold spans the whole recording in time and temperature.
+//! Each observation is predicted by the model fitted without its fold; its held-out loss is the
+//! squared residual in units of its own noise, `Lᵢ = Σₖ(rᵢₖ/σᵢₖ)²` (about 1 per component at the
+//! floor), averaged over the repetitions.
 //!
 //! Acceptance of an extension over the current model, both conditions required:
-//! 1. *More than chance*: the one-sided Wilcoxon signed-rank test on the paired differences
-//!    `dᵢ = L_currentᵢ − L_extendedᵢ` rejects "no improvement" at `α = 0.01/m`, `m` = number of
-//!    candidates tested in that round (Bonferroni). The signed-rank test uses only the ranks, so
-//!    one badly predicted pose cannot carry it and it needs no assumption about the size of the
-//!    noise, only that under the null the differences are symmetric about zero. Exact null
-//!    distribution up to 60 pairs, normal approximation with tie correction beyond.
+//! 1. *More than chance*: the corrected resampled t test (Nadeau & Bengio, *Inference for the
+//!    generalization error*, Machine Learning 52, 2003) rejects "no improvement" at
+//!    `α = 0.01/m`, `m` = number of candidates tested in that round (Bonferroni). Its unit is
+//!    the split: `d_j` = mean over the held-out poses of split `j` of `L_current − L_extended`,
+//!    `J` = number of splits. The training sets of two splits share most of their poses, so the
+//!    `d_j` are positively correlated and the naive variance `s²/J` of their mean is too small;
+//!    the correction uses `(1/J + n_test/n_train)·s²` and Student's t with `J − 1` degrees of
+//!    freedom (Bouckaert & Frank 2004 found it close to its nominal size with repeated k-fold).
+//!    A signed-rank or sign-flip test on per-pose differences assumes independent pairs, which
+//!    the shared training data break in the same way; a permutation test of the effect's
+//!    variable would respect the dependence but needs hundreds of full cross-validations per
+//!    candidate at `α = 0.01/m`. One badly predicted pose cannot carry the t test: it moves the
+//!    splits that hold it out, which raises `s²` as much as the mean.
 //!    α = 0.01 keeps the family-wise false-acceptance rate of a whole analysis (a few rounds)
 //!    near 1–2 %, while a real effect of a few noise σ gives p-values far smaller.
 //! 2. *Worth having*: the mean held-out loss falls by at least [`MIN_GAIN_PER_COMPONENT`] per
-//!    residual component, i.e. the effect predicts at least half a noise σ (RMS) of each pose.
-//!    Smaller effects may be real but are below what a user can see in one pose, and a term
-//!    the firmware applies must earn its place.
+//!    residual component in units of the *inflated* floor, i.e. the effect predicts at least
+//!    half a σ (RMS) of the scatter that real poses show. On real recordings that scatter is
+//!    5–100× the white-noise variance (slow wander, placement, the AR(1) floor counts only the
+//!    fast noise), so the white-noise floor is inflated by the Birge ratio `max(1, χ²/ν)` of the
+//!    extended model (the policy of [`crate::fit::uncertainty`]). The extended model's χ², not
+//!    the current one's, as in the F test of nested models: under the hypothesis being tested
+//!    the extended model's residual is the noise, while the current model's still contains the
+//!    effect, so a strong effect would raise its own bar. Smaller effects may be real but are
+//!    below what a user can see in one pose, and a term the firmware applies must earn its place.
 
 use super::effects::EffectKind;
 use super::extended_fit::{fit_rows, ExtendedFit, Problem};
-use crate::stats::distributions::normal_upper_tail;
+use crate::fit::uncertainty::{noise_scale, NoiseLevel};
+use crate::stats::distributions::{f_upper_tail, student_t_upper_tail};
 use nalgebra::DVector;
 
 /// Largest number of folds.
 pub const MAX_FOLDS: usize = 12;
+/// Repetitions of the `MAX_FOLDS`-fold split (leave-one-out is not repeated: it is unique).
+/// The corrected variance factor is `1/J + 1/11` with `J = 12·REPEATS`: at five repetitions the
+/// first term is already below a fifth of the total, so more buy little power for their cost.
+pub const REPEATS: usize = 5;
 /// Family-wise significance level of one round of candidates.
 pub const ALPHA: f64 = 0.01;
-/// Minimum fall of the mean held-out loss per residual component, in noise variances.
+/// Significance level of the lack-of-fit test by which a bias free in shape over time or
+/// temperature shows that an accepted time or temperature effect has the wrong form (the form
+/// check of [`super`]). Higher than [`ALPHA`]: there a miss writes a wrong family to the
+/// device, so the free-shape rival needs less evidence than a new effect does.
+pub const FORM_ALPHA: f64 = 0.05;
+/// Minimum fall of the mean held-out loss per residual component, in variances of the
+/// inflated floor.
 pub const MIN_GAIN_PER_COMPONENT: f64 = 0.25;
 
 /// Held-out losses of one model.
 #[derive(Debug, Clone)]
 pub struct HeldOut {
-    /// Per-observation held-out loss `Lᵢ` (noise units).
+    /// Per-observation held-out loss `Lᵢ` (noise units), mean over the repetitions.
     pub losses: Vec<f64>,
-    /// Per-observation held-out residual in physical units (as [`super::extended_fit::physical_residual`]).
+    /// Per-observation held-out residual in physical units (as
+    /// [`super::extended_fit::physical_residual`]), RMS over the repetitions.
     pub residuals: Vec<f64>,
+    /// Mean loss of the held-out observations of each split (repetition × fold, in order).
+    pub split_losses: Vec<f64>,
+    /// Mean over the splits of held-out over training observations, `n_test/n_train`.
+    pub test_to_train: f64,
+    /// Birge ratio `max(1, χ²/ν)` of the model fitted on every observation: the factor by
+    /// which the white-noise floor is inflated for the gain criterion.
+    pub floor_inflation: f64,
 }
 
 impl HeldOut {
@@ -54,15 +87,31 @@ impl HeldOut {
     }
 }
 
-/// Fold index of each observation: leave-one-out up to [`MAX_FOLDS`] observations, otherwise
-/// a fixed pseudo-random balanced assignment (a plain `i mod K` would line up with a schedule
-/// that repeats every `K` poses and hold out one orientation at a time).
+/// Fold index of each observation in the first repetition (see [`repeated_folds`]).
 pub fn folds(n: usize) -> Vec<usize> {
+    repeated_folds(n, 0)
+}
+
+/// Number of repetitions of the split for `n` observations: one for leave-one-out.
+pub fn repetitions(n: usize) -> usize {
+    if n <= MAX_FOLDS {
+        1
+    } else {
+        REPEATS
+    }
+}
+
+/// Fold index of each observation in repetition `repeat`: leave-one-out up to [`MAX_FOLDS`]
+/// observations, otherwise a fixed pseudo-random balanced assignment per repetition (a plain
+/// `i mod K` would line up with a schedule that repeats every `K` poses and hold out one
+/// orientation at a time).
+pub fn repeated_folds(n: usize, repeat: usize) -> Vec<usize> {
     let k = n.clamp(1, MAX_FOLDS);
     if n <= MAX_FOLDS {
         return (0..n).collect();
     }
     // Order the poses by a fixed hash (SplitMix64) and deal them out round-robin.
+    let salt = (repeat as u64) << 32;
     let mix = |i: u64| {
         let mut z = i.wrapping_add(0x9E37_79B9_7F4A_7C15);
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -70,7 +119,7 @@ pub fn folds(n: usize) -> Vec<usize> {
         z ^ (z >> 31)
     };
     let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by_key(|&i| mix(i as u64));
+    order.sort_by_key(|&i| mix(i as u64 ^ salt));
     let mut out = vec![0; n];
     for (rank, &i) in order.iter().enumerate() {
         out[i] = rank % k;
@@ -94,109 +143,100 @@ pub fn observations_needed(unknowns: usize, components: usize) -> usize {
     }
 }
 
-/// Held-out losses of `effects`, each fold started from `full` (the fit on all observations).
-/// `None` when some fold cannot be fitted.
+/// Held-out losses of `effects` over every split, each fold started from `full` (the fit on
+/// all observations). `None` when some fold cannot be fitted.
 pub fn held_out(problem: &Problem, effects: &[EffectKind], full: &ExtendedFit) -> Option<HeldOut> {
     let n = problem.points.len();
-    let fold_of = folds(n);
-    let k = fold_of.iter().max().map_or(0, |m| m + 1);
+    let repeats = repetitions(n);
     let mut losses = vec![0.0; n];
-    let mut residuals = vec![0.0; n];
-    for fold in 0..k {
-        let train: Vec<usize> = (0..n).filter(|&i| fold_of[i] != fold).collect();
-        let fit = fit_rows(problem, effects, &train, &full.params)?;
-        for i in (0..n).filter(|&i| fold_of[i] == fold) {
-            let r = problem.residual(i, effects, fit.params.as_slice());
-            losses[i] = r.norm_squared();
-            residuals[i] =
-                super::extended_fit::physical_residual(problem, i, effects, &fit.params).0;
+    let mut squares = vec![0.0; n];
+    let mut split_losses = Vec::new();
+    let mut ratio_sum = 0.0;
+    for repeat in 0..repeats {
+        let fold_of = repeated_folds(n, repeat);
+        let k = fold_of.iter().max().map_or(0, |m| m + 1);
+        for fold in 0..k {
+            let train: Vec<usize> = (0..n).filter(|&i| fold_of[i] != fold).collect();
+            let fit = fit_rows(problem, effects, &train, &full.params)?;
+            let test: Vec<usize> = (0..n).filter(|&i| fold_of[i] == fold).collect();
+            let mut split = 0.0;
+            for &i in &test {
+                let loss = problem
+                    .residual(i, effects, fit.params.as_slice())
+                    .norm_squared();
+                let r = super::extended_fit::physical_residual(problem, i, effects, &fit.params).0;
+                losses[i] += loss / repeats as f64;
+                squares[i] += r * r / repeats as f64;
+                split += loss / test.len() as f64;
+            }
+            split_losses.push(split);
+            ratio_sum += test.len() as f64 / train.len() as f64;
         }
     }
-    losses
-        .iter()
-        .all(|v| v.is_finite())
-        .then_some(HeldOut { losses, residuals })
+    let residual_count = n * problem.components();
+    let floor_inflation = noise_scale(
+        full.cost,
+        residual_count,
+        full.params.len(),
+        NoiseLevel::Known,
+    )
+    .map_or(1.0, |s| s.variance_factor);
+    let test_to_train = ratio_sum / split_losses.len().max(1) as f64;
+    losses.iter().all(|v| v.is_finite()).then(|| HeldOut {
+        losses,
+        residuals: squares.iter().map(|v| v.sqrt()).collect(),
+        split_losses,
+        test_to_train,
+        floor_inflation,
+    })
 }
 
-/// One-sided Wilcoxon signed-rank p-value for "the differences tend to be positive".
-pub fn wilcoxon_signed_rank(d: &[f64]) -> f64 {
-    let mut nz: Vec<f64> = d
-        .iter()
-        .copied()
-        .filter(|v| *v != 0.0 && v.is_finite())
-        .collect();
-    let n = nz.len();
-    if n == 0 {
+/// One-sided p-value of the corrected resampled t test (Nadeau & Bengio 2003) for "the split
+/// differences `d` tend to be positive", splits sharing training data with held-out over
+/// training size `test_to_train` (see the module comment).
+pub fn corrected_resampled_t(d: &[f64], test_to_train: f64) -> f64 {
+    let j = d.len();
+    if j < 2 || d.iter().any(|v| !v.is_finite()) {
         return 1.0;
     }
-    nz.sort_by(|a, b| a.abs().total_cmp(&b.abs()));
-    // Mid-ranks for ties, doubled to stay integral.
-    let mut ranks2 = vec![0usize; n];
-    let mut i = 0;
-    let mut tie_term = 0.0;
-    while i < n {
-        let mut j = i;
-        while j + 1 < n && nz[j + 1].abs() == nz[i].abs() {
-            j += 1;
-        }
-        for r in &mut ranks2[i..=j] {
-            *r = i + j + 2; // 2 × mean of ranks i+1..=j+1
-        }
-        let t = (j - i + 1) as f64;
-        tie_term += t * t * t - t;
-        i = j + 1;
+    let jf = j as f64;
+    let mean = d.iter().sum::<f64>() / jf;
+    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (jf - 1.0);
+    let scale = ((1.0 / jf + test_to_train.max(0.0)) * var).sqrt();
+    if scale <= 0.0 {
+        // Identical differences: the sign decides.
+        return if mean > 0.0 { 0.0 } else { 1.0 };
     }
-    let w2: usize = nz
-        .iter()
-        .zip(&ranks2)
-        .filter(|(v, _)| **v > 0.0)
-        .map(|(_, r)| *r)
-        .sum();
-    if n <= 60 {
-        // Exact: number of sign assignments with doubled positive-rank sum ≥ w2.
-        let total: usize = ranks2.iter().sum();
-        let mut counts = vec![0f64; total + 1];
-        counts[0] = 1.0;
-        for &r in &ranks2 {
-            for s in (r..=total).rev() {
-                counts[s] += counts[s - r];
-            }
-        }
-        let tail: f64 = counts[w2..].iter().sum();
-        return tail / 2f64.powi(n as i32);
-    }
-    let nf = n as f64;
-    let w = w2 as f64 / 2.0;
-    let mean = nf * (nf + 1.0) / 4.0;
-    let var = nf * (nf + 1.0) * (2.0 * nf + 1.0) / 24.0 - tie_term / 48.0;
-    if var <= 0.0 {
-        return 1.0;
-    }
-    // Continuity correction of one half.
-    normal_upper_tail((w - mean - 0.5) / var.sqrt())
+    student_t_upper_tail(mean / scale, jf - 1.0)
 }
 
 /// The comparison of an extended model with the current one.
 #[derive(Debug, Clone)]
 pub struct Comparison {
-    /// One-sided signed-rank p-value of the improvement.
+    /// One-sided p-value of the improvement (corrected resampled t test).
     pub p_value: f64,
-    /// Fall of the mean held-out loss per residual component (noise variances).
+    /// Fall of the mean held-out loss per residual component, in variances of the inflated
+    /// floor (the white-noise variance times the extended model's Birge ratio).
     pub gain_per_component: f64,
+    /// The Birge ratio that inflated the floor.
+    pub floor_inflation: f64,
     /// Relative fall of the mean held-out loss, `1 − L_ext/L_current` (the reported score).
     pub score: f64,
 }
 
 impl Comparison {
-    /// Compare held-out losses.
+    /// Compare held-out losses of two models evaluated on the same splits.
     pub fn new(current: &HeldOut, extended: &HeldOut, components: usize) -> Self {
         let d: Vec<f64> = current
-            .losses
+            .split_losses
             .iter()
-            .zip(&extended.losses)
+            .zip(&extended.split_losses)
             .map(|(a, b)| a - b)
             .collect();
-        let gain = (current.mean_loss() - extended.mean_loss()) / components.max(1) as f64;
+        let floor_inflation = extended.floor_inflation.max(1.0);
+        let gain = (current.mean_loss() - extended.mean_loss())
+            / components.max(1) as f64
+            / floor_inflation;
         let base = current.mean_loss();
         let score = if base > 0.0 {
             1.0 - extended.mean_loss() / base
@@ -204,8 +244,9 @@ impl Comparison {
             0.0
         };
         Self {
-            p_value: wilcoxon_signed_rank(&d),
+            p_value: corrected_resampled_t(&d, extended.test_to_train),
             gain_per_component: gain,
+            floor_inflation,
             score,
         }
     }
@@ -214,6 +255,25 @@ impl Comparison {
     pub fn passes(&self, m: usize) -> bool {
         self.p_value <= ALPHA / m.max(1) as f64 && self.gain_per_component >= MIN_GAIN_PER_COMPONENT
     }
+}
+
+/// P-value of the lack-of-fit F test of a model (in-sample cost `cost`) against the same model
+/// extended by `extra` parameters (cost `cost_extended`, `dof_extended` residual degrees of
+/// freedom): `F = ((χ² − χ²_ext)/extra)/(χ²_ext/ν_ext)`. The noise is estimated from the
+/// extended model, so a floor that is too small cancels; fitted once on every observation, the
+/// test has none of the dependence between cross-validation splits.
+pub fn lack_of_fit_p(cost: f64, cost_extended: f64, extra: usize, dof_extended: usize) -> f64 {
+    if extra == 0
+        || dof_extended == 0
+        || cost_extended.is_nan()
+        || cost_extended <= 0.0
+        || !cost.is_finite()
+    {
+        return 1.0;
+    }
+    let f =
+        ((cost - cost_extended).max(0.0) / extra as f64) / (cost_extended / dof_extended as f64);
+    f_upper_tail(f, extra as f64, dof_extended as f64)
 }
 
 /// Start vector for `extended` from a fit of `current` (a prefix of it): the fitted parameters
@@ -229,23 +289,66 @@ mod tests {
     use super::*;
 
     #[test]
-    fn signed_rank_exact_tail_matches_enumeration() {
-        // n = 5 all positive: only one of 32 sign patterns reaches the maximum, p = 1/32.
-        assert!((wilcoxon_signed_rank(&[1.0, 2.0, 3.0, 4.0, 5.0]) - 1.0 / 32.0).abs() < 1e-15);
-        // All negative: every pattern has W ≥ 0, p = 1.
-        assert!((wilcoxon_signed_rank(&[-1.0, -2.0, -3.0]) - 1.0).abs() < 1e-15);
+    fn corrected_t_widens_the_naive_t_by_the_training_overlap() {
+        // d = 1, 2, 4: mean 7/3, s² = 7/3, ν = 2, where P(T ≥ t) = ½ − t/(2√(2 + t²)) exactly.
+        let tail2 = |t: f64| 0.5 - t / (2.0 * (2.0 + t * t).sqrt());
+        let d = [1.0, 2.0, 4.0];
+        let mean: f64 = 7.0 / 3.0;
+        // Without overlap it is the one-sample t test: t = mean/√(s²/J).
+        let naive = mean / (mean / 3.0).sqrt();
+        assert!((corrected_resampled_t(&d, 0.0) - tail2(naive)).abs() < 1e-12);
+        // Leave-one-out on 3 poses: n_test/n_train = 1/2, variance (1/3 + 1/2)·s².
+        let corrected = mean / ((1.0 / 3.0 + 0.5) * mean).sqrt();
+        let p = corrected_resampled_t(&d, 0.5);
+        assert!((p - tail2(corrected)).abs() < 1e-12);
+        assert!(p > corrected_resampled_t(&d, 0.0));
+        // No improvement on average gives p ≥ ½; a single split decides nothing.
+        assert!(corrected_resampled_t(&[1.0, -1.0, 0.5, -0.5], 0.1) >= 0.5);
+        assert_eq!(corrected_resampled_t(&[3.0], 0.1), 1.0);
     }
 
     #[test]
-    fn signed_rank_normal_approximation_is_close_to_exact_at_the_switch() {
-        // 61 differences alternating in sign with a small positive excess: compare with the exact
-        // value on the first 60 (the approximation error at n ≈ 60 is below 0.01 in p).
-        let d: Vec<f64> = (1..=61)
-            .map(|i| if i % 3 == 0 { -(i as f64) } else { i as f64 })
-            .collect();
-        let approx = wilcoxon_signed_rank(&d);
-        let exact = wilcoxon_signed_rank(&d[..60]);
-        assert!((approx - exact).abs() < 0.02, "{approx} vs {exact}");
+    fn lack_of_fit_p_is_the_f_tail_of_the_cost_reduction_per_extra_parameter() {
+        // χ² 21.124 → 10 with 3 extra parameters and ν = 10: F = (11.124/3)/(10/10) = 3.708, the
+        // tabulated upper 5 % point of F(3, 10) (3 decimals, hence 2e-4 on p).
+        assert!((lack_of_fit_p(21.124, 10.0, 3, 10) - 0.05).abs() < 2e-4);
+        // Scaling both costs (a floor too small by any factor) leaves p unchanged.
+        let p = lack_of_fit_p(21.124 * 7.0, 70.0, 3, 10);
+        assert!((p - lack_of_fit_p(21.124, 10.0, 3, 10)).abs() < 1e-12);
+        // No reduction: nothing to find.
+        assert_eq!(lack_of_fit_p(10.0, 10.0, 3, 10), 1.0);
+    }
+
+    #[test]
+    fn repetitions_are_different_balanced_splits() {
+        assert_eq!(repetitions(12), 1);
+        assert_eq!(repetitions(13), REPEATS);
+        let first = repeated_folds(40, 0);
+        assert_eq!(first, folds(40));
+        for r in 1..REPEATS {
+            let f = repeated_folds(40, r);
+            // Balanced: 40 poses in 12 folds of 3 or 4.
+            for fold in 0..MAX_FOLDS {
+                let size = f.iter().filter(|&&x| x == fold).count();
+                assert!(
+                    (3..=4).contains(&size),
+                    "repetition {r}, fold {fold}: {size}"
+                );
+            }
+            // Different pairings of poses from the first repetition.
+            let pairs_kept = (0..40)
+                .flat_map(|i| (i + 1..40).map(move |j| (i, j)))
+                .filter(|&(i, j)| first[i] == first[j] && f[i] == f[j])
+                .count();
+            let pairs = (0..40)
+                .flat_map(|i| (i + 1..40).map(move |j| (i, j)))
+                .filter(|&(i, j)| first[i] == first[j])
+                .count();
+            assert!(
+                pairs_kept * 2 < pairs,
+                "repetition {r}: {pairs_kept} of {pairs} pairs kept"
+            );
+        }
     }
 
     #[test]

@@ -13,11 +13,19 @@
 //! slower than the sample rate contributes little to them. The white-noise variance is then
 //! `E[Δx²]/(2(1 − ρ))`, also from the differences. Both choices make the floor the noise of the
 //! sensor, not of the person holding it.
+//!
+//! Guard at the ends of a detected hold: a sample is called still when the window centred on it
+//! is quiet, and the threshold sits above the noise, so the first and last window of a hold can
+//! hold the end of the motion (up to half a window) and its decay (the hand letting go). At rest
+//! a gyroscope's mean is its residual, so a tenth of a second at a few °/s moves the mean of an
+//! 8 s hold by several standard errors; the difference-based noise estimate grows with it. One
+//! detector window is dropped at each end ([`hold_guard`]), never more than a quarter of the
+//! hold. Holds from a `pose` column are the user's own boundaries and are kept whole.
 
 use crate::fit::{Pose, Vec3};
-use crate::recording::{LabelKind, Recording, Sensor};
+use crate::recording::{Recording, Sensor};
 use crate::stats::autocorrelation::run_stats;
-use crate::still::StillReport;
+use crate::still::{hold_samples, StillReport};
 
 /// One observation: a still pose or a short window of samples.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,20 +54,18 @@ fn mean_of(values: &[f64]) -> Option<f64> {
     (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
 }
 
-/// Rows of the main stream that belong to a hold: every row in `[start, end)`, or only those
-/// carrying the hold's label when the holds came from a `pose` column.
-fn hold_rows(recording: &Recording, start: usize, end: usize, label: Option<i64>) -> Vec<usize> {
-    match (&recording.labels, label) {
-        (Some(labels), Some(value)) if labels.kind == LabelKind::Pose => (start
-            ..end.min(labels.per_row.len()))
-            .filter(|&i| labels.per_row[i].map(|l| labels.value(l)) == Some(value))
-            .collect(),
-        _ => (start..end.min(recording.len())).collect(),
+/// Samples dropped at each end of a detected hold of `len` samples (see the module comment):
+/// the detector's window, at most a quarter of the hold; none for holds from a `pose` column.
+pub fn hold_guard(still: &StillReport, len: usize) -> usize {
+    if still.from_pose_column {
+        0
+    } else {
+        still.window.min(len / 4)
     }
 }
 
 /// One observation per still interval for `sensor` (accelerometer, gyroscope, or the
-/// magnetometer samples that fall inside each hold).
+/// magnetometer samples that fall inside each hold), without the guard at each end.
 pub fn pose_observations(
     recording: &Recording,
     still: &StillReport,
@@ -67,7 +73,20 @@ pub fn pose_observations(
 ) -> Vec<Observation> {
     let mut out = Vec::new();
     for interval in &still.intervals {
-        let rows = hold_rows(recording, interval.start, interval.end, interval.label);
+        let guard = hold_guard(still, interval.end.saturating_sub(interval.start));
+        let (start, end) = (interval.start + guard, interval.end - guard);
+        let rows: Vec<usize> = interval
+            .rows(recording)
+            .into_iter()
+            .filter(|&i| (start..end).contains(&i))
+            .collect();
+        let (t_start, t_end) = match (recording.time.get(start), end.checked_sub(1)) {
+            (Some(&a), Some(last)) if guard > 0 => (
+                a,
+                recording.time.get(last).copied().unwrap_or(interval.t_end),
+            ),
+            _ => (interval.t_start, interval.t_end),
+        };
         let temp = recording.temp_c.as_ref().and_then(|t| {
             mean_of(
                 &rows
@@ -76,28 +95,14 @@ pub fn pose_observations(
                     .collect::<Vec<f64>>(),
             )
         });
-        let accel_mean = recording.accel.as_ref().and_then(|a| {
-            let picked: Vec<Vec3> = rows.iter().filter_map(|&i| a.get(i).copied()).collect();
-            (!picked.is_empty()).then(|| picked.iter().sum::<Vec3>() / picked.len() as f64)
-        });
-        let samples: Vec<Vec3> = match sensor {
-            Sensor::Accel | Sensor::Gyro => {
-                let Some(all) = recording.samples(sensor) else {
-                    continue;
-                };
-                rows.iter().filter_map(|&i| all.get(i).copied()).collect()
-            }
-            Sensor::Mag => match &recording.mag {
-                Some(m) => m
-                    .time
-                    .iter()
-                    .zip(&m.samples)
-                    .filter(|(t, _)| **t >= interval.t_start && **t <= interval.t_end)
-                    .map(|(_, x)| *x)
-                    .collect(),
-                None => continue,
-            },
+        // The screened samples (spikes dropped) of the trimmed hold.
+        let accel_mean = hold_samples(recording, &rows, t_start, t_end, Sensor::Accel)
+            .filter(|h| !h.kept.is_empty())
+            .map(|h| h.kept.iter().sum::<Vec3>() / h.kept.len() as f64);
+        let Some(held) = hold_samples(recording, &rows, t_start, t_end, sensor) else {
+            continue;
         };
+        let samples = held.kept;
         let Some(stats) = run_stats(&samples) else {
             continue;
         };
@@ -108,7 +113,7 @@ pub fn pose_observations(
             n_eff: stats.n_eff,
             noise_correlation: stats.rho,
             temp_c: temp,
-            time_s: 0.5 * (interval.t_start + interval.t_end),
+            time_s: 0.5 * (t_start + t_end),
             accel_mean,
             label: interval.label,
         });

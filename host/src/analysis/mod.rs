@@ -21,13 +21,15 @@
 //! confirm it (a cool-down or a second warm-up). A pure time drift is still not written as
 //! temperature when the recording also holds a decorrelated part: then |ρ| is below the limit
 //! and the two are compared on the data. Candidates whose model cannot be fitted on every
-//! held-out fold are reported `not_fittable`, with the number of poses still needed. A time or temperature effect must also pass a form check: a bias free
-//! in shape over the same variable (constant within each of 8 quantile bins) must not predict the
-//! held-out poses better by the same rule; otherwise the dependence has another form (a step,
-//! hysteresis) and the effect is rejected rather than accepted as an approximation. A
-//! temperature effect must also beat a bias free in shape over time (any slow change of the bias
-//! is a function of time in a sequential recording). An accepted `bias_drift` is taken out again
-//! when the final residual still follows time ([`time_structure`]): a linear trend then is the
+//! held-out fold are reported `not_fittable`, with the number of poses still needed. A time or
+//! temperature effect must also pass a form check: a bias free in shape over the same variable
+//! (constant within each of 8 quantile bins), added to it, must not both fit significantly better
+//! (lack-of-fit F test at [`crossval::FORM_ALPHA`]) and predict the held-out poses better by the
+//! worth-having gain; otherwise the dependence has another form (a step, hysteresis) and the
+//! effect is rejected rather than accepted as an approximation. A temperature effect must pass
+//! the same check against a bias free in shape over time (any slow change of the bias is a
+//! function of time in a sequential recording). An accepted `bias_drift` is taken out again when
+//! the final residual still follows time ([`time_structure`]): a linear trend then is the
 //! straight-line part of a random walk, steps or hysteresis, not a drift. When accepted effects
 //! leave a residual above the floor the report says "partly explained".
 

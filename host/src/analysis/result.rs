@@ -121,9 +121,10 @@ pub struct EffectResult {
     pub status: EffectStatus,
     /// Relative fall of the mean held-out loss (last round it was tested in).
     pub score: f64,
-    /// Signed-rank p-value (last round).
+    /// One-sided p-value of the corrected resampled t test (last round).
     pub p_value: f64,
-    /// Fall of the held-out loss per component, noise variances (last round).
+    /// Fall of the held-out loss per component, in variances of the floor inflated by the
+    /// Birge ratio (last round).
     pub gain: f64,
     /// Coefficients (of the final model when accepted, of the tested extension otherwise).
     pub coefficients: Vec<Coefficient>,

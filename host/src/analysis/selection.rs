@@ -2,7 +2,10 @@
 //! [`super`]): the base fit, every candidate tested by held-out error, the accepted ones refitted
 //! jointly, temperature and time told apart only when they decorrelate.
 
-use super::crossval::{extend_start, held_out, observations_needed, Comparison, HeldOut, ALPHA};
+use super::crossval::{
+    extend_start, held_out, lack_of_fit_p, observations_needed, Comparison, HeldOut, ALPHA,
+    FORM_ALPHA, MIN_GAIN_PER_COMPONENT,
+};
 use super::dataset::Observation;
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
 use super::extended_fit::{
@@ -284,28 +287,33 @@ pub fn analyse_observations(
         let (kind, _, fit, ho) = round.swap_remove(w);
         remaining.retain(|r| r.name() != kind.name());
         if time_or_temp {
-            // Form check: a bias free in shape over the same variable must not predict better;
-            // nor, for a temperature effect, one free in shape over time (the recording is
+            // Form check: a bias free in shape over the same variable, added to the effect, must
+            // neither fit significantly better (lack-of-fit F test) nor predict visibly better;
+            // for a temperature effect, nor one free in shape over time (the recording is
             // sequential, so any slow change of the bias is a function of time).
             let mut checks = vec![EffectKind::BinnedBias(kind.needs_temperature())];
             if kind.needs_temperature() {
                 checks.push(EffectKind::BinnedBias(false));
             }
-            let better = checks.into_iter().find_map(|binned| {
-                let mut effects = current.0.effects.clone();
-                effects.push(binned);
-                let start = extend_start(&current.0.params, binned.param_count());
-                let (_, binned_ho) = evaluate(&problem, &effects, &start)?;
-                let cmp = Comparison::new(&ho, &binned_ho, components);
-                cmp.passes(1).then_some((binned, cmp.p_value))
-            });
-            if let Some((binned, p_value)) = better {
+            let other_form =
+                checks.into_iter().find_map(|binned| {
+                    let mut effects = fit.effects.clone();
+                    effects.push(binned);
+                    let start = extend_start(&fit.params, binned.param_count());
+                    let (free_fit, free_ho) = evaluate(&problem, &effects, &start)?;
+                    let dof = (n * components).saturating_sub(free_fit.params.len());
+                    let p = lack_of_fit_p(fit.cost, free_fit.cost, binned.param_count(), dof);
+                    let cmp = Comparison::new(&ho, &free_ho, components);
+                    (p <= FORM_ALPHA && cmp.gain_per_component >= MIN_GAIN_PER_COMPONENT)
+                        .then_some((binned, p, cmp.gain_per_component))
+                });
+            if let Some((binned, p, gain)) = other_form {
                 wrong_form.push((
                     kind.name(),
                     format!(
-                        "explains part of the residual, but a bias free in shape over {} predicts held-out poses better \
-                         (signed-rank p = {p_value:.1e}): the dependence has another form (a step, hysteresis, a random walk), \
-                         so it is not accepted",
+                        "explains part of the residual, but a bias free in shape over {} fits it better (lack-of-fit \
+                         F test p = {p:.1e}) and predicts held-out poses better by {gain:.2} variances of the inflated floor: \
+                         the dependence has another form (a step, hysteresis, a random walk), so it is not accepted",
                         binned.variable(),
                     ),
                 ));
@@ -388,7 +396,7 @@ pub fn analyse_observations(
             note: if provisional.contains(&kind.name()) {
                 format!(
                     "provisional: confounded with time (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); improves held-out error by \
-                     {:.0} % (signed-rank p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
+                     {:.0} % (corrected t p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
                      applies temperature terms only; confirm with a recording where temperature does not follow time \
                      (a cool-down, or a second warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
                     temp_time_correlation.unwrap_or(f64::NAN),
@@ -396,7 +404,7 @@ pub fn analyse_observations(
                 )
             } else {
                 format!(
-                    "improves held-out error by {:.0} % (signed-rank p = {p_value:.1e})",
+                    "improves held-out error by {:.0} % (corrected t p = {p_value:.1e})",
                     100.0 * score
                 )
             },
@@ -421,8 +429,9 @@ pub fn analyse_observations(
             _ => match wrong_form.iter().find(|(name, _)| *name == kind.name()) {
                 Some((_, why)) => why.clone(),
                 None => format!(
-                    "held-out gain {:.2} noise variances per component, signed-rank p = {:.2e}: not enough",
-                    cmp.gain_per_component, cmp.p_value
+                    "held-out gain {:.2} variances of the inflated floor per component (white-noise floor × {:.2}, \
+                     the Birge ratio), corrected t p = {:.2e}: not enough (needs ≥ {MIN_GAIN_PER_COMPONENT} and p ≤ {ALPHA}/m, m candidates in the round)",
+                    cmp.gain_per_component, cmp.floor_inflation, cmp.p_value
                 ),
             },
         };

@@ -200,11 +200,16 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
             sigmas(u.mag_bias_ut, 3)
         ),
         format!(
-            "                 expected |m| error ± {:.3} % (1σ); field {:.2} µT ({source}); \
-             aligned to the accelerometer ± {:.3}°",
-            u.mag_norm_pct, fit.field_ut, u.alignment_deg
+            "                 expected |m| error ± {:.3} % (1σ); field {:.2} µT ({source}); {}",
+            u.mag_norm_pct,
+            fit.field_ut,
+            match &fit.alignment {
+                Ok(_) => format!("aligned to the accelerometer ± {:.3}°", u.alignment_deg),
+                Err(e) => format!("NOT aligned to the accelerometer ({e})"),
+            }
         ),
     ];
+    lines.extend(fit.notes.iter().map(|n| format!("  note: {n}")));
     let verdict = match fit.verdict.level {
         VerdictLevel::Good => "good",
         VerdictLevel::Marginal => "marginal",

@@ -17,6 +17,9 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
     let recording = super::load(&args.input)?;
     let report = find_still(&recording, &super::still_options(&args.input))?;
     input_checks::require_still(&recording, &report, args.input.min_hold)?;
+    for sentence in report.intervals.iter().filter_map(|i| i.dropped_sentence()) {
+        eprintln!("imucal: warning: {sentence}");
+    }
     if args.json {
         let intervals: Vec<_> = report
             .intervals

@@ -1,8 +1,8 @@
 //! The statistics the history needs: the median, and tail probabilities and quantiles of
-//! Student's t distribution for outlier thresholds that follow from a stated false-alarm rate. The t CDF is the regularised incomplete beta function
-//! (Abramowitz & Stegun 26.7.1), evaluated by its continued fraction (modified Lentz).
+//! Student's t distribution for outlier thresholds that follow from a stated false-alarm rate
+//! (the tail from [`crate::stats::distributions::student_t_upper_tail`]).
 
-use crate::stats::distributions::ln_gamma;
+use crate::stats::distributions::student_t_upper_tail;
 
 /// Median of `values` (reordered); `None` when empty.
 pub fn median(values: &mut [f64]) -> Option<f64> {
@@ -18,62 +18,9 @@ pub fn median(values: &mut [f64]) -> Option<f64> {
     })
 }
 
-/// Continued fraction of the incomplete beta function (modified Lentz).
-fn beta_fraction(a: f64, b: f64, x: f64) -> f64 {
-    const TINY: f64 = 1e-300;
-    let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
-    let mut c = 1.0;
-    let mut d = 1.0 - qab * x / qap;
-    if d.abs() < TINY {
-        d = TINY;
-    }
-    d = 1.0 / d;
-    let mut h = d;
-    for m in 1..=300 {
-        let m = f64::from(m);
-        let m2 = 2.0 * m;
-        for aa in [
-            m * (b - m) * x / ((qam + m2) * (a + m2)),
-            -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2)),
-        ] {
-            d = 1.0 + aa * d;
-            if d.abs() < TINY {
-                d = TINY;
-            }
-            c = 1.0 + aa / c;
-            if c.abs() < TINY {
-                c = TINY;
-            }
-            d = 1.0 / d;
-            h *= d * c;
-        }
-        if (d * c - 1.0).abs() < 1e-15 {
-            break;
-        }
-    }
-    h
-}
-
-/// The regularised incomplete beta function `I_x(a, b)`.
-fn regularized_beta(a: f64, b: f64, x: f64) -> f64 {
-    if x <= 0.0 {
-        return 0.0;
-    }
-    if x >= 1.0 {
-        return 1.0;
-    }
-    let front =
-        (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln()).exp();
-    if x < (a + 1.0) / (a + b + 2.0) {
-        front * beta_fraction(a, b, x) / a
-    } else {
-        1.0 - front * beta_fraction(b, a, 1.0 - x) / b
-    }
-}
-
 /// `P(T > t)` for Student's t with `dof` degrees of freedom, `t ≥ 0`.
 pub fn t_upper_tail(t: f64, dof: f64) -> f64 {
-    0.5 * regularized_beta(0.5 * dof, 0.5, dof / (dof + t * t))
+    student_t_upper_tail(t, dof)
 }
 
 /// The `t` with `P(T > t) = upper` (0 < upper < 0.5), by bisection on [`t_upper_tail`].

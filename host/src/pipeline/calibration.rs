@@ -63,6 +63,19 @@ impl SensorOutcome {
         }
     }
 
+    /// Why a magnetometer fitted together with the accelerometer is not in the accelerometer's
+    /// frame, with the fix; `None` when it is aligned or was fitted alone.
+    pub fn alignment_failure(&self) -> Option<String> {
+        let Some(Err(error)) = &self.alignment else {
+            return None;
+        };
+        Some(format!(
+            "not aligned to the accelerometer ({error}), so its output would be in its own \
+             frame; hold more orientations with both sensors recording, or fit it alone with \
+             --sensor mag to keep its own frame deliberately"
+        ))
+    }
+
     /// Whether `A`'s per-entry uncertainties still apply (a rotated `A` carries the rotation's
     /// uncertainty instead, reported with the alignment).
     pub fn a_std_applies(&self) -> bool {
@@ -148,11 +161,20 @@ impl RecordingCalibration {
         self.sensors.iter().find(|s| s.sensor == sensor)
     }
 
-    /// `sensor: reason` for every sensor that was not fitted.
+    /// `sensor: reason` for every sensor that was not fitted, and for a magnetometer that could
+    /// not be aligned to the accelerometer fitted with it (left out of the parameter file).
     pub fn failures(&self) -> Vec<String> {
         self.sensors
             .iter()
-            .filter_map(|r| r.fit.as_ref().err().map(|e| format!("{}: {e}", r.sensor)))
+            .filter_map(|r| {
+                let reason = r
+                    .fit
+                    .as_ref()
+                    .err()
+                    .cloned()
+                    .or_else(|| r.alignment_failure())?;
+                Some(format!("{}: {reason}", r.sensor))
+            })
             .collect()
     }
 }

@@ -8,6 +8,7 @@
 use crate::fit::Vec3;
 use crate::input_checks;
 use crate::recording::{Recording, Sensor};
+use crate::stats::robust::{screen_stream, Screening};
 use crate::still::{find_still, StillOptions, StillReport};
 
 use super::methods::thin;
@@ -89,7 +90,11 @@ pub fn check_input(
     let mut mag_points = Vec::new();
     if sensors.contains(&Sensor::Mag) {
         let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
-        mag_points = thin(all, options.max_mag_samples);
+        let screening = screen_stream(all);
+        if screening.dropped > 0 {
+            warnings.push(stream_outliers_sentence(&screening, all.len()));
+        }
+        mag_points = thin(&screening.kept(all), options.max_mag_samples);
         match input_checks::check_mag_coverage(&mag_points) {
             Err(e) => refusals.push((Sensor::Mag, e.to_string())),
             Ok(()) => match input_checks::check_mag_field(
@@ -149,8 +154,20 @@ pub fn check_input(
     }
 }
 
+/// The warning for magnetometer samples dropped from the fit's stream of `total`.
+fn stream_outliers_sentence(screening: &Screening, total: usize) -> String {
+    format!(
+        "{} of {total} magnetometer samples dropped from the field fit as outliers (up to \
+         {:.3e} robust standard deviations from the running median of their neighbours; the \
+         bound for this many samples is {:.1}): a spike, a corrupted read or a jerk of the hand; \
+         check the wiring or the sensor if spikes recur",
+        screening.dropped, screening.worst_sigmas, screening.bound_sigmas
+    )
+}
+
 /// Still intervals with the holds that cannot be used left out; refuses when none is found or
-/// none is usable. Returns warnings.
+/// none is usable. Returns warnings, among them one per hold and sensor whose outliers were
+/// dropped.
 fn still_intervals(
     recording: &Recording,
     options: &StillOptions,
@@ -159,7 +176,9 @@ fn still_intervals(
         .map_err(|e| format!("still intervals could not be found: {e}"))?;
     input_checks::require_still(recording, &still, options.min_hold_s)
         .map_err(|e| e.to_string())?;
-    let warnings = input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
-        .map_err(|e| e.to_string())?;
+    let mut warnings =
+        input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
+            .map_err(|e| e.to_string())?;
+    warnings.extend(still.intervals.iter().filter_map(|i| i.dropped_sentence()));
     Ok((still, warnings))
 }

@@ -22,6 +22,9 @@ fn sensor_json(
         return Err("not asked for (see --sensor) or not in the recording".to_string());
     };
     let fit = outcome.fit.as_ref().map_err(Clone::clone)?;
+    if let Some(reason) = outcome.alignment_failure() {
+        return Err(reason);
+    }
     let to_nominal = outcome.to_nominal;
     if outcome.sensor == Sensor::Gyro && outcome.output_unit != "rad/s" {
         return Err(

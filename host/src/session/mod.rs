@@ -40,6 +40,7 @@ pub mod gyro_moves;
 mod gyro_nuisance;
 pub mod hold;
 pub mod journal;
+mod mag_alignment;
 mod mag_phase;
 pub mod motion;
 pub mod motioncal;

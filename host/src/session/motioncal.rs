@@ -29,6 +29,8 @@ use crate::compat::adafruit::{limitations, AdafruitLimitations, Conversion};
 use crate::compat::{AdafruitCalibration, CompatError, EchoCheck, MotionCalClient, MotionCalError};
 use crate::device::UnitSample;
 use crate::fit::{FitError, Vec3};
+use crate::stats::descriptive::mean_variance;
+use crate::stats::robust::screen_vectors;
 
 /// Temperature given to poses: the sketch prints none, and the set carries no temperature terms,
 /// so it only labels the poses.
@@ -121,16 +123,19 @@ pub struct MotionCalOutcome {
     pub wall_seconds: f64,
 }
 
-/// Mean and variance of a hold, as imucal's firmware reports a pose.
+/// Mean and variance of a hold, as imucal's firmware reports a pose, each sensor's gross
+/// outliers screened out first ([`crate::stats::robust`], as for the holds of a recording).
 pub fn pose_stats(samples: &[UnitSample]) -> PoseStats {
     let n = samples.len().max(1) as f64;
     let moments = |pick: fn(&UnitSample) -> [f64; 3]| {
-        let mean = [0, 1, 2].map(|i| samples.iter().map(|s| pick(s)[i]).sum::<f64>() / n);
-        let var = [0, 1, 2].map(|i| {
-            let sum: f64 = samples.iter().map(|s| (pick(s)[i] - mean[i]).powi(2)).sum();
-            sum / (n - 1.0).max(1.0)
-        });
-        (mean.map(|v| v as f32), var.map(|v| v as f32))
+        let values: Vec<Vec3> = samples.iter().map(|s| Vec3::from(pick(s))).collect();
+        let kept = screen_vectors(&values).kept(&values);
+        let (mean, var, _) =
+            mean_variance(kept.iter()).unwrap_or((Vec3::zeros(), Vec3::zeros(), 0));
+        (
+            [mean.x, mean.y, mean.z].map(|v| v as f32),
+            [var.x, var.y, var.z].map(|v| v as f32),
+        )
     };
     let (accel_mean, accel_var) = moments(|s| s.accel);
     let (gyro_mean, gyro_var) = moments(|s| s.gyro);

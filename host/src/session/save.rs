@@ -65,6 +65,9 @@ pub struct SessionSummary {
     pub uncertainties: Uncertainties,
     /// The verdict.
     pub verdict: Verdict,
+    /// Findings that do not change the verdict (positions left out of the magnetometer's
+    /// alignment, and why).
+    pub notes: Vec<String>,
     /// The gyroscope's scale factors and misalignment with their σ (`null` when only the bias
     /// could be calibrated).
     pub gyro_scale: Option<GyroScale>,
@@ -104,6 +107,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         uncertainties: outcome.fit.uncertainties,
         gyro_scale: outcome.gyro_scale.clone(),
         verdict: outcome.fit.verdict.clone(),
+        notes: outcome.fit.notes.clone(),
         stream_rate_hz: outcome.stream_rate_hz,
         lost_samples: outcome.lost_samples,
     }

@@ -11,7 +11,9 @@
 //! - Magnetometer: LM on `|A(mₖ − b)| = H` over the tumble samples, started from Li's ellipsoid
 //!   (seed 000 eq. 17–29; [`crate::fit::norm_lm::fit_mag_lm`]), then rotated into the
 //!   accelerometer frame by the dip-invariance alignment from the poses (`A ← R·A`,
-//!   [`crate::fit::alignment`]), because the norm fit's gauge leaves its output frame arbitrary.
+//!   [`crate::fit::alignment`]), because the norm fit's gauge leaves its output frame arbitrary;
+//!   positions whose field disagrees with the calibration are screened out first
+//!   ([`super::mag_alignment`]). A failed alignment makes the verdict poor.
 //!
 //! The expected error of `|a|` (or `|m|`) along an output direction `û` follows from the
 //! parameter covariance `Σ` by first-order propagation: `σ² = ∇θᵀ Σ ∇θ` with
@@ -26,12 +28,14 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
 use super::coverage::region_directions;
+use super::mag_alignment::{align_session_mag, SessionAlignment};
 use super::targets::Target;
-use crate::fit::alignment::{fit_alignment, Alignment};
+use crate::fit::alignment::Alignment;
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::norm_lm::fit_mag_lm;
 use crate::fit::{Calibration, Fit, FitError, Mat3, Pose, Vec3};
 use crate::pipeline::chain::{default_accel_chain, ChainChoice};
+use crate::stats::robust::screen_stream;
 
 /// Standard gravity, m/s² (the unit of "mg").
 pub const STANDARD_GRAVITY: f64 = 9.806_65;
@@ -120,8 +124,12 @@ pub struct SessionFit {
     pub gyro: Fit,
     /// Magnetometer fit in its own gauge, before the alignment (µT).
     pub mag: Fit,
-    /// Rotation of the magnetometer frame into the accelerometer frame.
-    pub alignment: Option<Alignment>,
+    /// Rotation of the magnetometer frame into the accelerometer frame, or why there is none
+    /// (the verdict then says so, and the magnetometer is left in its own frame).
+    pub alignment: Result<Alignment, String>,
+    /// Findings worth a line that do not change the verdict (positions left out of the
+    /// magnetometer's alignment, and why).
+    pub notes: Vec<String>,
     /// Reference field magnitude, µT.
     pub field_ut: f64,
     /// Where `field_ut` came from.
@@ -297,17 +305,32 @@ pub fn fit_session(
     let accel_choice = default_accel_chain(&accel_poses, gravity_mps2)?;
     let accel = accel_choice.fit.clone();
     let gyro = fit_gyro_bias(&gyro_poses, 1.0)?;
-    let (mag, field, field_source) = fit_mag(mag_points, field_ut)?;
+    // A spike in the stream would dominate the ellipsoid: screened like a recording's.
+    let screening = screen_stream(mag_points);
+    let (mag, field, field_source) = fit_mag(&screening.kept(mag_points), field_ut)?;
 
     let accel_up: Vec<Vec3> = accel_poses
         .iter()
         .map(|p| accel.cal.apply(&p.mean))
         .collect();
-    let mag_in_poses: Vec<Vec3> = poses
+    let raw_field: Vec<Vec3> = poses
         .iter()
-        .map(|p| mag.cal.apply(&pose_of(&p.stats, mag_of).mean))
+        .map(|p| pose_of(&p.stats, mag_of).mean)
         .collect();
-    let alignment = fit_alignment(&accel_up, &mag_in_poses).ok();
+    let names: Vec<&str> = poses.iter().map(|p| p.target.name.as_str()).collect();
+    let SessionAlignment {
+        outcome: alignment,
+        mut notes,
+    } = align_session_mag(&accel_up, &raw_field, &names, &mag, field);
+    if screening.dropped > 0 {
+        notes.push(format!(
+            "{} of {} magnetometer samples of the turns were left out of the field fit as \
+             spikes (up to {:.3e} robust standard deviations from their neighbours)",
+            screening.dropped,
+            mag_points.len(),
+            screening.worst_sigmas
+        ));
+    }
     let mag_final = alignment
         .as_ref()
         .map_or(mag.cal, |align| align.apply_to(&mag.cal));
@@ -349,7 +372,7 @@ pub fn fit_session(
     let verdict = judge(
         &accel,
         &uncertainties,
-        alignment.is_some(),
+        alignment.as_ref().err(),
         budgets,
         gravity_mps2,
     );
@@ -360,6 +383,7 @@ pub fn fit_session(
         gyro,
         mag,
         alignment,
+        notes,
         field_ut: field,
         field_source,
         gravity_mps2,
@@ -373,7 +397,7 @@ pub fn fit_session(
 fn judge(
     accel: &Fit,
     u: &Uncertainties,
-    aligned: bool,
+    alignment_error: Option<&String>,
     budgets: Budgets,
     gravity_mps2: f64,
 ) -> Verdict {
@@ -409,12 +433,15 @@ fn judge(
             u.mag_norm_pct, budgets.mag_pct
         ));
     }
-    if !aligned {
-        reasons.push(
-            "the magnetometer could not be aligned to the accelerometer frame; the heading \
-             from this calibration may be off by the sensors' mounting angle"
-                .to_string(),
-        );
+    if let Some(error) = alignment_error {
+        // The magnetometer would be written in its own frame: a heading off by the sensors'
+        // mounting angle, which for separate dies can be any multiple of 90°.
+        poor = true;
+        reasons.push(format!(
+            "the magnetometer could not be aligned to the accelerometer frame ({error}), so \
+             the heading from this calibration would be off by the sensors' mounting angle; \
+             hold the positions again, with no magnet or steel near the board"
+        ));
     }
     let level = if reasons.is_empty() {
         VerdictLevel::Good
@@ -440,7 +467,14 @@ mod tests {
         for i in 6..9 {
             cov[(i, i)] = sigma * sigma;
         }
-        let fit = Fit {
+        let got = max_norm_sigma(&identity_fit(cov)).expect("a covariance");
+        assert!((got - sigma).abs() < 1e-15, "{got}");
+    }
+
+    /// An identity fit of the accelerometer with covariance `cov` over the upper-triangular
+    /// `A` and `b`.
+    fn identity_fit(cov: DMatrix<f64>) -> Fit {
+        Fit {
             method: crate::fit::Method::Lm,
             cal: Calibration::identity(),
             residuals: vec![],
@@ -454,9 +488,35 @@ mod tests {
             termination: None,
             coverage_factor: crate::fit::uncertainty::Z_95,
             reference: 9.8,
+        }
+    }
+
+    #[test]
+    fn a_failed_alignment_makes_the_verdict_poor_and_names_the_cause() {
+        let within = Uncertainties {
+            accel_bias_mg: [0.01; 3],
+            accel_scale_ppm: [10.0; 3],
+            accel_norm_mg: 0.1,
+            gyro_bias_dps: [0.001; 3],
+            mag_bias_ut: [0.01; 3],
+            mag_norm_pct: 0.01,
+            alignment_deg: f64::NAN,
         };
-        let got = max_norm_sigma(&fit).expect("a covariance");
-        assert!((got - sigma).abs() < 1e-15, "{got}");
+        let budgets = Budgets {
+            accel_mg: 2.0,
+            mag_pct: 0.5,
+        };
+        let fit = identity_fit(DMatrix::zeros(9, 9));
+        let aligned = judge(&fit, &within, None, budgets, 9.8);
+        assert_eq!(aligned.level, VerdictLevel::Good, "{:?}", aligned.reasons);
+        let error = "only 4 poses for the rotation and the dip".to_string();
+        let failed = judge(&fit, &within, Some(&error), budgets, 9.8);
+        assert_eq!(failed.level, VerdictLevel::Poor);
+        assert!(
+            failed.reasons.iter().any(|r| r.contains(&error)),
+            "{:?}",
+            failed.reasons
+        );
     }
 
     #[test]

@@ -1,7 +1,8 @@
-//! Distribution functions of the normal and chi-square laws, computed without a dependency:
-//! the normal quantile (Acklam's rational approximation), the chi-square quantile per degree of
-//! freedom (Wilson–Hilferty), and upper tails through the regularised incomplete gamma function
-//! (Lanczos `ln Γ`, series and Lentz continued fraction, Numerical Recipes §6.1–6.2).
+//! Distribution functions of the normal, chi-square and Student t laws, computed without a
+//! dependency: the normal quantile (Acklam's rational approximation), the chi-square quantile per
+//! degree of freedom (Wilson–Hilferty), upper tails through the regularised incomplete gamma
+//! function (Lanczos `ln Γ`, series and Lentz continued fraction, Numerical Recipes §6.1–6.2) and
+//! the regularised incomplete beta function (continued fraction, Numerical Recipes §6.4).
 
 /// Standard normal quantile (Acklam's rational approximation, relative error < 1.2e-9).
 pub fn normal_quantile(p: f64) -> f64 {
@@ -156,6 +157,91 @@ pub fn normal_upper_tail(z: f64) -> f64 {
     0.5 * erfc(z / std::f64::consts::SQRT_2)
 }
 
+/// Upper-tail probability of Student's t distribution with `dof` degrees of freedom,
+/// `P(T ≥ t) = ½·I_{ν/(ν+t²)}(ν/2, ½)` for `t ≥ 0` (Abramowitz & Stegun 26.7.1 with 26.5.27).
+pub fn student_t_upper_tail(t: f64, dof: f64) -> f64 {
+    if t.is_nan() || dof.is_nan() || dof <= 0.0 {
+        return f64::NAN;
+    }
+    if t.is_infinite() {
+        return if t > 0.0 { 0.0 } else { 1.0 };
+    }
+    let half = 0.5 * incomplete_beta(0.5 * dof, 0.5, dof / (dof + t * t));
+    if t >= 0.0 {
+        half
+    } else {
+        1.0 - half
+    }
+}
+
+/// Upper-tail probability of the F distribution with `(d1, d2)` degrees of freedom,
+/// `P(F ≥ f) = I_{d2/(d2 + d1·f)}(d2/2, d1/2)` (Abramowitz & Stegun 26.6.2).
+pub fn f_upper_tail(f: f64, d1: f64, d2: f64) -> f64 {
+    if f.is_nan() || !(d1 > 0.0 && d2 > 0.0) {
+        return f64::NAN;
+    }
+    if f <= 0.0 {
+        return 1.0;
+    }
+    if f.is_infinite() {
+        return 0.0;
+    }
+    incomplete_beta(0.5 * d2, 0.5 * d1, d2 / (d2 + d1 * f))
+}
+
+/// Regularised incomplete beta `I_x(a, b)`: the continued fraction (modified Lentz) where it
+/// converges fast, `x < (a + 1)/(a + b + 2)`, and the symmetry `1 − I_{1−x}(b, a)` elsewhere.
+fn incomplete_beta(a: f64, b: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let ln_front = ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln();
+    if x < (a + 1.0) / (a + b + 2.0) {
+        (ln_front.exp() * beta_fraction(a, b, x) / a).clamp(0.0, 1.0)
+    } else {
+        (1.0 - ln_front.exp() * beta_fraction(b, a, 1.0 - x) / b).clamp(0.0, 1.0)
+    }
+}
+
+/// The continued fraction of the incomplete beta function (Numerical Recipes `betacf`).
+fn beta_fraction(a: f64, b: f64, x: f64) -> f64 {
+    let tiny = 1e-300;
+    let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
+    let mut c = 1.0;
+    let mut d = 1.0 - qab * x / qap;
+    if d.abs() < tiny {
+        d = tiny;
+    }
+    d = 1.0 / d;
+    let mut h = d;
+    for m in 1..10_000 {
+        let m = m as f64;
+        let m2 = 2.0 * m;
+        let even = m * (b - m) * x / ((qam + m2) * (a + m2));
+        d = 1.0 + even * d;
+        d = if d.abs() < tiny { tiny } else { d };
+        c = 1.0 + even / c;
+        c = if c.abs() < tiny { tiny } else { c };
+        d = 1.0 / d;
+        h *= d * c;
+        let odd = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
+        d = 1.0 + odd * d;
+        d = if d.abs() < tiny { tiny } else { d };
+        c = 1.0 + odd / c;
+        c = if c.abs() < tiny { tiny } else { c };
+        d = 1.0 / d;
+        let delta = d * c;
+        h *= delta;
+        if (delta - 1.0).abs() < 1e-15 {
+            break;
+        }
+    }
+    h
+}
+
 /// Complementary error function via `Q(1/2, x²)`.
 fn erfc(x: f64) -> f64 {
     if x >= 0.0 {
@@ -186,6 +272,42 @@ mod tests {
         assert!((normal_upper_tail(1.959_964) - 0.025).abs() < 1e-7);
         assert!((normal_upper_tail(2.326_348) - 0.01).abs() < 1e-7);
         assert!((normal_upper_tail(-1.959_964) - 0.975).abs() < 1e-7);
+    }
+
+    #[test]
+    fn student_t_tail_matches_tabulated_quantiles() {
+        // Tabulated one-sided points (NIST/SEMATECH 1.3.6.7.2, 3 decimals): t_{0.975,5} = 2.571,
+        // t_{0.99,10} = 2.764, t_{0.995,30} = 2.750, t_{0.95,100} = 1.660; hence 2e-4 on p.
+        for (t, dof, p) in [
+            (2.571, 5.0, 0.025),
+            (2.764, 10.0, 0.01),
+            (2.750, 30.0, 0.005),
+            (1.660, 100.0, 0.05),
+        ] {
+            let got = student_t_upper_tail(t, dof);
+            assert!((got - p).abs() < 2e-4, "t = {t}, ν = {dof}: {got}");
+        }
+        // ν = 1 is the Cauchy law: P(T ≥ t) = ½ − atan(t)/π exactly; symmetric about zero.
+        let cauchy = 0.5 - 3.0f64.atan() / std::f64::consts::PI;
+        assert!((student_t_upper_tail(3.0, 1.0) - cauchy).abs() < 1e-12);
+        assert!((student_t_upper_tail(-3.0, 1.0) - (1.0 - cauchy)).abs() < 1e-12);
+        assert!((student_t_upper_tail(0.0, 7.0) - 0.5).abs() < 1e-15);
+        // Large ν tends to the normal tail.
+        assert!((student_t_upper_tail(2.0, 1e7) - normal_upper_tail(2.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn f_tail_matches_the_t_tail_and_the_tables() {
+        // F(1, ν) is the square of t(ν): P(F ≥ t²) = 2·P(T ≥ t).
+        for (t, dof) in [(2.0, 5.0), (1.3, 20.0)] {
+            let two_sided = 2.0 * student_t_upper_tail(t, dof);
+            assert!((f_upper_tail(t * t, 1.0, dof) - two_sided).abs() < 1e-12);
+        }
+        // Tabulated upper 5 % points (NIST/SEMATECH 1.3.6.7.3, 3 decimals): F(21, 60) = 1.727
+        // (interpolated table value 1.73 ± 0.005), F(3, 10) = 3.708.
+        assert!((f_upper_tail(3.708, 3.0, 10.0) - 0.05).abs() < 2e-4);
+        assert!((f_upper_tail(1.73, 21.0, 60.0) - 0.05).abs() < 2e-3);
+        assert_eq!(f_upper_tail(0.0, 3.0, 10.0), 1.0);
     }
 
     #[test]

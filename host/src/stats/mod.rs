@@ -5,6 +5,7 @@ pub mod autocorrelation;
 pub mod chi_square;
 pub mod descriptive;
 pub mod distributions;
+pub mod robust;
 pub mod threshold;
 
 /// 3-vector of f64: per-axis statistics (the same type as `crate::fit::Vec3`, named here so that

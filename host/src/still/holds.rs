@@ -1,9 +1,11 @@
 //! Per-sensor statistics of one hold: mean, within-hold variance and count of each sensor's
-//! samples, the magnetometer samples inside the hold's time span, and the die temperature.
+//! screened samples ([`super::samples`]), the magnetometer samples inside the hold's time span,
+//! and the die temperature.
 
 use super::intervals::{StillInterval, StillReport, TempStats};
-use crate::fit::{Pose, Vec3};
-use crate::recording::Recording;
+use super::samples::hold_samples;
+use crate::fit::Pose;
+use crate::recording::{Recording, Sensor};
 use crate::stats::descriptive::mean_variance;
 
 /// Holds from a `pose` column: every row with the same label belongs to one hold.
@@ -40,19 +42,6 @@ pub(super) fn from_pose_column(recording: &Recording) -> StillReport {
     }
 }
 
-/// Mean, per-axis sample variance and count of the selected samples.
-fn pose_of<'a>(
-    samples: impl Iterator<Item = &'a Vec3> + Clone,
-    label: Option<i64>,
-) -> Option<Pose> {
-    mean_variance(samples).map(|(mean, var, n)| Pose {
-        mean,
-        var,
-        n,
-        label,
-    })
-}
-
 /// The hold of rows `start..end` (statistics over `rows`), before direction clustering.
 pub(super) fn interval(
     recording: &Recording,
@@ -63,19 +52,20 @@ pub(super) fn interval(
 ) -> StillInterval {
     let t_start = recording.time[start];
     let t_end = recording.time[end - 1];
-    let pick = |x: &Option<Vec<Vec3>>| {
-        x.as_ref()
-            .and_then(|x| pose_of(rows.iter().filter_map(|&i| x.get(i)), label))
+    let mut dropped = Vec::new();
+    let mut pose = |sensor: Sensor| {
+        let held = hold_samples(recording, rows, t_start, t_end, sensor)?;
+        dropped.extend(held.dropped);
+        mean_variance(held.kept.iter()).map(|(mean, var, n)| Pose {
+            mean,
+            var,
+            n,
+            label,
+        })
     };
-    let mag = recording.mag.as_ref().and_then(|m| {
-        let inside = m
-            .time
-            .iter()
-            .zip(&m.samples)
-            .filter(|(t, _)| **t >= t_start && **t <= t_end)
-            .map(|(_, x)| x);
-        pose_of(inside, label)
-    });
+    let accel = pose(Sensor::Accel);
+    let gyro = pose(Sensor::Gyro);
+    let mag = pose(Sensor::Mag);
     let temp = recording.temp_c.as_ref().and_then(|t| {
         let values: Vec<f64> = rows.iter().filter_map(|&i| t.get(i).copied()).collect();
         (!values.is_empty()).then(|| TempStats {
@@ -90,10 +80,11 @@ pub(super) fn interval(
         t_start,
         t_end,
         label,
-        accel: pick(&recording.accel),
-        gyro: pick(&recording.gyro),
+        accel,
+        gyro,
         mag,
         temp,
         direction: None,
+        dropped,
     }
 }

@@ -1,6 +1,7 @@
 //! What the detector finds: the holds, their per-sensor statistics, and the noise floors used.
 
 use super::directions::cluster_directions;
+use super::samples::{hold_samples, DroppedSamples, HoldSamples};
 use crate::fit::{Pose, Vec3};
 use crate::recording::{LabelKind, Recording, Sensor};
 
@@ -38,6 +39,9 @@ pub struct StillInterval {
     pub temp: Option<TempStats>,
     /// Index into [`StillReport::directions`] of this hold's gravity direction.
     pub direction: Option<usize>,
+    /// Samples the outlier screen dropped from the statistics above, per sensor (empty when
+    /// none was).
+    pub dropped: Vec<DroppedSamples>,
 }
 
 impl StillInterval {
@@ -58,6 +62,35 @@ impl StillInterval {
                 None => true,
             })
             .collect()
+    }
+
+    /// The screened samples of `sensor` in this hold, the ones its statistics are made of.
+    pub fn samples(&self, recording: &Recording, sensor: Sensor) -> Option<HoldSamples> {
+        hold_samples(
+            recording,
+            &self.rows(recording),
+            self.t_start,
+            self.t_end,
+            sensor,
+        )
+    }
+
+    /// One sentence naming the samples the outlier screen dropped from this hold, per sensor;
+    /// `None` when nothing was dropped.
+    pub fn dropped_sentence(&self) -> Option<String> {
+        if self.dropped.is_empty() {
+            return None;
+        }
+        let name = self.label.map_or(String::new(), |l| format!(" (pose {l})"));
+        let what: Vec<String> = self.dropped.iter().map(DroppedSamples::phrase).collect();
+        Some(format!(
+            "hold at {:.1}–{:.1} s{name}: outliers dropped from its statistics: {} (robust \
+             standard deviations from the hold's median): a spike, a corrupted read or a knock \
+             during the hold",
+            self.t_start,
+            self.t_end,
+            what.join(", ")
+        ))
     }
 
     /// Duration in seconds.

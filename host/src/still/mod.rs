@@ -19,10 +19,14 @@
 //! break. Runs of still windows are merged across short blips, kept when they last long
 //! enough, and their gravity directions are clustered by angle.
 //!
+//! Inside each hold, gross outliers (a spike, a corrupted read) are screened out of every
+//! sensor's samples by median/MAD with a Bonferroni bound before any statistic is taken
+//! ([`crate::stats::robust`]); each hold lists what was dropped.
+//!
 //! Files: `options` (settings, errors), `intervals` (what is found), `detect` (the windowed test
-//! and the runs it gives), `holds` (per-sensor statistics of a hold), `directions` (clustering of
-//! gravity directions), `motions` (the gyroscope rotations between consecutive holds, for the
-//! gyroscope-scale fit).
+//! and the runs it gives), `samples` (a hold's screened samples), `holds` (per-sensor
+//! statistics of a hold), `directions` (clustering of gravity directions), `motions` (the
+//! gyroscope rotations between consecutive holds, for the gyroscope-scale fit).
 
 mod detect;
 pub mod directions;
@@ -30,6 +34,7 @@ mod holds;
 mod intervals;
 pub mod motions;
 mod options;
+mod samples;
 
 use crate::recording::{LabelKind, Recording};
 
@@ -38,6 +43,7 @@ pub use detect::{BREAK_S, MAX_STILL_GYRO_STD_DPS};
 use holds::from_pose_column;
 pub use intervals::{NoiseFloor, StillInterval, StillReport, TempStats};
 pub use options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
+pub use samples::{hold_samples, DroppedSamples, HoldSamples};
 
 /// Find the static holds of a recording: from its `pose` column when it has one, otherwise by
 /// detection (within each `segment`, never across a boundary).

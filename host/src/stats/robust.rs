@@ -1,0 +1,276 @@
+//! Screening of gross outliers (a spike, a corrupted read) from a set of samples that should
+//! scatter about one value: median and MAD with a Bonferroni bound; and from a stream taken
+//! while turning, by the same bound on the deviations from a running median
+//! ([`screen_stream`]).
+//!
+//! Centre `m = median(x)`, scale `σ̂ = 1.4826·median|xᵢ − m|` (Rousseeuw & Croux 1993): both
+//! ignore up to half the values being wrong, unlike the mean and standard deviation a spike
+//! drags along. A value is dropped when `|xᵢ − m| > k·σ` with `k = Φ⁻¹(1 − α/(2N))` for `N`
+//! tests (every value of every axis): by Bonferroni's inequality a set of Gaussian values loses
+//! any value with probability at most `α` ([`FAMILY_FALSE_DROP`]), whatever its size. So clean
+//! data keeps its plain mean and variance, while a spike of any size is removed whole; a robust
+//! M-estimate (Huber) would also bound the spike's pull, but keeps no account of what was
+//! rejected, which the warnings name.
+//!
+//! Two guards keep the bound from biting on clean data: `σ̂` of few values can come out small
+//! by chance (its standard error is `1.166σ/√n` for Gaussian data), so `σ = σ̂/(1 − 2·1.166/√n)`
+//! (at most twice `σ̂`), the value two standard errors below which `σ̂` rarely falls; and a
+//! quantised sensor whose readings mostly repeat has `σ̂ = 0`, so `σ` is at least the data's
+//! resolution (one step: a reading a few steps from the median is noise, not a spike).
+
+use super::descriptive::{median, quantisation_step};
+use super::distributions::normal_quantile;
+use super::Vec3;
+
+/// Probability that a clean set of Gaussian samples loses any sample to the screen.
+pub const FAMILY_FALSE_DROP: f64 = 0.01;
+
+/// Fewer values than this are not screened: the median and MAD of a handful say little.
+pub const MIN_SCREENED: usize = 10;
+
+/// Asymptotic standard error of the normalised MAD, in units of `σ/√n`, for Gaussian data.
+const MAD_STANDARD_ERROR: f64 = 1.166;
+
+/// What the screen decided for a set of samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Screening {
+    /// Per sample: kept (`true`) or dropped.
+    pub keep: Vec<bool>,
+    /// Number of samples dropped.
+    pub dropped: usize,
+    /// The bound `k`, in standard deviations.
+    pub bound_sigmas: f64,
+    /// Largest deviation of a dropped sample from the median, in standard deviations (0 when
+    /// nothing was dropped).
+    pub worst_sigmas: f64,
+}
+
+impl Screening {
+    /// Everything kept (too few values to screen).
+    fn keep_all(n: usize) -> Self {
+        Self {
+            keep: vec![true; n],
+            dropped: 0,
+            bound_sigmas: f64::INFINITY,
+            worst_sigmas: 0.0,
+        }
+    }
+
+    /// The kept values of `values` (the slice the screening was computed on).
+    pub fn kept<T: Copy>(&self, values: &[T]) -> Vec<T> {
+        values
+            .iter()
+            .zip(&self.keep)
+            .filter(|(_, k)| **k)
+            .map(|(v, _)| *v)
+            .collect()
+    }
+}
+
+/// Bound `k = Φ⁻¹(1 − α/(2·tests))` in standard deviations.
+pub fn bonferroni_bound(tests: usize) -> f64 {
+    normal_quantile(1.0 - FAMILY_FALSE_DROP / (2.0 * tests.max(1) as f64))
+}
+
+/// Centre and guarded scale (see the module comment) of `values`, with `resolution` as the
+/// scale's floor.
+fn centre_and_scale(values: &[f64], resolution: f64) -> (f64, f64) {
+    let mut sorted = values.to_vec();
+    let centre = median(&mut sorted);
+    let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
+    let mad = 1.482_6 * median(&mut deviations);
+    let shrink = (1.0 - 2.0 * MAD_STANDARD_ERROR / (values.len() as f64).sqrt()).max(0.5);
+    (centre, (mad / shrink).max(resolution))
+}
+
+/// Screen each of `axes` (equal lengths) with one Bonferroni bound over all their values; a
+/// sample is dropped when any axis is beyond it.
+fn screen_axes(axes: &[Vec<f64>], resolution: &[f64]) -> Screening {
+    let n = axes.first().map_or(0, Vec::len);
+    if n < MIN_SCREENED {
+        return Screening::keep_all(n);
+    }
+    let bound = bonferroni_bound(n * axes.len());
+    let mut worst = vec![0.0_f64; n];
+    for (values, &floor) in axes.iter().zip(resolution) {
+        let (centre, sigma) = centre_and_scale(values, floor);
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            continue;
+        }
+        for (w, v) in worst.iter_mut().zip(values) {
+            // A non-finite reading is dropped: it would poison every statistic.
+            let z = if v.is_finite() {
+                (v - centre).abs() / sigma
+            } else {
+                f64::INFINITY
+            };
+            *w = w.max(z);
+        }
+    }
+    let keep: Vec<bool> = worst.iter().map(|z| *z <= bound).collect();
+    let dropped = keep.iter().filter(|k| !**k).count();
+    let worst_sigmas = worst
+        .iter()
+        .filter(|z| **z > bound)
+        .fold(0.0_f64, |a, z| a.max(*z));
+    Screening {
+        keep,
+        dropped,
+        bound_sigmas: bound,
+        worst_sigmas,
+    }
+}
+
+/// Screen scalar values; `resolution` is the smallest meaningful difference (0 when unknown).
+pub fn screen_scalars(values: &[f64], resolution: f64) -> Screening {
+    screen_axes(&[values.to_vec()], &[resolution])
+}
+
+/// Screen 3-vector samples axis by axis (one bound over the `3n` tests), each axis's scale
+/// floored at its quantisation step.
+pub fn screen_vectors(samples: &[Vec3]) -> Screening {
+    let step = quantisation_step(samples);
+    let axes: Vec<Vec<f64>> = (0..3)
+        .map(|k| samples.iter().map(|s| s[k]).collect())
+        .collect();
+    screen_axes(&axes, &[step.x, step.y, step.z])
+}
+
+/// Half-width of the running median of [`screen_stream`]: six neighbours follow a turning
+/// board's smooth path, and a spike of up to two samples cannot move their median far.
+const STREAM_HALF_WINDOW: usize = 3;
+
+/// Screen a stream of 3-vector samples taken while the board turns (the magnetometer's
+/// tumble), where no single value is expected: each sample's deviation from the median of the
+/// six around it (Hampel's identifier; Pearson, "Outliers in process modeling and
+/// identification", IEEE TCST 10(1), 2002), screened axis by axis like [`screen_vectors`] with
+/// one robust scale per axis for the whole stream. A smooth path leaves the deviations at the
+/// noise; a spike stands out by its own size.
+pub fn screen_stream(samples: &[Vec3]) -> Screening {
+    let n = samples.len();
+    if n < MIN_SCREENED.max(2 * STREAM_HALF_WINDOW + 1) {
+        return Screening::keep_all(n);
+    }
+    let axes: Vec<Vec<f64>> = (0..3)
+        .map(|k| {
+            (0..n)
+                .map(|i| {
+                    let lo = i.saturating_sub(STREAM_HALF_WINDOW);
+                    let hi = (i + STREAM_HALF_WINDOW + 1).min(n);
+                    // The neighbours without the sample itself: on a steady turn the sample
+                    // would be its own window's median, and the deviations would collapse to 0.
+                    let mut neighbours: Vec<f64> = (lo..hi)
+                        .filter(|&j| j != i)
+                        .filter_map(|j| samples.get(j).map(|s| s[k]))
+                        .collect();
+                    samples[i][k] - median(&mut neighbours)
+                })
+                .collect()
+        })
+        .collect();
+    let step = quantisation_step(samples);
+    screen_axes(&axes, &[step.x, step.y, step.z])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Standard normal numbers from a seeded generator.
+    fn gaussian(seed: u64, n: usize) -> Vec<f64> {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        (0..n).map(|_| StandardNormal.sample(&mut rng)).collect()
+    }
+
+    fn noisy_vectors(seed: u64, n: usize, sigma: f64) -> Vec<Vec3> {
+        let (x, y, z) = (
+            gaussian(seed, n),
+            gaussian(seed + 1, n),
+            gaussian(seed + 2, n),
+        );
+        (0..n)
+            .map(|i| {
+                Vec3::new(
+                    20.0 + sigma * x[i],
+                    -5.0 + sigma * y[i],
+                    40.0 + sigma * z[i],
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_bound_grows_with_the_number_of_tests_as_bonferroni_says() {
+        // Φ⁻¹(1 − 0.01/2) = 2.5758 for one test; Φ⁻¹(1 − 0.01/6000) = 4.648 for 3000.
+        assert!((bonferroni_bound(1) - 2.5758).abs() < 1e-3);
+        assert!((bonferroni_bound(3000) - 4.648).abs() < 2e-3);
+    }
+
+    #[test]
+    fn one_huge_spike_in_a_hold_is_dropped_and_nothing_else() {
+        let mut samples = noisy_vectors(3, 800, 0.3);
+        samples[417].y = 1e5;
+        let screening = screen_vectors(&samples);
+        assert_eq!(screening.dropped, 1);
+        assert!(!screening.keep[417]);
+        assert!(screening.worst_sigmas > 1e4, "{}", screening.worst_sigmas);
+    }
+
+    #[test]
+    fn clean_gaussian_holds_lose_a_sample_in_about_one_percent_of_cases() {
+        // 200 clean holds of 500 samples: at α = 1 % the expected count of holds losing any
+        // sample is 2 (the guard on σ̂ makes it smaller); more than 8 would mean the bound is
+        // far looser than stated (Poisson(2) exceeds 8 with probability < 3e-4).
+        let losing = (0..200)
+            .filter(|seed| screen_vectors(&noisy_vectors(10 * seed, 500, 1.0)).dropped > 0)
+            .count();
+        assert!(losing <= 8, "{losing} of 200 clean holds lost samples");
+    }
+
+    #[test]
+    fn quantised_readings_that_mostly_repeat_are_not_screened_down_to_one_value() {
+        // 0.15 µT steps, 80 % of readings on the median, the rest one or two steps away:
+        // MAD = 0, but nothing within a few steps is an outlier.
+        let values: Vec<f64> = (0..200)
+            .map(|i| match i % 10 {
+                0 => 0.15,
+                1 => -0.15,
+                2 if i % 20 == 2 => 0.30,
+                _ => 0.0,
+            })
+            .collect();
+        let screening = screen_scalars(&values, 0.15);
+        assert_eq!(screening.dropped, 0);
+    }
+
+    #[test]
+    fn a_spike_in_a_turning_stream_is_dropped_and_the_smooth_path_kept() {
+        // A 48 µT field turning at up to 2 rad/s, sampled at 100 Hz with 0.3 µT noise.
+        let noise = [gaussian(1, 3000), gaussian(2, 3000), gaussian(3, 3000)];
+        let mut samples: Vec<Vec3> = (0..3000)
+            .map(|i| {
+                let t = i as f64 / 100.0;
+                let (a, b) = (2.0 * (0.3 * t).sin() * t / 10.0, 0.7 * t);
+                Vec3::new(a.cos() * b.cos(), a.cos() * b.sin(), a.sin()) * 48.0
+                    + Vec3::new(noise[0][i], noise[1][i], noise[2][i]) * 0.3
+            })
+            .collect();
+        samples[1234].x = 1e5;
+        let screening = screen_stream(&samples);
+        assert!(!screening.keep[1234]);
+        assert_eq!(screening.dropped, 1, "{}", screening.bound_sigmas);
+    }
+
+    #[test]
+    fn a_non_finite_reading_is_dropped_and_too_few_values_are_left_alone() {
+        let mut values = gaussian(5, 50);
+        values[7] = f64::NAN;
+        let screening = screen_scalars(&values, 0.0);
+        assert_eq!(screening.dropped, 1);
+        assert!(!screening.keep[7]);
+        let few = [1.0, 2.0, 1e9];
+        assert_eq!(screen_scalars(&few, 0.0).dropped, 0);
+    }
+}
