@@ -22,7 +22,9 @@
 //!
 //! `bias_step` and `thermal_hysteresis` lie outside every effect family a fitted model can
 //! express (temperature, time, specific force, reading magnitude), so they test that the analysis
-//! reports an unexplained residual instead of guessing.
+//! reports an unexplained residual instead of guessing; so do the effects of
+//! [`crate::out_of_family`] (a bias following `dT/dt`, cross-axis non-linearity, a bumped hold,
+//! a steel object near one hold).
 
 use std::str::FromStr;
 
@@ -33,6 +35,10 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
+use crate::out_of_family::{
+    CrossAxisNonlinearity, HoldEvent, OutOfFamily, TemperatureRateBias, THERMAL_LAG_S,
+    TYPICAL_STEEL_FIELD_UT,
+};
 use crate::sensor_kind::SensorKind;
 
 /// The effects that can be switched on.
@@ -55,11 +61,19 @@ pub enum EffectKind {
     ThermalHysteresis,
     /// Bias random walk (rate random walk).
     BiasRandomWalk,
+    /// Bias proportional to the rate of temperature change (see [`crate::out_of_family`]).
+    TemperatureRateBias,
+    /// Each axis picks up the product of the other two (see [`crate::out_of_family`]).
+    CrossAxisNonlinearity,
+    /// A bias offset during one hold (see [`crate::out_of_family`]).
+    BumpedHold,
+    /// A steel object's field during one hold, magnetometer only (see [`crate::out_of_family`]).
+    SteelNearHold,
 }
 
 impl EffectKind {
     /// Every effect, in a fixed order.
-    pub const ALL: [EffectKind; 8] = [
+    pub const ALL: [EffectKind; 12] = [
         EffectKind::BiasTemperature,
         EffectKind::ScaleTemperature,
         EffectKind::BiasDrift,
@@ -68,6 +82,10 @@ impl EffectKind {
         EffectKind::BiasStep,
         EffectKind::ThermalHysteresis,
         EffectKind::BiasRandomWalk,
+        EffectKind::TemperatureRateBias,
+        EffectKind::CrossAxisNonlinearity,
+        EffectKind::BumpedHold,
+        EffectKind::SteelNearHold,
     ];
 
     /// Name as used on the command line and in JSON.
@@ -81,12 +99,26 @@ impl EffectKind {
             EffectKind::BiasStep => "bias_step",
             EffectKind::ThermalHysteresis => "thermal_hysteresis",
             EffectKind::BiasRandomWalk => "bias_random_walk",
+            EffectKind::TemperatureRateBias => "temperature_rate_bias",
+            EffectKind::CrossAxisNonlinearity => "cross_axis_nonlinearity",
+            EffectKind::BumpedHold => "bumped_hold",
+            EffectKind::SteelNearHold => "steel_near_hold",
         }
     }
 
-    /// Whether the effect exists for `sensor` (g-sensitivity is a gyro effect only).
+    /// The only sensor the effect exists for (g-sensitivity: gyro; a steel object's field:
+    /// magnetometer), or `None` when it exists for every sensor.
+    pub fn only_sensor(self) -> Option<SensorKind> {
+        match self {
+            EffectKind::GSensitivity => Some(SensorKind::Gyro),
+            EffectKind::SteelNearHold => Some(SensorKind::Mag),
+            _ => None,
+        }
+    }
+
+    /// Whether the effect exists for `sensor`.
     pub fn applies_to(self, sensor: SensorKind) -> bool {
-        self != EffectKind::GSensitivity || sensor == SensorKind::Gyro
+        self.only_sensor().is_none_or(|only| only == sensor)
     }
 
     fn stream_index(self) -> u64 {
@@ -150,10 +182,12 @@ impl FromStr for EffectRequest {
                 ))
             })?;
         if let Some(sensor) = sensor {
-            if !kind.applies_to(sensor) {
+            if let Some(only) = kind.only_sensor().filter(|&only| only != sensor) {
                 return Err(invalid(format!(
-                    "{} exists only for the gyro; write `gyro.{}`",
+                    "{} exists only for the {}; write `{}.{}`",
                     kind.name(),
+                    only.name(),
+                    only.name(),
                     kind.name()
                 )));
             }
@@ -244,6 +278,9 @@ pub struct SensorEffects {
     pub thermal_hysteresis: Option<ThermalHysteresis>,
     /// See [`BiasRandomWalk`].
     pub bias_random_walk: Option<BiasRandomWalk>,
+    /// Effects no calibration model has a term for (see [`crate::out_of_family`]).
+    #[serde(default)]
+    pub out_of_family: OutOfFamily,
 }
 
 impl SensorEffects {
@@ -471,6 +508,41 @@ pub fn draw_effects(
                 EffectKind::BiasRandomWalk => {
                     effects.bias_random_walk = on.then_some(BiasRandomWalk {
                         density: size * typ.random_walk,
+                    });
+                }
+                EffectKind::TemperatureRateBias => {
+                    effects.out_of_family.temperature_rate_bias = on.then(|| TemperatureRateBias {
+                        per_degree_per_second: signed3(
+                            &mut rng,
+                            size * typ.bias_tempco * THERMAL_LAG_S,
+                        ),
+                    });
+                }
+                EffectKind::CrossAxisNonlinearity => {
+                    let r = typ.nonlinearity_reference;
+                    effects.out_of_family.cross_axis_nonlinearity =
+                        on.then(|| CrossAxisNonlinearity {
+                            product: signed3(&mut rng, size * 1e-3 / r),
+                        });
+                }
+                EffectKind::BumpedHold => {
+                    effects.out_of_family.bumped_hold = on.then(|| {
+                        let time_s = duration_s * rng.gen_range(0.3..=0.7);
+                        HoldEvent {
+                            start_s: time_s,
+                            end_s: time_s,
+                            value: signed3(&mut rng, size * typ.step),
+                        }
+                    });
+                }
+                EffectKind::SteelNearHold => {
+                    effects.out_of_family.steel_near_hold = on.then(|| {
+                        let time_s = duration_s * rng.gen_range(0.3..=0.7);
+                        HoldEvent {
+                            start_s: time_s,
+                            end_s: time_s,
+                            value: signed3(&mut rng, size * TYPICAL_STEEL_FIELD_UT),
+                        }
                     });
                 }
             }

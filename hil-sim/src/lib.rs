@@ -15,6 +15,7 @@ pub mod link_faults;
 pub mod lsm9ds1_chip;
 pub mod motioncal_board;
 pub mod motioncal_serve;
+pub mod out_of_family;
 pub mod physics;
 pub mod poser;
 pub mod recording;

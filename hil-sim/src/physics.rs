@@ -3,9 +3,12 @@
 //! The host calibrates with `y = A·(x − b)` (ARCHITECTURE.md; seed 000 eq. (3)–(8)), so the
 //! raw reading is generated as `x = A⁻¹·y + b`, with, in this order:
 //! 1. gyro only: `y ← ω + K·f` (g-sensitivity, calibrated units; correction `− K·f`);
+//!    magnetometer: `y ← y + steel field` during the hold a steel object lies near;
 //! 2. `u = A⁻¹·y` (scale, cross-axis, and for the magnetometer soft iron);
-//! 3. `u_i ← u_i·(1 + k_i·ΔT)` (scale temperature), then `u_i ← u_i + q_i·u_i² + c_i·u_i³`;
-//! 4. `x = u + b + b_T(ΔT) + r·t + step + walk + hysteresis + σ·n`, `n ~ N(0, I)`;
+//! 3. `u_i ← u_i·(1 + k_i·ΔT)` (scale temperature), then `u_i ← u_i + q_i·u_i² + c_i·u_i³`,
+//!    then the cross-axis products of [`crate::out_of_family`];
+//! 4. `x = u + b + b_T(ΔT) + r·t + step + walk + hysteresis + g·dT/dt + bump + σ·n`,
+//!    `n ~ N(0, I)`;
 //! 5. counts `= round(x / LSB)` clamped to the 16-bit output register (saturation).
 //!
 //! `ΔT = T − 25 °C`. White noise follows the IEEE Std 952 convention: a density `N` (units/√Hz)
@@ -387,6 +390,8 @@ pub struct ImuPhysics {
     walk: [Vector3<f64>; 3],
     /// Play-operator state of thermal hysteresis, per sensor.
     play_temp_c: [Option<f64>; 3],
+    /// Temperature of the previous sample, for `dT/dt`.
+    previous_temp_c: Option<f64>,
 }
 
 impl ImuPhysics {
@@ -401,6 +406,7 @@ impl ImuPhysics {
             noise,
             walk: [Vector3::zeros(); 3],
             play_temp_c: [None; 3],
+            previous_temp_c: None,
         })
     }
 
@@ -418,6 +424,10 @@ impl ImuPhysics {
             *n = self.noise.sample(StandardNormal);
         }
         let delta_t = state.temp_c - self.truth.reference_temp_c;
+        let temp_rate = self
+            .previous_temp_c
+            .map_or(0.0, |previous| (state.temp_c - previous) / self.dt_s);
+        self.previous_temp_c = Some(state.temp_c);
         let readings = SensorKind::ALL.map(|sensor| {
             let truth = self.truth.sensor(sensor);
             let effects = &truth.effects;
@@ -430,9 +440,15 @@ impl ImuPhysics {
             if let (SensorKind::Gyro, Some(g)) = (sensor, &self.truth.gyro_g_sensitivity) {
                 y += matrix_from_rows(&g.matrix) * state.specific_force_body;
             }
+            let extra = &effects.out_of_family;
+            y += extra.external_field(state.t);
             let u = truth.a_inverse() * y;
             let u = effects.apply_nonlinearity(u.component_mul(&effects.scale_multiplier(delta_t)));
-            let mut bias = truth.b() + effects.memoryless_bias(delta_t, state.t) + self.walk[k];
+            let u = extra.apply_cross_axis(u);
+            let mut bias = truth.b()
+                + effects.memoryless_bias(delta_t, state.t)
+                + extra.bias(state.t, temp_rate)
+                + self.walk[k];
             if let Some(h) = &effects.thermal_hysteresis {
                 if h.play_c > 0.0 {
                     let state_c = &mut self.play_temp_c[k];

@@ -152,13 +152,17 @@ impl Simulation {
         };
         world.validate()?;
         let duration = world.trajectory.duration_s();
-        let truth = ImuTruth::draw(
+        let mut truth = ImuTruth::draw(
             config.seed,
             &config.error_ranges,
             &config.effects,
             rate,
             duration,
         )?;
+        let holds = world.trajectory.holds();
+        for sensor in [&mut truth.accel, &mut truth.gyro, &mut truth.mag] {
+            sensor.effects.out_of_family.place_on_holds(&holds);
+        }
         let physics = ImuPhysics::new(truth, config.seed)?;
         // Whole samples within the trajectory: t_k = k / f_s < duration.
         let sample_count = (duration * rate).ceil() as usize;

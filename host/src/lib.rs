@@ -13,6 +13,9 @@ pub mod fit;
 pub mod geomag;
 pub mod history;
 pub mod input_checks;
+/// The residual analysis on simulated recordings with hidden effects (needs `synthetic`, `sim`).
+#[cfg(all(feature = "synthetic", feature = "sim"))]
+pub mod open_world;
 pub mod pipeline;
 pub mod recording;
 pub mod report;

@@ -8,6 +8,7 @@
 //! - [`effects`]: the candidate families and their parameters;
 //! - [`extended_fit`]: the base model plus effects, fitted jointly;
 //! - [`crossval`]: held-out losses by pose and the acceptance rule;
+//! - [`time_structure`]: whether a model's residual still follows time;
 //! - [`report`]: JSON, text and SVG plots.
 //!
 //! Selection is forward: every remaining candidate is tested against the current model; the
@@ -25,7 +26,12 @@
 //! (constant within each of 8 quantile bins), added to it, must not both fit significantly better
 //! (lack-of-fit F test at [`crossval::FORM_ALPHA`]) and predict the held-out poses better by the
 //! worth-having gain; otherwise the dependence has another form (a step, hysteresis) and the
-//! effect is rejected rather than accepted as an approximation.
+//! effect is rejected rather than accepted as an approximation. A temperature effect must pass
+//! the same check against a bias free in shape over time (any slow change of the bias is a
+//! function of time in a sequential recording). An accepted `bias_drift` is taken out again when
+//! the final residual still follows time ([`time_structure`]): a linear trend then is the
+//! straight-line part of a random walk, steps or hysteresis, not a drift. When accepted effects
+//! leave a residual above the floor the report says "partly explained".
 
 pub mod crossval;
 pub mod dataset;
@@ -36,6 +42,7 @@ pub mod report;
 pub mod result;
 pub mod selection;
 pub mod sensors;
+pub mod time_structure;
 
 pub use result::{
     AnalysisError, AnalysisOptions, CalibrationTerms, Coefficient, EffectResult, EffectStatus,

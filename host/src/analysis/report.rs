@@ -195,8 +195,13 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
             let corr = a.best_correlate.as_ref().map_or(String::new(), |(v, r)| {
                 format!("; it correlates best with {v} (r = {r:.2})")
             });
+            let what = if a.accepted().next().is_some() {
+                "partly explained: after the accepted effects the final residual"
+            } else {
+                "unexplained: the final residual"
+            };
             out.push_str(&format!(
-                "  unexplained: the final residual ({:.3e} {u} RMS, χ²/dof = {:.1}) is above the floor and no candidate explains it{corr}\n",
+                "  {what} ({:.3e} {u} RMS, χ²/dof = {:.1}) is above the floor and no candidate explains it{corr}\n",
                 a.rms_after,
                 a.test_after.reduced()
             ));

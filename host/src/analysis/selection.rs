@@ -13,6 +13,7 @@ use super::extended_fit::{
     ExtendedFit, Problem,
 };
 use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, SensorAnalysis};
+use super::time_structure::{follows_time_p, timed_residuals, without_effect};
 use crate::fit::{Calibration, Vec3};
 use crate::recording::Sensor;
 use crate::stats::chi_square::ChiSquareTest;
@@ -287,31 +288,64 @@ pub fn analyse_observations(
         remaining.retain(|r| r.name() != kind.name());
         if time_or_temp {
             // Form check: a bias free in shape over the same variable, added to the effect, must
-            // neither fit significantly better (lack-of-fit F test) nor predict visibly better.
-            let binned = EffectKind::BinnedBias(kind.needs_temperature());
-            let mut effects = fit.effects.clone();
-            effects.push(binned);
-            let start = extend_start(&fit.params, binned.param_count());
-            if let Some((free_fit, free_ho)) = evaluate(&problem, &effects, &start) {
-                let dof = (n * components).saturating_sub(free_fit.params.len());
-                let p = lack_of_fit_p(fit.cost, free_fit.cost, binned.param_count(), dof);
-                let cmp = Comparison::new(&ho, &free_ho, components);
-                if p <= FORM_ALPHA && cmp.gain_per_component >= MIN_GAIN_PER_COMPONENT {
-                    wrong_form.push((
-                        kind.name(),
-                        format!(
-                            "explains part of the residual, but a bias free in shape over {} fits it better (lack-of-fit \
-                             F test p = {p:.1e}) and predicts held-out poses better by {:.2} variances of the inflated floor: \
-                             the dependence has another form (a step, hysteresis), so it is not accepted",
-                            kind.variable(),
-                            cmp.gain_per_component
-                        ),
-                    ));
-                    continue;
-                }
+            // neither fit significantly better (lack-of-fit F test) nor predict visibly better;
+            // for a temperature effect, nor one free in shape over time (the recording is
+            // sequential, so any slow change of the bias is a function of time).
+            let mut checks = vec![EffectKind::BinnedBias(kind.needs_temperature())];
+            if kind.needs_temperature() {
+                checks.push(EffectKind::BinnedBias(false));
+            }
+            let other_form =
+                checks.into_iter().find_map(|binned| {
+                    let mut effects = fit.effects.clone();
+                    effects.push(binned);
+                    let start = extend_start(&fit.params, binned.param_count());
+                    let (free_fit, free_ho) = evaluate(&problem, &effects, &start)?;
+                    let dof = (n * components).saturating_sub(free_fit.params.len());
+                    let p = lack_of_fit_p(fit.cost, free_fit.cost, binned.param_count(), dof);
+                    let cmp = Comparison::new(&ho, &free_ho, components);
+                    (p <= FORM_ALPHA && cmp.gain_per_component >= MIN_GAIN_PER_COMPONENT)
+                        .then_some((binned, p, cmp.gain_per_component))
+                });
+            if let Some((binned, p, gain)) = other_form {
+                wrong_form.push((
+                    kind.name(),
+                    format!(
+                        "explains part of the residual, but a bias free in shape over {} fits it better (lack-of-fit \
+                         F test p = {p:.1e}) and predicts held-out poses better by {gain:.2} variances of the inflated floor: \
+                         the dependence has another form (a step, hysteresis, a random walk), so it is not accepted",
+                        binned.variable(),
+                    ),
+                ));
+                continue;
             }
         }
         current = (fit, ho);
+    }
+
+    // A drift whose residual still follows time is the straight-line part of a random walk or
+    // of steps, not a drift (see `time_structure`): take it out and refit.
+    if let Some(index) = current
+        .0
+        .effects
+        .iter()
+        .position(|k| *k == EffectKind::BiasDrift)
+    {
+        let p = follows_time_p(&timed_residuals(&problem, &current.0, &times));
+        let (effects, start) = without_effect(&problem, &current.0, index);
+        if p <= ALPHA {
+            if let Some(refit) = evaluate(&problem, &effects, &start) {
+                wrong_form.push((
+                    EffectKind::BiasDrift.name(),
+                    format!(
+                        "a linear trend improves held-out error, but the residual after it still follows time \
+                         (neighbours-in-time permutation p = {p:.1e}): the bias wanders (a random walk, steps, hysteresis) \
+                         rather than drifting linearly, so it is not accepted"
+                    ),
+                ));
+                current = refit;
+            }
+        }
     }
 
     let final_fit = current.0.clone();
