@@ -55,16 +55,21 @@ impl PortArgs {
                 _sim: Some(sim),
             });
         }
-        let path = match &self.port {
-            Some(port) => port.clone(),
-            None => {
-                let chosen = choose_port(&list_ports()?)?.path.clone();
-                eprintln!("using port {chosen}");
-                chosen
-            }
-        };
+        let path = given_or_only_board(self.port.as_deref())?;
         Ok(BoardPort { path, _sim: None })
     }
+}
+
+/// The port given, or else the only likely board (announced on stderr).
+pub(super) fn given_or_only_board(port: Option<&str>) -> anyhow::Result<String> {
+    Ok(match port {
+        Some(port) => port.to_string(),
+        None => {
+            let chosen = choose_port(&list_ports()?)?.path.clone();
+            eprintln!("using port {chosen}");
+            chosen
+        }
+    })
 }
 
 /// A client of the board running imucal's firmware at `args`; keep the [`BoardPort`] while

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
-use imucal::device::{choose_port, list_ports, DeviceClient, ParamsFile};
+use imucal::device::{DeviceClient, ParamsFile};
 use imucal::session::{
     load_poses, load_progress, run_session_with, save_session, summary, CapturedPose,
     SessionControl, SessionOptions,
@@ -25,6 +25,7 @@ use imucal::session::{
 use imucal_protocol::Welcome;
 
 use super::args::CalibrateArgs;
+use super::board::given_or_only_board;
 use super::calibrate_extend::close_the_loop;
 use super::calibrate_sim::Simulated;
 use super::calibrate_view::{before_after_table, Terminal};
@@ -158,10 +159,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let port = match (&simulated, args.port.first()) {
-        (Some(sim), _) => sim.port(),
-        (None, Some(port)) => port.clone(),
-        (None, None) => choose_port(&list_ports()?)?.path.clone(),
+    let port = match &simulated {
+        Some(sim) => sim.port(),
+        None => given_or_only_board(args.port.first().map(String::as_str))?,
     };
     let field_ut = field_reference(args)?.or(simulated.as_ref().map(Simulated::field_ut));
     if simulated.is_some() {

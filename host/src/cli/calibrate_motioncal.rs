@@ -9,12 +9,12 @@ use std::time::Duration;
 use anyhow::Context;
 use imucal::compat::motioncal::RawAccelScaling;
 use imucal::compat::MotionCalClient;
-use imucal::device::{choose_port, list_ports};
 use imucal::session::motioncal::{
     run_motioncal_session, save_motioncal_session, MotionCalOptions, MotionCalOutcome,
 };
 
 use super::args::CalibrateArgs;
+use super::board::given_or_only_board;
 use super::calibrate::{checked_session_dir, field_reference, session_options};
 use super::calibrate_view::Terminal;
 use super::write_policy::WritePolicy;
@@ -47,10 +47,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         None
     };
-    let port = match (&simulated, args.port.first()) {
-        (Some(sim), _) => sim.port(),
-        (None, Some(port)) => port.clone(),
-        (None, None) => choose_port(&list_ports()?)?.path.clone(),
+    let port = match &simulated {
+        Some(sim) => sim.port(),
+        None => given_or_only_board(args.port.first().map(String::as_str))?,
     };
     if simulated.is_some() {
         eprintln!(
