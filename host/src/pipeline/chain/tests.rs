@@ -179,4 +179,74 @@ fn equally_simple_models_the_data_cannot_tell_apart_are_averaged() {
     assert!((choice.fit.cal.a - truth).norm() < 1e-3);
     assert!((choice.fit.cal.b - b).norm() < 3e-3);
     assert!(choice.fit.loo_rms.is_some());
+    // The paired test did not separate them, and the mean is a scored candidate of its own.
+    assert!(!choice.pair.expect("both scored").significant());
+    assert!(choice
+        .candidates
+        .iter()
+        .any(|c| c.method == Method::MinMaxAxisAlignedMean
+            && matches!(c.outcome, CandidateOutcome::Scored { .. })));
+}
+
+#[test]
+fn a_pair_member_the_paired_test_finds_worse_leaves_the_contest() {
+    // Each face held twice and the eight corners once, a diagonal truth and a wobble: min/max
+    // reads one hold per face and ignores the corners, the axis-aligned ellipsoid fits all 20.
+    // On the same held-out poses the ellipsoid is better often enough for the paired test.
+    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
+    let b = Vec3::new(0.1, -0.2, 0.05);
+    let corners = tilted_directions()
+        .into_iter()
+        .filter(|d| d.iter().all(|c| c.abs() == 1.0));
+    let dirs: Vec<Vec3> = faces().into_iter().chain(faces()).chain(corners).collect();
+    let set = poses(&a_inv, &b, &dirs, 2e-2);
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    let test = choice.pair.expect("both 6-unknown models scored");
+    assert!(test.significant(), "{test:?}: {}", choice.reason);
+    assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
+    assert!(
+        choice.reason.contains("minmax: held-out error")
+            && choice
+                .reason
+                .contains("worse than axis-aligned on the same poses"),
+        "{}",
+        choice.reason
+    );
+    // No mean was formed.
+    assert!(choice
+        .candidates
+        .iter()
+        .all(|c| c.method != Method::MinMaxAxisAlignedMean));
+}
+
+#[test]
+fn a_mean_worse_than_the_best_by_more_than_its_standard_error_is_not_used() {
+    // Every face held twice except +X, plus a hold tilted 25° from +X. Left without the one +X
+    // hold, min/max takes the tilted hold as its +X face and misses that pose badly; on every
+    // other pose it does as well as the axis-aligned ellipsoid. One pose carries the whole
+    // difference, so the paired t test cannot reject (t ≈ 1), the mean joins the contest, and
+    // half of min/max's miss keeps it above the best model's standard error.
+    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
+    let b = Vec3::new(0.1, -0.2, 0.05);
+    let tilt = 25f64.to_radians();
+    let dirs: Vec<Vec3> = faces()
+        .into_iter()
+        .chain(faces().into_iter().skip(1))
+        .chain([Vec3::new(tilt.cos(), tilt.sin(), 0.0)])
+        .collect();
+    let set = poses(&a_inv, &b, &dirs, 1e-3);
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    let test = choice.pair.expect("both 6-unknown models scored");
+    assert!(!test.significant(), "{test:?}: {}", choice.reason);
+    assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
+    assert!(
+        choice
+            .reason
+            .contains("minmax+axis-aligned: held-out error")
+            && choice
+                .reason
+                .contains("worse by more than its standard error"),
+        "{}",
+        choice.reason
+    );
 }
