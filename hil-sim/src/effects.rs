@@ -132,6 +132,7 @@ pub struct EffectRequest {
     /// Which effect.
     pub kind: EffectKind,
     /// Only this sensor, or every sensor the effect applies to when `None`.
+    #[serde(default, with = "crate::sensor_kind::optional_name")]
     pub sensor: Option<SensorKind>,
     /// Size relative to the typical part (1.0); 0 switches it off.
     pub size: f64,

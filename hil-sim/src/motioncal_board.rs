@@ -18,7 +18,7 @@
 //! magnetometer, then rests in the last orientation.
 
 use crate::error::SimError;
-use crate::physics::{ImuPhysics, ImuTruth, SensorKind};
+use crate::physics::{ImuPhysics, ImuTruth, NominalScale, SensorKind};
 use crate::poser::{build_schedule, ScheduleKind};
 use crate::recording::{SimConfig, Simulation};
 use crate::world::World;

@@ -31,7 +31,7 @@ use crate::error::{require_non_negative, require_positive, SimError};
 use crate::world::{WorldState, STANDARD_GRAVITY_MPS2};
 
 pub use crate::sensor_kind::{
-    SensorKind, ACCEL_MPS2_PER_COUNT, GYRO_RADS_PER_COUNT, MAG_UT_PER_COUNT,
+    NominalScale, SensorKind, ACCEL_MPS2_PER_COUNT, GYRO_RADS_PER_COUNT, MAG_UT_PER_COUNT,
 };
 
 /// Die thermometer sensitivity, counts per °C.

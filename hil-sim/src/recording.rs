@@ -16,8 +16,8 @@ use imucal_protocol::{RawSample, SensorScales};
 use crate::effects::EffectRequest;
 use crate::error::{require_positive, SimError};
 use crate::physics::{
-    lsm9ds1_scales, ImuErrorRanges, ImuPhysics, ImuSample, ImuTruth, SensorKind, TEMP_COUNTS_PER_C,
-    TEMP_ZERO_C,
+    lsm9ds1_scales, ImuErrorRanges, ImuPhysics, ImuSample, ImuTruth, NominalScale, SensorKind,
+    TEMP_COUNTS_PER_C, TEMP_ZERO_C,
 };
 use crate::poser::{build_schedule, PoserOptions, Schedule, ScheduleKind};
 use crate::world::{

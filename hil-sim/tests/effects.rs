@@ -3,7 +3,7 @@
 //! the hold-bound out-of-family effects act during exactly one hold.
 
 use imucal_hil_sim::effects::{EffectKind, EffectRequest, SensorEffects};
-use imucal_hil_sim::physics::{matrix_from_rows, ImuSample, SensorKind};
+use imucal_hil_sim::physics::{matrix_from_rows, ImuSample, NominalScale, SensorKind};
 use imucal_hil_sim::poser::ScheduleKind;
 use imucal_hil_sim::recording::{SimConfig, Simulation};
 use imucal_hil_sim::world::WorldState;

@@ -1,7 +1,7 @@
 //! Sensor physics: calibrating with the truth recovers the physical magnitudes to within the
 //! noise, the noise has the stated σ, and readings are quantised and saturate like the chip.
 
-use imucal_hil_sim::physics::{ImuErrorRanges, SensorKind, TEMP_COUNTS_PER_C};
+use imucal_hil_sim::physics::{ImuErrorRanges, NominalScale, SensorKind, TEMP_COUNTS_PER_C};
 use imucal_hil_sim::poser::ScheduleKind;
 use imucal_hil_sim::recording::{SimConfig, Simulation};
 use imucal_hil_sim::world::LocalDisturbance;

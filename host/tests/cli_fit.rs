@@ -315,15 +315,21 @@ fn six_face_recording_gets_the_model_with_the_best_held_out_error_and_says_why()
     assert!(ok, "{stderr}");
     let accel = &serde_json::from_str::<Value>(&stdout).expect("valid JSON")["accel"];
     // Six faces: lm is refused (6 directions for 9 unknowns); six-position's 6 extra unknowns
-    // predict held-out holds worse; min/max and the axis-aligned ellipsoid (6 unknowns each)
-    // are within one standard error of each other, so their mean is used.
+    // predict held-out holds worse; a paired t test does not tell min/max and the axis-aligned
+    // ellipsoid (6 unknowns each) apart, and their mean is within one standard error of the
+    // best, so the mean is used.
     assert_eq!(accel["method"], "minmax+axis-aligned");
     let chain = &accel["default_chain"];
     assert_eq!(chain["chosen"], "minmax+axis-aligned");
+    let p = chain["pair_test"]["p_value"]
+        .as_f64()
+        .expect("paired test reported");
+    assert!((0.05..=1.0).contains(&p), "p = {p}");
     let note = accel["note"].as_str().expect("note");
     assert!(
         note.contains("lm: refused")
             && note.contains("six-position: held-out error")
+            && note.contains("paired t test")
             && note.contains("cannot tell them apart"),
         "{note}"
     );

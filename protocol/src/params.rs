@@ -63,6 +63,20 @@ impl SensorKind {
             Self::Mag => "mag",
         }
     }
+
+    /// The sensor named `accel`, `gyro` or `mag` ([`SensorKind::name`]), or `None`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|s| s.name() == name)
+    }
+
+    /// Position in [`SensorKind::ALL`].
+    pub const fn index(self) -> usize {
+        match self {
+            Self::Accel => 0,
+            Self::Gyro => 1,
+            Self::Mag => 2,
+        }
+    }
 }
 
 /// Calibration of one three-axis sensor; see [`CalibrationSet`] for how the terms combine.

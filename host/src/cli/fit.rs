@@ -269,7 +269,13 @@ fn chain_json(chain: &imucal::pipeline::ChainChoice) -> Value {
     json!({
         "chosen": chain.fit.method.name(),
         "rule": "leave-one-pose-out norm error, simplest model within one standard error of the \
-                 best; the mean of min/max and axis-aligned when both are",
+                 best; min/max and axis-aligned enter as their mean unless a paired t test \
+                 (two-sided, 5 %) tells them apart",
+        "pair_test": chain.pair.map(|t| json!({
+            "folds": t.folds,
+            "t": if t.t.is_finite() { Some(t.t) } else { None },
+            "p_value": t.p_value,
+        })),
         "reason": chain.reason,
         "candidates": candidates,
     })

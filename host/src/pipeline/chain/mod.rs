@@ -23,15 +23,29 @@
 //! has the smaller variance on poses not seen. The rule has no tuned threshold: its margin is
 //! the sampling error of the data at hand.
 //!
-//! **A tie in unknowns is resolved by averaging, not by the lower score.** Min/max and the
-//! axis-aligned ellipsoid are two estimators of the same 6 unknowns. When both pass the rule,
-//! the data have just said that their LOPO difference is within its sampling error; picking the
-//! lower score anyway bets the whole calibration on that noise (model selection between near
-//! equals is unstable, Breiman 1996, *Ann. Statist.* 24:2350). The chain instead uses the mean of
-//! their outputs ([`mean`]), again an axis-aligned calibration: since `|·|²` is convex, its
-//! squared vector error on any pose is at most the mean of the two models' (to first order the
-//! same holds for the norm residual), so whichever of the two turns out better on poses not yet
-//! seen, the mean does no worse than their average. Its own LOPO error is reported alongside.
+//! **Two estimators of the same unknowns are averaged unless a paired test tells them apart.**
+//! Min/max and the axis-aligned ellipsoid estimate the same 6 unknowns, so choosing between them
+//! is not a question of model size, and the one-standard-error rule is the wrong tool for it:
+//! its margin is the unpaired standard error of one score, whereas the two scores rest on the
+//! same poses and are strongly correlated (a pose far from the others, or one taken after the
+//! sensor drifted, costs both). Whether one predicts held-out poses better than the other is a
+//! paired question: Student's t on the per-pose differences of their squared held-out
+//! residuals, two-sided at α = 0.05 ([`pair`], which states why). When it finds a difference,
+//! the worse model leaves the contest. When it does not, picking the lower score anyway bets the
+//! whole calibration on noise — selection between near equals has a large variance (Breiman
+//! 1996, *Ann. Statist.* 24:2350) — so the mean of their outputs ([`mean`], again an
+//! axis-aligned calibration) joins the contest with its own LOPO error on the same poses, and
+//! is preferred to its members whenever it is itself within one standard error of the best.
+//! Since `|·|²` is convex, its squared vector error on any pose is at most the mean of the two
+//! models' (to first order the same holds for the norm residual), so whichever of the two turns
+//! out better on poses not yet seen, the mean does no worse than their average.
+//!
+//! The mean must pass the same one-standard-error bar as every model because a t test on a few
+//! poses has little power against a difference carried by one pose: one member far off on a
+//! single pose (min/max reading a tilted hold as a face) gives `t ≈ 1` however large the
+//! miss, and the average of a good and a bad model is not good. The bar, set by the best
+//! model's own standard error, catches that case; the paired test catches consistent
+//! differences the bar is too wide to see. Model size is decided by the bar alone.
 //!
 //! **Models are compared on the same held-out poses.** A refit can be refused when a pose is
 //! left out (leaving out the only hold of a face leaves a norm model without that direction;
@@ -43,6 +57,7 @@
 //! used. The output says which case applied.
 
 pub mod mean;
+pub mod pair;
 
 use crate::fit::axis_aligned::{fit_axis_aligned, fit_axis_aligned_poses};
 use crate::fit::loo::{leave_one_out_errors, rms_of_all};
@@ -51,6 +66,7 @@ use crate::fit::norm_lm::fit_accel_lm_detailed;
 use crate::fit::six_position::{fit_six_position, nearest_axes, six_position_calibration};
 use crate::fit::{Calibration, Fit, FitError, Method, Pose, Vec3};
 use mean::{mean_calibration, mean_fit};
+use pair::{paired_t, PairTest, PAIR_ALPHA};
 
 /// Fewest held-out poses a comparison rests on: with fewer, the standard error of the mean square
 /// (from `n − 1` degrees of freedom) is not an estimate.
@@ -64,8 +80,8 @@ pub const CANDIDATES: [Method; 4] = [
     Method::SixPosition,
 ];
 
-/// The models whose mean is used when both pass the one-standard-error rule with the fewest
-/// unknowns (the only candidates with equally many).
+/// The two estimators of the same 6 unknowns: their mean replaces them unless a paired test on
+/// their held-out errors finds one better (the only candidates with equally many unknowns).
 pub const TIED_PAIR: [Method; 2] = [Method::MinMax, Method::AxisAligned];
 
 /// Number of unknowns of a candidate model (or of the mean of [`TIED_PAIR`]).
@@ -112,8 +128,11 @@ pub struct Candidate {
 pub struct ChainChoice {
     /// The chosen model fitted on every pose.
     pub fit: Fit,
-    /// Every candidate, in [`CANDIDATES`] order.
+    /// Every candidate, in [`CANDIDATES`] order, followed by the mean of [`TIED_PAIR`] when
+    /// the paired test formed it.
     pub candidates: Vec<Candidate>,
+    /// The paired test between the two [`TIED_PAIR`] models, when both were scored.
+    pub pair: Option<PairTest>,
     /// One sentence: why this model, and why not the others.
     pub reason: String,
 }
@@ -141,13 +160,13 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
             }
         }
     }
-    let (common, scores) = compare(folds, poses.len());
+    let (common, scores) = compare(folds.clone(), poses.len());
     for (method, outcome) in scores {
         if let Some(slot) = outcomes.iter_mut().find(|(m, _)| *m == method) {
             slot.1 = Some(outcome);
         }
     }
-    let candidates: Vec<Candidate> = outcomes
+    let mut candidates: Vec<Candidate> = outcomes
         .into_iter()
         .filter_map(|(method, outcome)| {
             Some(Candidate {
@@ -156,62 +175,119 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
             })
         })
         .collect();
-    let passing = within_one_se(&candidates);
-    let fewest = passing.iter().map(|&m| unknowns(m)).min();
-    let simplest: Vec<Method> = passing
+    // The models in the one-standard-error contest: every scored one, less the member of the
+    // pair the paired test finds worse, or else joined by the pair's mean.
+    let mut contest: Vec<Method> = candidates
         .iter()
-        .copied()
-        .filter(|&m| Some(unknowns(m)) == fewest)
+        .filter(|c| matches!(c.outcome, CandidateOutcome::Scored { .. }))
+        .map(|c| c.method)
         .collect();
+    let pair = compare_pair(&folds, &common, &contest);
+    let mut mean_errors = None;
+    match pair {
+        Some(test) if test.significant() => {
+            let worse = pair_worse(&test);
+            contest.retain(|&m| m != worse);
+        }
+        Some(_) => {
+            let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
+                let members = TIED_PAIR
+                    .iter()
+                    .map(|&m| refit(m, rest, rest_faces, reference))
+                    .collect::<Result<Vec<Calibration>, FitError>>()?;
+                mean_calibration(&members)
+            });
+            candidates.push(Candidate {
+                method: Method::MinMaxAxisAlignedMean,
+                outcome: score(&errors, &common),
+            });
+            contest.push(Method::MinMaxAxisAlignedMean);
+            mean_errors = Some(errors);
+        }
+        None => {}
+    }
+    let passing = within_one_se(&candidates, &contest);
+    let chosen = simplest_passing(&passing, &candidates)
+        // None validated: the fitted model with the fewest unknowns.
+        .or_else(|| fits.first().map(|(m, _)| *m));
     let fit_of = |m: Method| fits.iter().find(|(f, _)| *f == m).map(|(_, f)| f);
-    let (fit, mean_rms) = if simplest == TIED_PAIR {
-        let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
-            let members = TIED_PAIR
-                .iter()
-                .map(|&m| refit(m, rest, rest_faces, reference))
-                .collect::<Result<Vec<Calibration>, FitError>>()?;
-            mean_calibration(&members)
-        });
-        let on_common = rms_of_all(
-            common
-                .iter()
-                .map(|&i| errors.get(i).copied().flatten())
-                .collect(),
-        );
-        let members: Vec<&Fit> = TIED_PAIR.iter().filter_map(|&m| fit_of(m)).collect();
-        let fit = mean_fit(
-            Method::MinMaxAxisAlignedMean,
-            &members,
-            poses,
-            reference,
-            rms_of_all(errors),
-        )?;
-        (fit, on_common)
-    } else {
-        // One simplest model passes, or none is validated: then the fitted model with the
-        // fewest unknowns.
-        let chosen = simplest
-            .first()
-            .copied()
-            .or_else(|| fits.first().map(|(m, _)| *m));
-        let Some(fit) = chosen.and_then(fit_of) else {
-            let reasons: Vec<String> = candidates
-                .iter()
-                .map(|c| format!("{}: {}", c.method.name(), describe(&c.outcome)))
-                .collect();
-            return Err(FitError::Underdetermined(format!(
-                "no accelerometer model fits these poses ({})",
-                reasons.join("; ")
-            )));
-        };
-        (fit.clone(), None)
+    let fit = match (chosen, mean_errors) {
+        (Some(Method::MinMaxAxisAlignedMean), Some(errors)) => {
+            let members: Vec<&Fit> = TIED_PAIR.iter().filter_map(|&m| fit_of(m)).collect();
+            mean_fit(
+                Method::MinMaxAxisAlignedMean,
+                &members,
+                poses,
+                reference,
+                rms_of_all(errors),
+            )?
+        }
+        _ => match chosen.and_then(fit_of) {
+            Some(fit) => fit.clone(),
+            None => {
+                let reasons: Vec<String> = candidates
+                    .iter()
+                    .map(|c| format!("{}: {}", c.method.name(), describe(&c.outcome)))
+                    .collect();
+                return Err(FitError::Underdetermined(format!(
+                    "no accelerometer model fits these poses ({})",
+                    reasons.join("; ")
+                )));
+            }
+        },
     };
-    let reason = explain(fit.method, &passing, &candidates, mean_rms);
+    let reason = explain(fit.method, &passing, &candidates, pair.as_ref());
     Ok(ChainChoice {
         fit,
         candidates,
+        pair,
         reason,
     })
+}
+
+/// Among the `passing` models with the fewest unknowns: the mean of [`TIED_PAIR`] when it is one
+/// of them, else the one with the lowest held-out mean square.
+fn simplest_passing(passing: &[Method], candidates: &[Candidate]) -> Option<Method> {
+    let fewest = passing.iter().map(|&m| unknowns(m)).min()?;
+    let simplest: Vec<Method> = passing
+        .iter()
+        .copied()
+        .filter(|&m| unknowns(m) == fewest)
+        .collect();
+    if simplest.contains(&Method::MinMaxAxisAlignedMean) {
+        return Some(Method::MinMaxAxisAlignedMean);
+    }
+    let mse = |m: Method| {
+        candidates.iter().find_map(|c| match c.outcome {
+            CandidateOutcome::Scored { lopo_mse, .. } if c.method == m => Some(lopo_mse),
+            _ => None,
+        })
+    };
+    simplest.into_iter().min_by(|&a, &b| {
+        mse(a)
+            .unwrap_or(f64::INFINITY)
+            .total_cmp(&mse(b).unwrap_or(f64::INFINITY))
+    })
+}
+
+/// The paired test of the two [`TIED_PAIR`] models on the common held-out poses, when both are
+/// in `contest` (scored) and at least two such poses exist.
+fn compare_pair(
+    folds: &[(Method, Vec<Option<f64>>)],
+    common: &[usize],
+    contest: &[Method],
+) -> Option<PairTest> {
+    let squares = |method: Method| -> Option<Vec<f64>> {
+        if !contest.contains(&method) {
+            return None;
+        }
+        let (_, errors) = folds.iter().find(|(m, _)| *m == method)?;
+        common
+            .iter()
+            .map(|&i| errors.get(i).copied().flatten().map(|e| e * e))
+            .collect()
+    };
+    paired_t(&squares(TIED_PAIR[0])?, &squares(TIED_PAIR[1])?)
 }
 
 /// The full fit of one candidate, with its refusals.
@@ -291,23 +367,7 @@ fn compare(
             .collect();
         if common.len() >= MIN_COMMON_FOLDS || folds.is_empty() {
             for (method, errors) in &folds {
-                let squares: Vec<f64> = common
-                    .iter()
-                    .filter_map(|&i| errors.get(i).copied().flatten())
-                    .map(|e| e * e)
-                    .collect();
-                let n = squares.len() as f64;
-                let mse = squares.iter().sum::<f64>() / n;
-                let var = squares.iter().map(|s| (s - mse).powi(2)).sum::<f64>() / (n - 1.0);
-                outcomes.push((
-                    *method,
-                    CandidateOutcome::Scored {
-                        folds: common.len(),
-                        lopo_rms: mse.sqrt(),
-                        lopo_mse: mse,
-                        lopo_mse_se: (var / n).sqrt(),
-                    },
-                ));
+                outcomes.push((*method, score(errors, &common)));
             }
             return (common, outcomes);
         }
@@ -332,11 +392,37 @@ fn compare(
     }
 }
 
-/// The scored candidates whose LOPO mean square is within one standard error of the best, in
-/// [`CANDIDATES`] order (empty when none is scored).
-fn within_one_se(candidates: &[Candidate]) -> Vec<Method> {
+/// The held-out error of one model on the poses `common` (those of its refits that exist).
+fn score(errors: &[Option<f64>], common: &[usize]) -> CandidateOutcome {
+    let squares: Vec<f64> = common
+        .iter()
+        .filter_map(|&i| errors.get(i).copied().flatten())
+        .map(|e| e * e)
+        .collect();
+    if squares.len() < 2 {
+        return CandidateOutcome::NotValidated(format!(
+            "it could be refit without only {} of the {} compared poses",
+            squares.len(),
+            common.len()
+        ));
+    }
+    let n = squares.len() as f64;
+    let mse = squares.iter().sum::<f64>() / n;
+    let var = squares.iter().map(|s| (s - mse).powi(2)).sum::<f64>() / (n - 1.0);
+    CandidateOutcome::Scored {
+        folds: squares.len(),
+        lopo_rms: mse.sqrt(),
+        lopo_mse: mse,
+        lopo_mse_se: (var / n).sqrt(),
+    }
+}
+
+/// The scored candidates in `contest` whose LOPO mean square is within one standard error of
+/// the best of them, in candidate order (empty when none is scored).
+fn within_one_se(candidates: &[Candidate], contest: &[Method]) -> Vec<Method> {
     let scored: Vec<(Method, f64, f64)> = candidates
         .iter()
+        .filter(|c| contest.contains(&c.method))
         .filter_map(|c| match c.outcome {
             CandidateOutcome::Scored {
                 lopo_mse,
@@ -367,14 +453,36 @@ fn describe(outcome: &CandidateOutcome) -> String {
     }
 }
 
+/// The [`TIED_PAIR`] model with the larger held-out mean square in `test`.
+fn pair_worse(test: &PairTest) -> Method {
+    if test.mean_difference > 0.0 {
+        TIED_PAIR[0]
+    } else {
+        TIED_PAIR[1]
+    }
+}
+
+/// Why a [`TIED_PAIR`] model left the one-standard-error contest: the paired test `test` found
+/// it worse than the other (`None` for every other case).
+fn pair_verdict(method: Method, test: &PairTest) -> Option<String> {
+    let [first, second] = TIED_PAIR;
+    let other = if method == first { second } else { first };
+    (test.significant() && method == pair_worse(test)).then(|| {
+        format!(
+            "worse than {} on the same poses (paired t, p {})",
+            other.name(),
+            test.p_text()
+        )
+    })
+}
+
 /// Why `chosen` was chosen and the others were not; `passing` are the models within one
-/// standard error of the best, `mean_rms` the held-out error of the mean of [`TIED_PAIR`] on
-/// the compared poses when that mean was chosen.
+/// standard error of the best, `pair` the paired test between the [`TIED_PAIR`] models.
 fn explain(
     chosen: Method,
     passing: &[Method],
     candidates: &[Candidate],
-    mean_rms: Option<f64>,
+    pair: Option<&PairTest>,
 ) -> String {
     let scored = |m: Method| {
         candidates.iter().find_map(|c| match c.outcome {
@@ -389,31 +497,29 @@ fn explain(
     } else {
         std::slice::from_ref(&chosen)
     };
-    let head = match (chosen, scored(chosen)) {
-        (Method::MinMaxAxisAlignedMean, _) => {
+    let simplest = "the simplest model within one standard error of the best";
+    let head = match (chosen, scored(chosen), pair) {
+        (Method::MinMaxAxisAlignedMean, Some((lopo_rms, folds)), Some(test)) => {
             let each: Vec<String> = TIED_PAIR
                 .iter()
                 .filter_map(|&m| scored(m).map(|(e, _)| format!("{} {e:.3e}", m.name())))
                 .collect();
-            let folds = scored(Method::MinMax).map_or(0, |(_, n)| n);
             format!(
                 "{} ({} unknowns), the mean of the min/max and axis-aligned models, chosen by \
-                 leave-one-pose-out error: both are within one standard error of the best with \
-                 the fewest unknowns, so the data cannot tell them apart ({} of g over the {} \
-                 poses every compared model could be refit without; their mean {})",
+                 leave-one-pose-out error: the two estimate the same unknowns and a paired t \
+                 test on the {} poses both were refit without cannot tell them apart ({} of g, \
+                 p {}, not below {PAIR_ALPHA}); their mean, {lopo_rms:.3e} of g over the \
+                 {folds} poses every compared model could be refit without, is {simplest}",
                 chosen.name(),
                 unknowns(chosen),
+                test.folds,
                 each.join(", "),
-                folds,
-                mean_rms.map_or("could not be refit on every one".into(), |e| format!(
-                    "{e:.3e}"
-                )),
+                test.p_text(),
             )
         }
-        (_, Some((lopo_rms, folds))) => format!(
+        (_, Some((lopo_rms, folds)), _) => format!(
             "{} ({} unknowns) chosen by leave-one-pose-out error: {:.3e} of g over the {} poses \
-             every compared model could be refit without, the simplest model within one \
-             standard error of the best",
+             every compared model could be refit without, {simplest}",
             chosen.name(),
             unknowns(chosen),
             lopo_rms,
@@ -428,20 +534,34 @@ fn explain(
     };
     let others: Vec<String> = candidates
         .iter()
-        .filter(|c| !members.contains(&c.method))
+        .filter(|c| !members.contains(&c.method) && c.method != chosen)
         .map(|c| {
-            let why = match &c.outcome {
-                CandidateOutcome::Scored { lopo_rms, .. } if passing.contains(&c.method) => {
+            let left_pair = pair.and_then(|test| pair_verdict(c.method, test));
+            let why = match (&c.outcome, left_pair) {
+                (CandidateOutcome::Scored { lopo_rms, .. }, Some(verdict)) => {
+                    format!("held-out error {lopo_rms:.3e}, {verdict}")
+                }
+                (CandidateOutcome::Scored { lopo_rms, .. }, None)
+                    if passing.contains(&c.method) && unknowns(c.method) == unknowns(chosen) =>
+                {
+                    format!(
+                        "held-out error {lopo_rms:.3e}, within the standard error of the best \
+                         but higher, with as many unknowns"
+                    )
+                }
+                (CandidateOutcome::Scored { lopo_rms, .. }, None)
+                    if passing.contains(&c.method) =>
+                {
                     format!(
                         "held-out error {lopo_rms:.3e}, no better within the standard error \
                          for {} more unknowns",
                         unknowns(c.method).saturating_sub(unknowns(chosen))
                     )
                 }
-                CandidateOutcome::Scored { lopo_rms, .. } => {
+                (CandidateOutcome::Scored { lopo_rms, .. }, _) => {
                     format!("held-out error {lopo_rms:.3e}, worse by more than its standard error")
                 }
-                other => describe(other),
+                (other, _) => describe(other),
             };
             format!("{}: {why}", c.method.name())
         })

@@ -25,6 +25,21 @@ fn poses(a_inv: &Mat3, b: &Vec3, dirs: &[Vec3], jitter: f64) -> Vec<Pose> {
         .collect()
 }
 
+/// Offset of every synthetic sensor here, m/s².
+fn offset() -> Vec3 {
+    Vec3::new(0.1, -0.2, 0.05)
+}
+
+/// Gain of a sensor without cross-axis terms (raw = gain·true + offset).
+fn diagonal_gain() -> Mat3 {
+    Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01))
+}
+
+/// Pose means of the sensor with [`diagonal_gain`] and [`offset`] (see [`poses`]).
+fn diagonal_poses(dirs: &[Vec3], jitter: f64) -> Vec<Pose> {
+    poses(&diagonal_gain(), &offset(), dirs, jitter)
+}
+
 fn faces() -> Vec<Vec3> {
     face_directions().to_vec()
 }
@@ -49,12 +64,7 @@ fn cross_axis_coupling_that_the_data_determine_selects_the_norm_model() {
     // 26 well-spread directions and 2 % cross-axis terms: the axis-aligned model cannot
     // predict held-out poses, lm can; six-position refuses poses far from the faces.
     let a_inv = Mat3::new(1.02, 0.02, -0.015, 0.0, 0.98, 0.02, 0.0, 0.0, 1.01);
-    let set = poses(
-        &a_inv,
-        &Vec3::new(0.1, -0.2, 0.05),
-        &tilted_directions(),
-        1e-4,
-    );
+    let set = poses(&a_inv, &offset(), &tilted_directions(), 1e-4);
     let choice = default_accel_chain(&set, 9.81).expect("fits");
     assert_eq!(choice.fit.method, Method::Lm, "{}", choice.reason);
     assert!(
@@ -80,13 +90,7 @@ fn cross_axis_coupling_that_the_data_determine_selects_the_norm_model() {
 fn a_sensor_without_cross_coupling_gets_the_simpler_axis_aligned_model() {
     // Diagonal truth: lm's three extra unknowns cannot lower the held-out error by more than
     // its standard error, so parsimony picks the 6-unknown model.
-    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
-    let set = poses(
-        &a_inv,
-        &Vec3::new(0.1, -0.2, 0.05),
-        &tilted_directions(),
-        1e-3,
-    );
+    let set = diagonal_poses(&tilted_directions(), 1e-3);
     let choice = default_accel_chain(&set, 9.81).expect("fits");
     assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
     assert!(
@@ -100,8 +104,7 @@ fn a_sensor_without_cross_coupling_gets_the_simpler_axis_aligned_model() {
 fn six_faces_are_validated_only_by_six_position_which_is_chosen() {
     // Without one face the norm models lose a direction; six-position, knowing the faces,
     // can still be refit and so is the only model whose held-out error can be measured.
-    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
-    let set = poses(&a_inv, &Vec3::new(0.1, -0.2, 0.05), &faces(), 1e-4);
+    let set = diagonal_poses(&faces(), 1e-4);
     let choice = default_accel_chain(&set, 9.81).expect("fits");
     assert_eq!(choice.fit.method, Method::SixPosition, "{}", choice.reason);
     assert!(
@@ -117,8 +120,7 @@ fn when_no_model_can_be_validated_the_fewest_unknowns_fit_is_used() {
     // directions, and the axis-aligned model is exactly determined (no refit without a pose).
     let mut dirs = faces()[..5].to_vec();
     dirs.push(Vec3::new(1.0, 1.0, -1.0));
-    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
-    let set = poses(&a_inv, &Vec3::new(0.1, -0.2, 0.05), &dirs, 1e-4);
+    let set = diagonal_poses(&dirs, 1e-4);
     let choice = default_accel_chain(&set, 9.81).expect("fits");
     assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
     assert!(
@@ -127,7 +129,7 @@ fn when_no_model_can_be_validated_the_fewest_unknowns_fit_is_used() {
         choice.reason
     );
     // Exactly determined: the scale comes back to the jitter's order (1e-4 of g).
-    assert!((choice.fit.cal.a[(0, 0)] - 1.0 / 1.02).abs() < 1e-3);
+    assert!((choice.fit.cal.a[(0, 0)] - 1.0 / diagonal_gain()[(0, 0)]).abs() < 1e-3);
 }
 
 #[test]
@@ -153,14 +155,12 @@ fn equally_simple_models_the_data_cannot_tell_apart_are_averaged() {
     // Each face held twice and one tilted hold (which six-position cannot label and which leaves
     // lm with 7 directions for 9 unknowns), a small wobble and a diagonal truth: min/max and
     // the axis-aligned ellipsoid estimate the same 6 unknowns and predict held-out holds alike.
-    let a_inv = Mat3::from_diagonal(&Vec3::new(1.02, 0.98, 1.01));
-    let b = Vec3::new(0.1, -0.2, 0.05);
     let dirs: Vec<Vec3> = faces()
         .into_iter()
         .chain(faces())
         .chain([Vec3::new(1.0, 1.0, 1.0)])
         .collect();
-    let set = poses(&a_inv, &b, &dirs, 1e-3);
+    let set = diagonal_poses(&dirs, 1e-3);
     let choice = default_accel_chain(&set, 9.81).expect("fits");
     assert_eq!(
         choice.fit.method,
@@ -175,8 +175,74 @@ fn equally_simple_models_the_data_cannot_tell_apart_are_averaged() {
     );
     // The mean of two axis-aligned calibrations is axis-aligned and as close to the truth as
     // the wobble allows (1e-3 m/s² per axis ≈ 1e-4 of g in scale, 1e-3 m/s² in offset).
-    let truth = a_inv.try_inverse().expect("invertible");
+    let truth = diagonal_gain().try_inverse().expect("invertible");
     assert!((choice.fit.cal.a - truth).norm() < 1e-3);
-    assert!((choice.fit.cal.b - b).norm() < 3e-3);
+    assert!((choice.fit.cal.b - offset()).norm() < 3e-3);
     assert!(choice.fit.loo_rms.is_some());
+    // The paired test did not separate them, and the mean is a scored candidate of its own.
+    assert!(!choice.pair.expect("both scored").significant());
+    assert!(choice
+        .candidates
+        .iter()
+        .any(|c| c.method == Method::MinMaxAxisAlignedMean
+            && matches!(c.outcome, CandidateOutcome::Scored { .. })));
+}
+
+#[test]
+fn a_pair_member_the_paired_test_finds_worse_leaves_the_contest() {
+    // Each face held twice and the eight corners once, a diagonal truth and a wobble: min/max
+    // reads one hold per face and ignores the corners, the axis-aligned ellipsoid fits all 20.
+    // On the same held-out poses the ellipsoid is better often enough for the paired test.
+    let corners = tilted_directions()
+        .into_iter()
+        .filter(|d| d.iter().all(|c| c.abs() == 1.0));
+    let dirs: Vec<Vec3> = faces().into_iter().chain(faces()).chain(corners).collect();
+    let set = diagonal_poses(&dirs, 2e-2);
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    let test = choice.pair.expect("both 6-unknown models scored");
+    assert!(test.significant(), "{test:?}: {}", choice.reason);
+    assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
+    assert!(
+        choice.reason.contains("minmax: held-out error")
+            && choice
+                .reason
+                .contains("worse than axis-aligned on the same poses"),
+        "{}",
+        choice.reason
+    );
+    // No mean was formed.
+    assert!(choice
+        .candidates
+        .iter()
+        .all(|c| c.method != Method::MinMaxAxisAlignedMean));
+}
+
+#[test]
+fn a_mean_worse_than_the_best_by_more_than_its_standard_error_is_not_used() {
+    // Every face held twice except +X, plus a hold tilted 25° from +X. Left without the one +X
+    // hold, min/max takes the tilted hold as its +X face and misses that pose badly; on every
+    // other pose it does as well as the axis-aligned ellipsoid. One pose carries the whole
+    // difference, so the paired t test cannot reject (t ≈ 1), the mean joins the contest, and
+    // half of min/max's miss keeps it above the best model's standard error.
+    let tilt = 25f64.to_radians();
+    let dirs: Vec<Vec3> = faces()
+        .into_iter()
+        .chain(faces().into_iter().skip(1))
+        .chain([Vec3::new(tilt.cos(), tilt.sin(), 0.0)])
+        .collect();
+    let set = diagonal_poses(&dirs, 1e-3);
+    let choice = default_accel_chain(&set, 9.81).expect("fits");
+    let test = choice.pair.expect("both 6-unknown models scored");
+    assert!(!test.significant(), "{test:?}: {}", choice.reason);
+    assert_eq!(choice.fit.method, Method::AxisAligned, "{}", choice.reason);
+    assert!(
+        choice
+            .reason
+            .contains("minmax+axis-aligned: held-out error")
+            && choice
+                .reason
+                .contains("worse by more than its standard error"),
+        "{}",
+        choice.reason
+    );
 }
