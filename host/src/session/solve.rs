@@ -290,6 +290,18 @@ fn fit_mag(points: &[Vec3], field_ut: Option<f64>) -> Result<(Fit, f64, FieldSou
     }
 }
 
+/// The magnetometer fit's expected `|m|` error in its worst direction, % (1σ), for the raw
+/// readings `points` (µT) fitted as [`fit_session`] fits them (at most `max_points`, evenly
+/// thinned as the session does, then screened for spikes); infinite when the fit fails or gives
+/// no covariance.
+pub fn expected_mag_error_pct(points: &[Vec3], field_ut: Option<f64>, max_points: usize) -> f64 {
+    let thinned = thin(points, max_points);
+    fit_mag(&screen_stream(&thinned).kept(&thinned), field_ut)
+        .ok()
+        .and_then(|(fit, field, _)| max_norm_sigma(&fit).map(|s| s / field * 100.0))
+        .unwrap_or(f64::INFINITY)
+}
+
 /// Fit every sensor and build the parameter set; `mag_points` are raw magnetometer readings
 /// (µT) from the tumble, `created_unix_s` stamps the set.
 pub fn fit_session(
