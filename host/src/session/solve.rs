@@ -531,6 +531,37 @@ mod tests {
         );
     }
 
+    /// `count` readings of a 48 µT field around a hard-iron offset along a Fibonacci spiral over
+    /// the part of the sphere with `z ≥ z_min`, with ±0.2 µT of deterministic noise per axis.
+    fn field_readings(count: usize, z_min: f64) -> Vec<Vec3> {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..count)
+            .map(|i| {
+                let z = 1.0 - (1.0 - z_min) * (i as f64 + 0.5) / count as f64;
+                let r = (1.0 - z * z).sqrt();
+                let phi = golden * i as f64;
+                let noise = |k: f64| 0.2 * (i as f64 * 12.9898 + k * 78.233).sin();
+                Vec3::new(30.0, -45.0, 12.0)
+                    + 48.0 * Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                    + Vec3::new(noise(1.0), noise(2.0), noise(3.0))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_expected_field_error_grows_as_the_readings_cover_less_of_the_sphere() {
+        let whole = expected_mag_error_pct(&field_readings(2000, -1.0), Some(48.0), 3000);
+        let upper = expected_mag_error_pct(&field_readings(2000, 0.0), Some(48.0), 3000);
+        // ±0.2 µT of noise on 2000 readings: the whole sphere pins |m| to a few thousandths of
+        // a percent of 48 µT; half of it leaves the other half to extrapolation.
+        assert!(whole.is_finite() && whole > 0.0 && whole < 0.05, "{whole}");
+        assert!(
+            upper > 2.0 * whole,
+            "half sphere {upper} %, whole {whole} %"
+        );
+        assert!(expected_mag_error_pct(&[], Some(48.0), 3000).is_infinite());
+    }
+
     #[test]
     fn thinning_keeps_the_requested_count_in_order() {
         let points: Vec<Vec3> = (0..1000).map(|i| Vec3::new(i as f64, 0.0, 0.0)).collect();
