@@ -1,6 +1,7 @@
 //! The magnetometer phase: the board is turned until every direction region of the field holds
-//! enough samples ([`super::coverage`]). The samples streamed while moving between the positions
-//! count, so this phase only fills in the directions they left empty.
+//! enough samples ([`super::coverage`]), or until most are and the field fit expects an `|m|`
+//! error within its target. The samples streamed while moving between the positions count, so
+//! this phase only fills in the directions they left empty.
 
 use std::io::{Read, Write};
 use std::time::Instant;
@@ -9,9 +10,36 @@ use super::coverage::{self, Coverage, REGIONS};
 use super::error::SessionError;
 use super::events::{Phase, SessionEvent};
 use super::runner::Runner;
+use super::solve;
 use crate::fit::Vec3;
 
 impl<L: Read + Write> Runner<'_, L> {
+    /// Whether the turning can stop before every region is covered: at least `floor` regions
+    /// are (the coverage accepted at the time limit, so that each empty region borders sampled
+    /// ones and the fit does not rest on its covariance alone, which assumes independent noise
+    /// and a right model), and the fit of `points` expects an `|m|` error within the quarter
+    /// of the budget the verdict asks for ([`solve::expected_mag_error_pct`]).
+    fn fit_suffices(&mut self, covered: usize, floor: usize, points: &[Vec3]) -> bool {
+        if covered < floor {
+            return false;
+        }
+        let target_pct = self.options.budgets.mag_pct / 4.0;
+        let expected = solve::expected_mag_error_pct(
+            points,
+            self.options.field_ut,
+            self.options.mag_max_fit_samples,
+        );
+        if expected > target_pct {
+            return false;
+        }
+        self.observer.event(&SessionEvent::Note(format!(
+            "{covered} of {REGIONS} field directions give an expected |m| error of \
+             {expected:.3} % (1σ), within the {target_pct:.3} % target (a quarter of the \
+             budget); the turning can stop"
+        )));
+        true
+    }
+
     pub(super) fn magnetometer(&mut self) -> Result<Coverage, SessionError> {
         self.observer.event(&SessionEvent::MagPrompt);
         self.start_watching()?;
@@ -54,7 +82,9 @@ impl<L: Read + Write> Runner<'_, L> {
                 samples: count,
                 empty: empty.clone(),
             });
-            if covered == regions && count >= self.options.mag_min_samples {
+            if count >= self.options.mag_min_samples
+                && (covered == regions || self.fit_suffices(covered, needed_at_timeout, &all))
+            {
                 self.client.stop_stream()?;
                 return Ok(cover);
             }

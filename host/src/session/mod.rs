@@ -17,7 +17,8 @@
 //! 2. Magnetometer ([`mag_phase`]): raw samples while the user turns the board, until every one
 //!    of 26 direction regions holds enough samples ([`coverage`]); the moves between the
 //!    positions count, so this only fills in what they left empty.
-//! 3. Rest: once the board lies still, raw samples give the "before" errors.
+//! 3. Rest: once the board lies still, raw samples give the "before" errors (taken again if the
+//!    board moved during them).
 //! 4. Fit with the library's default methods ([`solve::fit_session`]), the gyroscope's scale and
 //!    misalignment from the moves ([`gyro_fit::complete_gyro`]), show the result with its
 //!    uncertainties and verdict, write the set, commit, read it back and compare (CRC and every
@@ -225,8 +226,7 @@ fn run_phases<L: Read + Write>(
     runner.journal.stage("magnetometer", &runner.mag)?;
     let coverage = runner.magnetometer()?;
     runner.journal.stage("rest", &runner.mag)?;
-    runner.wait_for_rest()?;
-    let raw_rest = runner.measure(StreamKind::Raw)?;
+    let raw_rest = runner.measure_at_rest()?;
     runner.journal.stage("fitting", &runner.mag)?;
 
     // Every moving sample shows a field direction: those of the moves between the positions and

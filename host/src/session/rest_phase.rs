@@ -1,5 +1,7 @@
 //! The rest phase: wait until the board lies still, then stream at full rate for the "before"
-//! (raw) and "after" (calibrated) errors at rest.
+//! (raw) and "after" (calibrated) errors at rest. The raw measurement must stay still all
+//! through (it also gives the gyroscope's bias without a hand on the board): one during which
+//! the board moved is taken again once it lies still.
 
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
@@ -8,6 +10,7 @@ use imucal_protocol::StreamKind;
 
 use super::error::SessionError;
 use super::events::{Phase, SessionEvent};
+use super::motion::MotionMonitor;
 use super::runner::Runner;
 use crate::device::{DeviceClient, UnitSample};
 
@@ -43,6 +46,36 @@ impl<L: Read + Write> Runner<'_, L> {
                     return Ok(());
                 }
             }
+        }
+    }
+
+    /// Wait for rest and measure the raw stream there ([`Self::measure`]) until a measurement
+    /// stays still all through, within `rest_timeout` overall.
+    pub(super) fn measure_at_rest(&mut self) -> Result<Vec<UnitSample>, SessionError> {
+        let start = Instant::now();
+        loop {
+            self.wait_for_rest()?;
+            let samples = self.measure(StreamKind::Raw)?;
+            let mut monitor = MotionMonitor::new(self.options.window_s, self.options.thresholds);
+            let moved = samples
+                .iter()
+                .filter_map(|s| monitor.push(s))
+                .any(|state| !state.still);
+            if !moved {
+                return Ok(samples);
+            }
+            if start.elapsed() > self.options.rest_timeout {
+                return Err(SessionError::NotAtRest {
+                    port: self.client.port_name().to_string(),
+                    needed_s: self.options.rest_settle_s + self.options.rest_measure_s,
+                    waited_s: start.elapsed().as_secs_f64(),
+                });
+            }
+            self.observer.event(&SessionEvent::Note(
+                "the board moved during the measurement at rest; it is measured again once it \
+                 lies still"
+                    .into(),
+            ));
         }
     }
 

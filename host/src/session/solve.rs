@@ -290,6 +290,18 @@ fn fit_mag(points: &[Vec3], field_ut: Option<f64>) -> Result<(Fit, f64, FieldSou
     }
 }
 
+/// The magnetometer fit's expected `|m|` error in its worst direction, % (1σ), for the raw
+/// readings `points` (µT) fitted as [`fit_session`] fits them (at most `max_points`, evenly
+/// thinned as the session does, then screened for spikes); infinite when the fit fails or gives
+/// no covariance.
+pub fn expected_mag_error_pct(points: &[Vec3], field_ut: Option<f64>, max_points: usize) -> f64 {
+    let thinned = thin(points, max_points);
+    fit_mag(&screen_stream(&thinned).kept(&thinned), field_ut)
+        .ok()
+        .and_then(|(fit, field, _)| max_norm_sigma(&fit).map(|s| s / field * 100.0))
+        .unwrap_or(f64::INFINITY)
+}
+
 /// Fit every sensor and build the parameter set; `mag_points` are raw magnetometer readings
 /// (µT) from the tumble, `created_unix_s` stamps the set.
 pub fn fit_session(
@@ -517,6 +529,37 @@ mod tests {
             "{:?}",
             failed.reasons
         );
+    }
+
+    /// `count` readings of a 48 µT field around a hard-iron offset along a Fibonacci spiral over
+    /// the part of the sphere with `z ≥ z_min`, with ±0.2 µT of deterministic noise per axis.
+    fn field_readings(count: usize, z_min: f64) -> Vec<Vec3> {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        (0..count)
+            .map(|i| {
+                let z = 1.0 - (1.0 - z_min) * (i as f64 + 0.5) / count as f64;
+                let r = (1.0 - z * z).sqrt();
+                let phi = golden * i as f64;
+                let noise = |k: f64| 0.2 * (i as f64 * 12.9898 + k * 78.233).sin();
+                Vec3::new(30.0, -45.0, 12.0)
+                    + 48.0 * Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                    + Vec3::new(noise(1.0), noise(2.0), noise(3.0))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_expected_field_error_grows_as_the_readings_cover_less_of_the_sphere() {
+        let whole = expected_mag_error_pct(&field_readings(2000, -1.0), Some(48.0), 3000);
+        let upper = expected_mag_error_pct(&field_readings(2000, 0.0), Some(48.0), 3000);
+        // ±0.2 µT of noise on 2000 readings: the whole sphere pins |m| to a few thousandths of
+        // a percent of 48 µT; half of it leaves the other half to extrapolation.
+        assert!(whole.is_finite() && whole > 0.0 && whole < 0.05, "{whole}");
+        assert!(
+            upper > 2.0 * whole,
+            "half sphere {upper} %, whole {whole} %"
+        );
+        assert!(expected_mag_error_pct(&[], Some(48.0), 3000).is_infinite());
     }
 
     #[test]
