@@ -9,6 +9,7 @@ mod csv;
 mod decimal;
 mod imutk;
 pub mod lines;
+mod rows;
 pub mod mapping;
 pub mod motioncal;
 pub mod units;
@@ -159,6 +160,22 @@ pub enum RecordingError {
         /// The line as read.
         text: String,
     },
+}
+
+impl RecordingError {
+    /// Add `by` to the line number of an error about one line (for text parsed in pieces, each
+    /// counting its lines from 1).
+    pub(crate) fn shift_line(&mut self, by: usize) {
+        match self {
+            Self::LineTooLong { line, .. }
+            | Self::OutOfRange { line, .. }
+            | Self::BadNumber { line, .. }
+            | Self::FieldCount { line, .. }
+            | Self::TimeBackwards { line, .. }
+            | Self::ImutkLine { line, .. } => *line += by,
+            _ => {}
+        }
+    }
 }
 
 /// How a label column divides the rows.
