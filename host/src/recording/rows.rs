@@ -468,7 +468,105 @@ impl LabelInterner {
 
 #[cfg(test)]
 mod tests {
-    use super::fields;
+    use super::*;
+
+    const NAMES: [&str; 5] = ["t_s", "ax", "ay", "az", "pose"];
+
+    fn layout(names: &[String]) -> Layout<'_> {
+        Layout {
+            path: "test.csv",
+            names,
+            roles: vec![
+                Role::Time,
+                Role::Reading(0),
+                Role::Reading(1),
+                Role::Reading(2),
+                Role::Label,
+            ],
+            sensors: 1,
+            time: true,
+            temp: false,
+            label: Some(LabelKind::Pose),
+        }
+    }
+
+    /// Rows `0..n` (time `i`, label `a`), and the index of the first row of the second half.
+    fn rows(n: usize) -> (Vec<String>, usize) {
+        let lines: Vec<String> = (0..n).map(|i| format!("{i},1.5,-2,3,a")).collect();
+        let text = lines.join("\n") + "\n";
+        let mid = text.len() / 2 + text[text.len() / 2..].find('\n').unwrap_or(0) + 1;
+        let second = text[..mid].matches('\n').count();
+        (lines, second)
+    }
+
+    fn parse(lines: &[String]) -> Result<Columns, RecordingError> {
+        let names: Vec<String> = NAMES.iter().map(|n| n.to_string()).collect();
+        let layout = layout(&names);
+        let text = lines.join("\n") + "\n";
+        let block = Block {
+            bytes: text.as_bytes(),
+            first_line: 2,
+            offset: 0,
+        };
+        let mut parts = [Part::new(&layout), Part::new(&layout)];
+        let mut out = Columns::new(&layout);
+        let count = parse_block(&layout, &block, &mut parts, &mut out)?;
+        assert_eq!(count, lines.len());
+        Ok(out)
+    }
+
+    #[test]
+    fn time_going_back_at_the_first_row_of_the_second_half_is_refused_there() {
+        let (mut lines, second) = rows(8000);
+        assert!(second > 1000, "the block is parsed in two halves");
+        lines[second] = format!("{},1.5,-2,3,a", second - 2);
+        let err = parse(&lines).err().map(|e| e.to_string()).unwrap_or_default();
+        // Line numbers count from the block's first line, 2.
+        let expected = format!(
+            "line {}: time {} s is earlier than the previous row's {} s",
+            second + 2,
+            second - 2,
+            second - 1
+        );
+        assert!(err.contains(&expected), "{err}");
+    }
+
+    #[test]
+    fn errors_of_the_second_half_name_their_line_in_the_whole_file() {
+        let (mut lines, second) = rows(8000);
+        lines[second + 10] = format!("{},1.5,oops,3,a", second + 10);
+        let err = parse(&lines).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(
+            err.contains(&format!("line {}, column `ay`: `oops`", second + 12)),
+            "{err}"
+        );
+        // An error in the first half comes first, whatever the second half holds.
+        lines[second - 3] = format!("{},1.5,-2,3", second - 3);
+        let err = parse(&lines).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(
+            err.contains(&format!("line {}: 4 fields", second - 1)),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn labels_first_seen_in_the_second_half_follow_those_of_the_first() {
+        let (mut lines, second) = rows(8000);
+        lines[1] = "1,1.5,-2,3,c".to_string();
+        lines[second] = format!("{second},1.5,-2,3,b");
+        lines[second + 1] = format!("{},1.5,-2,3,c", second + 1);
+        lines[second + 2] = format!("{},1.5,-2,3,-", second + 2);
+        let out = parse(&lines).expect("valid rows");
+        let labels = out.labels.expect("a label column").finish();
+        assert_eq!(labels.names, ["a", "c", "b"]);
+        assert_eq!(labels.per_row[1], Some(1));
+        assert_eq!(labels.per_row[second], Some(2));
+        assert_eq!(labels.per_row[second + 1], Some(1));
+        assert_eq!(labels.per_row[second + 2], None);
+        assert_eq!(labels.per_row[second + 3], Some(0));
+        assert_eq!(out.rows, 8000);
+        assert_eq!(out.time.expect("time")[second], second as f64);
+    }
 
     #[test]
     fn fields_split_a_row_exactly_as_str_split_on_commas() {
