@@ -8,7 +8,9 @@ use std::path::Path;
 
 use super::lines::LineReader;
 use super::rows::{content, parse_block, Block, Columns, LabelInterner, Layout, Part, Role};
-use super::{display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError, Sensor};
+use super::{
+    display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError, Sensor,
+};
 use crate::fit::Vec3;
 
 /// A parsed header: where each known column sits.

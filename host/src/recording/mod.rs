@@ -9,9 +9,9 @@ mod csv;
 mod decimal;
 mod imutk;
 pub mod lines;
-mod rows;
 pub mod mapping;
 pub mod motioncal;
+mod rows;
 pub mod units;
 
 use std::path::{Path, PathBuf};

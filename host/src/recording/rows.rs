@@ -520,7 +520,10 @@ mod tests {
         let (mut lines, second) = rows(8000);
         assert!(second > 1000, "the block is parsed in two halves");
         lines[second] = format!("{},1.5,-2,3,a", second - 2);
-        let err = parse(&lines).err().map(|e| e.to_string()).unwrap_or_default();
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
         // Line numbers count from the block's first line, 2.
         let expected = format!(
             "line {}: time {} s is earlier than the previous row's {} s",
@@ -535,14 +538,20 @@ mod tests {
     fn errors_of_the_second_half_name_their_line_in_the_whole_file() {
         let (mut lines, second) = rows(8000);
         lines[second + 10] = format!("{},1.5,oops,3,a", second + 10);
-        let err = parse(&lines).err().map(|e| e.to_string()).unwrap_or_default();
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
         assert!(
             err.contains(&format!("line {}, column `ay`: `oops`", second + 12)),
             "{err}"
         );
         // An error in the first half comes first, whatever the second half holds.
         lines[second - 3] = format!("{},1.5,-2,3", second - 3);
-        let err = parse(&lines).err().map(|e| e.to_string()).unwrap_or_default();
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
         assert!(
             err.contains(&format!("line {}: 4 fields", second - 1)),
             "{err}"
