@@ -4,13 +4,12 @@
 //! comments. The file is read once, line by line (see [`super::lines`]): memory holds the
 //! numbers kept, not the text.
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use super::lines::LineReader;
+use super::rows::{content, parse_block, Block, Columns, LabelInterner, Layout, Part, Role};
 use super::{
     display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError, Sensor,
-    MAX_SENSOR_MAGNITUDE,
 };
 use crate::fit::Vec3;
 
@@ -92,28 +91,13 @@ struct Table {
     rows: usize,
 }
 
-/// Text of a line as the CSV reader sees it: without a byte-order mark or surrounding blanks.
-fn content(line: &str) -> &str {
-    line.trim_start_matches('\u{feff}').trim()
-}
-
 /// True for lines the CSV format skips: blank lines and `#` comments.
 pub(super) fn is_skipped(line: &str) -> bool {
     let line = content(line);
     line.is_empty() || line.starts_with('#')
 }
 
-/// What a column of the header holds.
-#[derive(Debug, Clone, Copy)]
-enum Role {
-    Time,
-    Temp,
-    Label,
-    /// A sensor value: index `3·sensor + axis` into one row's readings.
-    Reading(usize),
-    Ignored,
-}
-
+/// What each column of `header` holds.
 fn column_roles(header: &Header) -> Vec<Role> {
     let mut roles = vec![Role::Ignored; header.names.len()];
     let mut set = |col: Option<usize>, role: Role| {
@@ -132,29 +116,9 @@ fn column_roles(header: &Header) -> Vec<Role> {
     roles
 }
 
-/// The comma-separated fields of a row (what `str::split(',')` yields), found with a byte
-/// search: a comma is one byte in UTF-8, so every piece is itself valid text.
-fn fields(row: &str) -> impl Iterator<Item = &str> {
-    let mut rest = Some(row);
-    std::iter::from_fn(move || {
-        let text = rest?;
-        match memchr::memchr(b',', text.as_bytes()) {
-            Some(at) => {
-                rest = text.get(at + 1..);
-                text.get(..at)
-            }
-            None => {
-                rest = None;
-                Some(text)
-            }
-        }
-    })
-}
-
-/// A field as a finite number.
-fn parse_number(text: &str) -> Option<f64> {
-    super::decimal::parse_finite(text)
-}
+/// Bytes of input parsed at a time (in two halves, one per thread): large enough that starting
+/// the second thread costs well under 1 % of the block's parsing, small enough to stay in cache.
+const BLOCK_BYTES: usize = 1 << 20;
 
 /// Read the rows after `header_line` (the first line that is not skipped, if any) from `lines`.
 fn read_table(
@@ -184,120 +148,62 @@ fn read_table(
             header: header_line.chars().take(80).collect(),
         });
     }
-    let mut time = header.time.map(|_| Vec::new());
-    let mut temp = header.temp.map(|_| Vec::new());
-    let mut labels = header.label.map(|(_, kind)| LabelInterner::new(kind));
-    let mut sensors: Vec<(Sensor, Vec<Vec3>)> = header
-        .sensors
-        .iter()
-        .map(|(s, _)| (*s, Vec::new()))
-        .collect();
-    let roles = column_roles(&header);
-    // One row's sensor values, in the order of `header.sensors`.
-    let mut readings = vec![0.0; 3 * header.sensors.len()];
-    let mut rows = 0;
+    let path_text = display(path);
+    let layout = Layout {
+        path: &path_text,
+        names: &header.names,
+        roles: column_roles(&header),
+        sensors: header.sensors.len(),
+        time: header.time.is_some(),
+        temp: header.temp.is_some(),
+        label: header.label.map(|(_, kind)| kind),
+    };
+    let mut columns = Columns::new(&layout);
+    let mut parts = [Part::new(&layout), Part::new(&layout)];
     let input_bytes = lines.input_len();
-    while let Some((line_no, line)) = lines.next_line()? {
-        let body = content(line);
-        if body.is_empty() || body.starts_with('#') {
-            continue;
-        }
-        let mut found = 0;
-        for (col, text) in fields(body).enumerate() {
-            found += 1;
-            let Some(role) = roles.get(col) else { continue };
-            if let Role::Label = role {
-                if let Some(l) = labels.as_mut() {
-                    l.push(text.trim());
-                }
-                continue;
-            }
-            if let Role::Ignored = role {
-                continue;
-            }
-            // ASCII blanks are the usual padding; other Unicode spaces take the slower trim.
-            let value = parse_number(text.trim_ascii())
-                .or_else(|| parse_number(text.trim()))
-                .ok_or_else(|| RecordingError::BadNumber {
-                    path: display(path),
-                    line: line_no,
-                    column: header.names[col].clone(),
-                    text: text.trim().to_string(),
-                })?;
-            match *role {
-                Role::Time => {
-                    let t = time.get_or_insert_with(Vec::new);
-                    if let Some(&previous) = t.last() {
-                        if value < previous {
-                            return Err(RecordingError::TimeBackwards {
-                                path: display(path),
-                                line: line_no,
-                                time: value,
-                                previous,
-                            });
-                        }
-                    }
-                    t.push(value);
-                }
-                Role::Temp => temp.get_or_insert_with(Vec::new).push(value),
-                Role::Reading(slot) => {
-                    if value.abs() > MAX_SENSOR_MAGNITUDE {
-                        return Err(RecordingError::OutOfRange {
-                            path: display(path),
-                            line: line_no,
-                            column: header.names[col].clone(),
-                            value,
-                            limit: MAX_SENSOR_MAGNITUDE,
-                        });
-                    }
-                    readings[slot] = value;
-                }
-                Role::Label | Role::Ignored => {}
-            }
-        }
-        if found != header.names.len() {
-            return Err(RecordingError::FieldCount {
-                path: display(path),
-                line: line_no,
-                expected: header.names.len(),
-                found,
-            });
-        }
-        for (k, (_, out)) in sensors.iter_mut().enumerate() {
-            out.push(Vec3::new(
-                readings[3 * k],
-                readings[3 * k + 1],
-                readings[3 * k + 2],
-            ));
-        }
-        if rows == 0 {
-            // Rows of a file are alike in length: reserve for all of them at once rather than
-            // copying every column as it doubles.
+    let mut reserved = false;
+    loop {
+        let first_line = lines.line_no() + 1;
+        let Some((offset, bytes)) = lines.next_block(BLOCK_BYTES)? else {
+            break;
+        };
+        let block = Block {
+            bytes,
+            first_line,
+            offset,
+        };
+        let block_len = bytes.len();
+        let count = parse_block(&layout, &block, &mut parts, &mut columns)?;
+        lines.count_lines(count);
+        if !reserved && columns.rows > 0 {
+            // Rows of a file are alike in length: reserve for all of them at once (from the
+            // first block's bytes per row) rather than copying every column as it doubles.
+            reserved = true;
             if let Some(total) = input_bytes {
-                let expected = (total / (line.len() as u64 + 1)).min(1 << 32) as usize;
-                let more = expected + expected / 8;
-                for v in time.iter_mut().chain(temp.iter_mut()) {
-                    v.reserve(more);
-                }
-                for (_, v) in sensors.iter_mut() {
-                    v.reserve(more);
-                }
+                let per_row = (block_len / columns.rows).max(1) as u64;
+                let expected = (total / per_row).min(1 << 32) as usize;
+                columns.reserve((expected + expected / 8).saturating_sub(columns.rows));
             }
         }
-        rows += 1;
     }
-    if rows == 0 {
+    if columns.rows == 0 {
         return Err(RecordingError::NoRows {
             path: display(path),
         });
     }
+    let sensors = header
+        .sensors
+        .iter()
+        .map(|(s, _)| *s)
+        .zip(columns.sensors)
+        .collect();
     Ok(Table {
         header,
-        time,
-        temp,
-        labels: labels.map(LabelInterner::finish),
+        time: columns.time,
+        temp: columns.temp,
+        labels: columns.labels.map(LabelInterner::finish),
         sensors,
-        rows,
+        rows: columns.rows,
     })
 }
 
@@ -307,46 +213,6 @@ fn row_times(time: Option<Vec<f64>>, rows: usize, rate_hz: Option<f64>) -> (Vec<
         (Some(t), _) => (t, false),
         (None, Some(rate)) => ((0..rows).map(|i| i as f64 / rate).collect(), false),
         (None, None) => ((0..rows).map(|i| i as f64).collect(), true),
-    }
-}
-
-/// Builds [`Labels`] row by row, storing each distinct text once.
-struct LabelInterner {
-    kind: LabelKind,
-    names: Vec<String>,
-    index: HashMap<String, usize>,
-    per_row: Vec<Option<usize>>,
-}
-
-impl LabelInterner {
-    fn new(kind: LabelKind) -> Self {
-        Self {
-            kind,
-            names: Vec::new(),
-            index: HashMap::new(),
-            per_row: Vec::new(),
-        }
-    }
-
-    fn push(&mut self, text: &str) {
-        let label = if text.is_empty() || text == "-" {
-            None
-        } else if let Some(&i) = self.index.get(text) {
-            Some(i)
-        } else {
-            self.names.push(text.to_string());
-            self.index.insert(text.to_string(), self.names.len() - 1);
-            Some(self.names.len() - 1)
-        };
-        self.per_row.push(label);
-    }
-
-    fn finish(self) -> Labels {
-        Labels {
-            kind: self.kind,
-            names: self.names,
-            per_row: self.per_row,
-        }
     }
 }
 
@@ -412,24 +278,4 @@ pub(super) fn load_mag_stream(
         time,
         samples,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::fields;
-
-    #[test]
-    fn fields_split_a_row_exactly_as_str_split_on_commas() {
-        for row in [
-            "",
-            ",",
-            "1,2,3",
-            ",a,,b,",
-            " 1.5 , -2 ,\u{e9}t\u{e9},x",
-            "no commas",
-        ] {
-            let expected: Vec<&str> = row.split(',').collect();
-            assert_eq!(fields(row).collect::<Vec<_>>(), expected, "{row:?}");
-        }
-    }
 }

@@ -120,6 +120,51 @@ impl<'a> LineReader<'a> {
         }
     }
 
+    /// The next run of whole lines, about `want` bytes or more when the lines allow (everything
+    /// up to the last line break read, or to the end of the input); `None` at the end. The
+    /// lines are not checked for text: the caller checks them as [`Self::next_line`] does and
+    /// then reports how many lines the run held with [`Self::count_lines`].
+    pub fn next_block(&mut self, want: usize) -> Result<Option<(u64, &[u8])>, RecordingError> {
+        loop {
+            if !self.eof && self.end - self.start < want {
+                self.fill()?;
+                continue;
+            }
+            let pending = &self.buf[self.start..self.end];
+            let to = match memchr::memrchr(b'\n', pending) {
+                Some(at) => self.start + at + 1,
+                None if pending.len() > MAX_LINE_BYTES => {
+                    return Err(RecordingError::LineTooLong {
+                        path: self.path.clone(),
+                        line: self.line_no + 1,
+                        limit: MAX_LINE_BYTES,
+                    })
+                }
+                None if self.eof => self.end,
+                None => {
+                    self.fill()?;
+                    continue;
+                }
+            };
+            if to == self.start {
+                return Ok(None);
+            }
+            let from = self.start;
+            self.start = to;
+            return Ok(Some((self.offset_of(from), &self.buf[from..to])));
+        }
+    }
+
+    /// Number of the last line handed out.
+    pub fn line_no(&self) -> usize {
+        self.line_no
+    }
+
+    /// Count `lines` more lines as read (those of a run from [`Self::next_block`]).
+    pub fn count_lines(&mut self, lines: usize) {
+        self.line_no += lines;
+    }
+
     /// Byte range in `buf` of the next line (line break excluded), consuming it.
     fn find_line(&mut self) -> Result<Option<(usize, usize)>, RecordingError> {
         let mut searched = self.start;

@@ -11,6 +11,7 @@ mod imutk;
 pub mod lines;
 pub mod mapping;
 pub mod motioncal;
+mod rows;
 pub mod units;
 
 use std::path::{Path, PathBuf};
@@ -159,6 +160,22 @@ pub enum RecordingError {
         /// The line as read.
         text: String,
     },
+}
+
+impl RecordingError {
+    /// Add `by` to the line number of an error about one line (for text parsed in pieces, each
+    /// counting its lines from 1).
+    pub(crate) fn shift_line(&mut self, by: usize) {
+        match self {
+            Self::LineTooLong { line, .. }
+            | Self::OutOfRange { line, .. }
+            | Self::BadNumber { line, .. }
+            | Self::FieldCount { line, .. }
+            | Self::TimeBackwards { line, .. }
+            | Self::ImutkLine { line, .. } => *line += by,
+            _ => {}
+        }
+    }
 }
 
 /// How a label column divides the rows.

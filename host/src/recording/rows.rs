@@ -1,0 +1,594 @@
+//! The data rows of a CSV recording turned into columns of numbers, a block of whole lines at a
+//! time, the two halves of a long block parsed side by side on two threads.
+//!
+//! The result is the one a single pass line by line gives, bit for bit and error for error: each
+//! half is parsed with the same row rules into its own columns; then the halves are joined in
+//! file order. What one half cannot see of the other is settled at the join: the time check
+//! across the seam (the first time of a half against the last time before it), the line numbers
+//! of the second half (counted from its start, then shifted), and the label indices (each half
+//! interns its own labels, the join maps them to the whole file's order of first appearance).
+//! The first error in file order wins, as it would line by line.
+
+use std::collections::HashMap;
+
+use super::{LabelKind, Labels, RecordingError, MAX_SENSOR_MAGNITUDE};
+use crate::fit::Vec3;
+
+/// Blocks shorter than this are parsed on the calling thread: a second thread costs tens of
+/// microseconds to start, about the time of parsing this many bytes.
+const PARALLEL_MIN_BYTES: usize = 64 * 1024;
+
+/// Text of a line as the CSV reader sees it: without a byte-order mark or surrounding blanks.
+pub(super) fn content(line: &str) -> &str {
+    line.trim_start_matches('\u{feff}').trim()
+}
+
+/// What a column of the header holds.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Role {
+    /// `t_s`.
+    Time,
+    /// `temp_c`.
+    Temp,
+    /// `pose` or `segment`.
+    Label,
+    /// A sensor value: index `3·sensor + axis` into one row's readings.
+    Reading(usize),
+    /// A column not read.
+    Ignored,
+}
+
+/// The columns of a header as the row parser needs them.
+pub(super) struct Layout<'h> {
+    /// File name for errors.
+    pub path: &'h str,
+    /// Column names, for errors.
+    pub names: &'h [String],
+    /// Role of each column.
+    pub roles: Vec<Role>,
+    /// Number of sensors (three readings each).
+    pub sensors: usize,
+    /// Whether a `t_s` column exists.
+    pub time: bool,
+    /// Whether a `temp_c` column exists.
+    pub temp: bool,
+    /// Kind of the label column, if there is one.
+    pub label: Option<LabelKind>,
+}
+
+/// The comma-separated fields of a row (what `str::split(',')` yields), found with a byte
+/// search: a comma is one byte in UTF-8, so every piece is itself valid text.
+pub(super) fn fields(row: &str) -> impl Iterator<Item = &str> {
+    let mut rest = Some(row);
+    std::iter::from_fn(move || {
+        let text = rest?;
+        match memchr::memchr(b',', text.as_bytes()) {
+            Some(at) => {
+                rest = text.get(at + 1..);
+                text.get(..at)
+            }
+            None => {
+                rest = None;
+                Some(text)
+            }
+        }
+    })
+}
+
+/// Rows read so far, as columns.
+pub(super) struct Columns {
+    /// `t_s` per row, when the column exists.
+    pub time: Option<Vec<f64>>,
+    /// `temp_c` per row, when the column exists.
+    pub temp: Option<Vec<f64>>,
+    /// Labels per row, when a label column exists.
+    pub labels: Option<LabelInterner>,
+    /// Readings per sensor, in the order of the header's sensors.
+    pub sensors: Vec<Vec<Vec3>>,
+    /// Number of rows.
+    pub rows: usize,
+}
+
+impl Columns {
+    /// No rows yet, with the columns of `layout`.
+    pub fn new(layout: &Layout<'_>) -> Self {
+        Self {
+            time: layout.time.then(Vec::new),
+            temp: layout.temp.then(Vec::new),
+            labels: layout.label.map(LabelInterner::new),
+            sensors: vec![Vec::new(); layout.sensors],
+            rows: 0,
+        }
+    }
+
+    /// Room for `more` rows in every column.
+    pub fn reserve(&mut self, more: usize) {
+        for v in self.time.iter_mut().chain(self.temp.iter_mut()) {
+            v.reserve(more);
+        }
+        for v in &mut self.sensors {
+            v.reserve(more);
+        }
+        if let Some(l) = &mut self.labels {
+            l.per_row.reserve(more);
+        }
+    }
+
+    fn clear(&mut self) {
+        for v in self.time.iter_mut().chain(self.temp.iter_mut()) {
+            v.clear();
+        }
+        for v in &mut self.sensors {
+            v.clear();
+        }
+        if let Some(l) = &mut self.labels {
+            l.clear();
+        }
+        self.rows = 0;
+    }
+
+    /// Append the rows of `part`, which come next in the file.
+    fn append(&mut self, part: &Columns) {
+        for (to, from) in self.time.iter_mut().zip(&part.time) {
+            to.extend_from_slice(from);
+        }
+        for (to, from) in self.temp.iter_mut().zip(&part.temp) {
+            to.extend_from_slice(from);
+        }
+        for (to, from) in self.sensors.iter_mut().zip(&part.sensors) {
+            to.extend_from_slice(from);
+        }
+        if let (Some(to), Some(from)) = (&mut self.labels, &part.labels) {
+            to.append(from);
+        }
+        self.rows += part.rows;
+    }
+}
+
+/// One stretch of lines parsed on its own: its rows, how far it got and what stopped it.
+pub(super) struct Part {
+    columns: Columns,
+    /// Lines seen (the line an error stopped on included).
+    lines: usize,
+    /// The first time value of the stretch, with its line (counted from the stretch's start):
+    /// the check against the time before the stretch is made when the stretches are joined.
+    first_time: Option<(usize, f64)>,
+    /// The first error, its line counted from the stretch's start.
+    error: Option<RecordingError>,
+}
+
+impl Part {
+    /// An empty part for the columns of `layout`.
+    pub fn new(layout: &Layout<'_>) -> Self {
+        Self {
+            columns: Columns::new(layout),
+            lines: 0,
+            first_time: None,
+            error: None,
+        }
+    }
+
+    fn reset(&mut self) {
+        self.columns.clear();
+        self.lines = 0;
+        self.first_time = None;
+        self.error = None;
+    }
+}
+
+/// A run of whole lines: its bytes, the number of its first line and the input offset of its
+/// first byte.
+pub(super) struct Block<'b> {
+    /// The lines, each ended by a line break except perhaps the last one of the input.
+    pub bytes: &'b [u8],
+    /// 1-based number of the first line.
+    pub first_line: usize,
+    /// Offset of the first byte in the input.
+    pub offset: u64,
+}
+
+/// Parse the rows of `block` into `out`, on two threads when the block is long; `parts` are
+/// scratch space reused across blocks. Returns the number of lines of the block, or the first
+/// error in file order.
+pub(super) fn parse_block(
+    layout: &Layout<'_>,
+    block: &Block<'_>,
+    parts: &mut [Part; 2],
+    out: &mut Columns,
+) -> Result<usize, RecordingError> {
+    let [first, second] = parts;
+    first.reset();
+    second.reset();
+    let split = (block.bytes.len() >= PARALLEL_MIN_BYTES)
+        .then(|| memchr::memchr(b'\n', &block.bytes[block.bytes.len() / 2..]))
+        .flatten()
+        .map(|at| block.bytes.len() / 2 + at + 1);
+    match split {
+        Some(mid) => {
+            let (a, b) = block.bytes.split_at(mid);
+            std::thread::scope(|scope| {
+                let later =
+                    scope.spawn(|| parse_lines(layout, b, block.offset + mid as u64, second));
+                parse_lines(layout, a, block.offset, first);
+                later
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            });
+        }
+        None => parse_lines(layout, block.bytes, block.offset, first),
+    }
+    let mut lines = 0;
+    for part in [&mut *first, &mut *second] {
+        join(layout.path, block.first_line + lines, part, out)?;
+        lines += part.lines;
+    }
+    Ok(lines)
+}
+
+/// Append `part`, whose first line is number `first_line`, to `out`: the time check across the
+/// seam first, then the part's own error (both as line by line reading would report them).
+fn join(
+    path: &str,
+    first_line: usize,
+    part: &mut Part,
+    out: &mut Columns,
+) -> Result<(), RecordingError> {
+    if let (Some((line, time)), Some(&previous)) =
+        (part.first_time, out.time.as_ref().and_then(|t| t.last()))
+    {
+        if time < previous {
+            return Err(RecordingError::TimeBackwards {
+                path: path.to_string(),
+                line: first_line - 1 + line,
+                time,
+                previous,
+            });
+        }
+    }
+    if let Some(mut err) = part.error.take() {
+        err.shift_line(first_line - 1);
+        return Err(err);
+    }
+    out.append(&part.columns);
+    Ok(())
+}
+
+/// Parse the lines of `text` (input offset `offset`) into `part`, stopping at the first error.
+fn parse_lines(layout: &Layout<'_>, text: &[u8], offset: u64, part: &mut Part) {
+    // Text without a zero byte that is valid UTF-8 as a whole is so line by line (a line break
+    // is one byte of UTF-8): the per-line checks are then needed only when this fails.
+    let checked = memchr::memchr(0, text).is_none() && std::str::from_utf8(text).is_ok();
+    let mut start = 0;
+    while start < text.len() {
+        let end = memchr::memchr(b'\n', &text[start..]).map_or(text.len(), |at| start + at);
+        part.lines += 1;
+        let mut line = &text[start..end];
+        if let [rest @ .., b'\r'] = line {
+            line = rest;
+        }
+        let line_start = start;
+        start = end + 1;
+        let line = if checked {
+            // Validated above: a piece of valid text cut at line breaks is valid text.
+            std::str::from_utf8(line).unwrap_or_default()
+        } else {
+            match line_text(layout.path, line, offset + line_start as u64) {
+                Ok(l) => l,
+                Err(e) => {
+                    part.error = Some(e);
+                    return;
+                }
+            }
+        };
+        if let Err(e) = parse_row(layout, line, part.lines, part) {
+            part.error = Some(e);
+            return;
+        }
+    }
+}
+
+/// A line as text, refused as [`super::lines::LineReader`] refuses it: a zero byte first, then
+/// bytes that are not UTF-8 (`offset` is the input offset of the line's first byte).
+fn line_text<'t>(path: &str, line: &'t [u8], offset: u64) -> Result<&'t str, RecordingError> {
+    if let Some(at) = memchr::memchr(0, line) {
+        return Err(RecordingError::NotText {
+            path: path.to_string(),
+            detail: format!(
+                "it holds binary data (a zero byte at offset {})",
+                offset + at as u64
+            ),
+        });
+    }
+    std::str::from_utf8(line).map_err(|e| {
+        let at = e.valid_up_to();
+        RecordingError::NotText {
+            path: path.to_string(),
+            detail: format!(
+                "it holds bytes that are not UTF-8 text (byte 0x{:02X} at offset {})",
+                line.get(at).copied().unwrap_or(0),
+                offset + at as u64
+            ),
+        }
+    })
+}
+
+/// A field as a finite number.
+fn parse_number(text: &str) -> Option<f64> {
+    super::decimal::parse_finite(text)
+}
+
+/// Parse one line (number `line_no` within its part) into `part`; skipped lines add nothing.
+fn parse_row(
+    layout: &Layout<'_>,
+    line: &str,
+    line_no: usize,
+    part: &mut Part,
+) -> Result<(), RecordingError> {
+    let body = content(line);
+    if body.is_empty() || body.starts_with('#') {
+        return Ok(());
+    }
+    let columns = &mut part.columns;
+    // One row's sensor values, in the order of the header's sensors (at most three sensors).
+    let mut readings = [0.0; 9];
+    let mut found = 0;
+    for (col, text) in fields(body).enumerate() {
+        found += 1;
+        let Some(role) = layout.roles.get(col) else {
+            continue;
+        };
+        if let Role::Label = role {
+            if let Some(l) = columns.labels.as_mut() {
+                l.push(text.trim());
+            }
+            continue;
+        }
+        if let Role::Ignored = role {
+            continue;
+        }
+        // ASCII blanks are the usual padding; other Unicode spaces take the slower trim.
+        let value = parse_number(text.trim_ascii())
+            .or_else(|| parse_number(text.trim()))
+            .ok_or_else(|| RecordingError::BadNumber {
+                path: layout.path.to_string(),
+                line: line_no,
+                column: layout.names[col].clone(),
+                text: text.trim().to_string(),
+            })?;
+        match *role {
+            Role::Time => {
+                let t = columns.time.get_or_insert_with(Vec::new);
+                match t.last() {
+                    Some(&previous) if value < previous => {
+                        return Err(RecordingError::TimeBackwards {
+                            path: layout.path.to_string(),
+                            line: line_no,
+                            time: value,
+                            previous,
+                        });
+                    }
+                    Some(_) => {}
+                    None => part.first_time = Some((line_no, value)),
+                }
+                t.push(value);
+            }
+            Role::Temp => columns.temp.get_or_insert_with(Vec::new).push(value),
+            Role::Reading(slot) => {
+                if value.abs() > MAX_SENSOR_MAGNITUDE {
+                    return Err(RecordingError::OutOfRange {
+                        path: layout.path.to_string(),
+                        line: line_no,
+                        column: layout.names[col].clone(),
+                        value,
+                        limit: MAX_SENSOR_MAGNITUDE,
+                    });
+                }
+                if let Some(r) = readings.get_mut(slot) {
+                    *r = value;
+                }
+            }
+            Role::Label | Role::Ignored => {}
+        }
+    }
+    if found != layout.names.len() {
+        return Err(RecordingError::FieldCount {
+            path: layout.path.to_string(),
+            line: line_no,
+            expected: layout.names.len(),
+            found,
+        });
+    }
+    for (out, r) in columns.sensors.iter_mut().zip(readings.chunks_exact(3)) {
+        out.push(Vec3::new(r[0], r[1], r[2]));
+    }
+    columns.rows += 1;
+    Ok(())
+}
+
+/// Builds [`Labels`] row by row, storing each distinct text once.
+pub(super) struct LabelInterner {
+    kind: LabelKind,
+    names: Vec<String>,
+    index: HashMap<String, usize>,
+    per_row: Vec<Option<usize>>,
+}
+
+impl LabelInterner {
+    fn new(kind: LabelKind) -> Self {
+        Self {
+            kind,
+            names: Vec::new(),
+            index: HashMap::new(),
+            per_row: Vec::new(),
+        }
+    }
+
+    fn clear(&mut self) {
+        self.names.clear();
+        self.index.clear();
+        self.per_row.clear();
+    }
+
+    /// Index of `text`, adding it when it is new.
+    fn intern(&mut self, text: &str) -> usize {
+        if let Some(&i) = self.index.get(text) {
+            return i;
+        }
+        self.names.push(text.to_string());
+        self.index.insert(text.to_string(), self.names.len() - 1);
+        self.names.len() - 1
+    }
+
+    fn push(&mut self, text: &str) {
+        let label = (!(text.is_empty() || text == "-")).then(|| self.intern(text));
+        self.per_row.push(label);
+    }
+
+    /// Append the rows of `later`, whose names are new to this one in their order of first
+    /// appearance there, so the joined order of first appearance is the whole file's.
+    fn append(&mut self, later: &LabelInterner) {
+        let map: Vec<usize> = later.names.iter().map(|n| self.intern(n)).collect();
+        self.per_row.extend(
+            later
+                .per_row
+                .iter()
+                .map(|l| l.and_then(|i| map.get(i).copied())),
+        );
+    }
+
+    /// The labels read.
+    pub fn finish(self) -> Labels {
+        Labels {
+            kind: self.kind,
+            names: self.names,
+            per_row: self.per_row,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const NAMES: [&str; 5] = ["t_s", "ax", "ay", "az", "pose"];
+
+    fn layout(names: &[String]) -> Layout<'_> {
+        Layout {
+            path: "test.csv",
+            names,
+            roles: vec![
+                Role::Time,
+                Role::Reading(0),
+                Role::Reading(1),
+                Role::Reading(2),
+                Role::Label,
+            ],
+            sensors: 1,
+            time: true,
+            temp: false,
+            label: Some(LabelKind::Pose),
+        }
+    }
+
+    /// Rows `0..n` (time `i`, label `a`), and the index of the first row of the second half.
+    fn rows(n: usize) -> (Vec<String>, usize) {
+        let lines: Vec<String> = (0..n).map(|i| format!("{i},1.5,-2,3,a")).collect();
+        let text = lines.join("\n") + "\n";
+        let mid = text.len() / 2 + text[text.len() / 2..].find('\n').unwrap_or(0) + 1;
+        let second = text[..mid].matches('\n').count();
+        (lines, second)
+    }
+
+    fn parse(lines: &[String]) -> Result<Columns, RecordingError> {
+        let names: Vec<String> = NAMES.iter().map(|n| n.to_string()).collect();
+        let layout = layout(&names);
+        let text = lines.join("\n") + "\n";
+        let block = Block {
+            bytes: text.as_bytes(),
+            first_line: 2,
+            offset: 0,
+        };
+        let mut parts = [Part::new(&layout), Part::new(&layout)];
+        let mut out = Columns::new(&layout);
+        let count = parse_block(&layout, &block, &mut parts, &mut out)?;
+        assert_eq!(count, lines.len());
+        Ok(out)
+    }
+
+    #[test]
+    fn time_going_back_at_the_first_row_of_the_second_half_is_refused_there() {
+        let (mut lines, second) = rows(8000);
+        assert!(second > 1000, "the block is parsed in two halves");
+        lines[second] = format!("{},1.5,-2,3,a", second - 2);
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        // Line numbers count from the block's first line, 2.
+        let expected = format!(
+            "line {}: time {} s is earlier than the previous row's {} s",
+            second + 2,
+            second - 2,
+            second - 1
+        );
+        assert!(err.contains(&expected), "{err}");
+    }
+
+    #[test]
+    fn errors_of_the_second_half_name_their_line_in_the_whole_file() {
+        let (mut lines, second) = rows(8000);
+        lines[second + 10] = format!("{},1.5,oops,3,a", second + 10);
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains(&format!("line {}, column `ay`: `oops`", second + 12)),
+            "{err}"
+        );
+        // An error in the first half comes first, whatever the second half holds.
+        lines[second - 3] = format!("{},1.5,-2,3", second - 3);
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains(&format!("line {}: 4 fields", second - 1)),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn labels_first_seen_in_the_second_half_follow_those_of_the_first() {
+        let (mut lines, second) = rows(8000);
+        lines[1] = "1,1.5,-2,3,c".to_string();
+        lines[second] = format!("{second},1.5,-2,3,b");
+        lines[second + 1] = format!("{},1.5,-2,3,c", second + 1);
+        lines[second + 2] = format!("{},1.5,-2,3,-", second + 2);
+        let out = parse(&lines).expect("valid rows");
+        let labels = out.labels.expect("a label column").finish();
+        assert_eq!(labels.names, ["a", "c", "b"]);
+        assert_eq!(labels.per_row[1], Some(1));
+        assert_eq!(labels.per_row[second], Some(2));
+        assert_eq!(labels.per_row[second + 1], Some(1));
+        assert_eq!(labels.per_row[second + 2], None);
+        assert_eq!(labels.per_row[second + 3], Some(0));
+        assert_eq!(out.rows, 8000);
+        assert_eq!(out.time.expect("time")[second], second as f64);
+    }
+
+    #[test]
+    fn fields_split_a_row_exactly_as_str_split_on_commas() {
+        for row in [
+            "",
+            ",",
+            "1,2,3",
+            ",a,,b,",
+            " 1.5 , -2 ,\u{e9}t\u{e9},x",
+            "no commas",
+        ] {
+            let expected: Vec<&str> = row.split(',').collect();
+            assert_eq!(fields(row).collect::<Vec<_>>(), expected, "{row:?}");
+        }
+    }
+}
