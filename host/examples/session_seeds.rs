@@ -186,6 +186,10 @@ fn main() {
             let bias_error = (outcome.fit.gyro.cal.b - b_true).norm().to_degrees();
             let rms = outcome.gyro_scale.as_ref().map_or(f64::NAN, |g| g.rms_deg);
             eprintln!("  gyro bias error {bias_error:.4} °/s, move residual RMS {rms:.4}°");
+            if let Some(g) = &outcome.gyro_scale {
+                let [x, y, z] = g.tilt_deg;
+                eprintln!("  tilting rotation about X, Y, Z: {x:.0}°, {y:.0}°, {z:.0}°");
+            }
             let std = outcome.fit.gyro.std.map_or(Mat3::zeros(), |s| s.a);
             for r in 0..3 {
                 let row: Vec<String> = (0..3)
