@@ -6,7 +6,11 @@
 //! The gyroscope's written `A` maps raw rates into the accelerometer's output frame, which the
 //! norm fit leaves as `Qᵀ·body` with `A_acc = Q·R` (upper-triangular gauge), so the truth it is
 //! compared with is `Qᵀ·A_true`; `E = A_fit·(Qᵀ·A_true)⁻¹ − I` holds the scale errors on its
-//! diagonal and the misalignment angles (radians) off it.
+//! diagonal and the misalignment angles (radians) off it. The table also gives the
+//! misalignment against the frame the calibrated accelerometer actually reads in,
+//! `M = A_acc,fit·A_acc,true⁻¹` (`Qᵀ` up to the accelerometer fit's own errors): what a fusion
+//! of the two sensors sees. A 360° turn is about one axis, so its error is that axis's scale
+//! error (×360°) plus the bias error over the turn; misalignment tilts the turn's axis only.
 //!
 //! Run: `cargo run --release -p imucal --example session_seeds -- [SEEDS] [FIRST_SEED] [-v]`
 //! (default 10 seeds from 1).
@@ -72,6 +76,17 @@ fn orthogonal_factor(a: &Mat3) -> Mat3 {
     q
 }
 
+/// Largest off-diagonal entry of `error`, degrees (a misalignment angle).
+fn largest_off_diagonal_deg(error: &Mat3) -> f64 {
+    let mut largest: f64 = 0.0;
+    for r in 0..3 {
+        for c in (0..3).filter(|&c| c != r) {
+            largest = largest.max(error[(r, c)].abs().to_degrees());
+        }
+    }
+    largest
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let verbose = args.iter().any(|a| a == "-v");
@@ -80,7 +95,7 @@ fn main() {
     let first = numbers.get(1).copied().unwrap_or(1);
     println!(
         "seed | session s | session s, fit at 1× | |a| mg | |m| % | gyro scale err % (1σ) | \
-         misalign err ° (1σ) | worst err/σ | moves | \
+         misalign err ° (1σ) | misalign err in accel frame ° | worst err/σ | moves | \
          360° before ° | 360° after °"
     );
     for seed in first..first + seeds {
@@ -120,18 +135,24 @@ fn main() {
                 continue;
             }
         };
-        let q = orthogonal_factor(&matrix(&truth.imu.accel.a_true));
+        let accel_true = matrix(&truth.imu.accel.a_true);
+        let q = orthogonal_factor(&accel_true);
         let gyro_true = matrix(&truth.imu.gyro.a_true);
         let expected = q.transpose() * gyro_true;
         let error = outcome.fit.gyro.cal.a * expected.try_inverse().unwrap_or(Mat3::identity())
             - Mat3::identity();
         let scale_err = (0..3).map(|i| error[(i, i)].abs()).fold(0.0, f64::max) * 100.0;
-        let mut misalign_err: f64 = 0.0;
-        for r in 0..3 {
-            for c in (0..3).filter(|&c| c != r) {
-                misalign_err = misalign_err.max(error[(r, c)].abs().to_degrees());
-            }
-        }
+        let misalign_err = largest_off_diagonal_deg(&error);
+        // The frame the calibrated accelerometer actually reads in, `M = A_acc,fit·A_acc,true⁻¹`
+        // (≈ Qᵀ, with the accelerometer fit's own errors), its unit taken out.
+        let frame = outcome.fit.accel.cal.a * accel_true.try_inverse().unwrap_or(Mat3::identity());
+        let frame = frame / frame.determinant().cbrt();
+        let in_accel_frame = outcome.fit.gyro.cal.a
+            * (frame * gyro_true)
+                .try_inverse()
+                .unwrap_or(Mat3::identity())
+            - Mat3::identity();
+        let misalign_accel_frame = largest_off_diagonal_deg(&in_accel_frame);
         // Worst error of an entry in units of its own σ (E's entry ij is A's over expected jj).
         let worst_z = outcome.fit.gyro.std.map_or(f64::NAN, |std| {
             (0..9)
@@ -165,10 +186,29 @@ fn main() {
             let bias_error = (outcome.fit.gyro.cal.b - b_true).norm().to_degrees();
             let rms = outcome.gyro_scale.as_ref().map_or(f64::NAN, |g| g.rms_deg);
             eprintln!("  gyro bias error {bias_error:.4} °/s, move residual RMS {rms:.4}°");
+            if let Some(g) = &outcome.gyro_scale {
+                let [x, y, z] = g.tilt_deg;
+                eprintln!("  tilting rotation about X, Y, Z: {x:.0}°, {y:.0}°, {z:.0}°");
+            }
+            let std = outcome.fit.gyro.std.map_or(Mat3::zeros(), |s| s.a);
+            for r in 0..3 {
+                let row: Vec<String> = (0..3)
+                    .map(|c| {
+                        let (err, sigma) = (error[(r, c)], std[(r, c)] / expected[(c, c)].abs());
+                        if r == c {
+                            format!("{:+.3} % ({:.3})", err * 100.0, sigma * 100.0)
+                        } else {
+                            let (e, s) = (err.to_degrees(), sigma.to_degrees());
+                            format!("{e:+.3}° ({s:.3})")
+                        }
+                    })
+                    .collect();
+                eprintln!("  E row {}: {}", r + 1, row.join("  "));
+            }
         }
         println!(
             "{seed} | {:.1} | {:.1} | {:.3} | {:.3} | {scale_err:.3} ({scale_sigma:.3}) | \
-             {misalign_err:.3} ({misalign_sigma:.3}) | {worst_z:.1} | {moves} | {before:.2} | {after:.3}",
+             {misalign_err:.3} ({misalign_sigma:.3}) | {misalign_accel_frame:.3} | {worst_z:.1} | {moves} | {before:.2} | {after:.3}",
             outcome.session_seconds,
             outcome.session_seconds - (SPEED - 1.0) * outcome.fit_wall_seconds,
             at_rest.map_or(f64::NAN, |a| a.accel_error_mg),

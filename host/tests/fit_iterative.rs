@@ -453,6 +453,7 @@ fn gyro_motions_about(
             gravity_after: after * G,
             rates,
             dt,
+            angle_sigma: None,
         });
         gravity = after;
     }

@@ -8,7 +8,9 @@
 //! rotated into the end pose, `Rᵀ·ĝ_before`, must equal the measured `ĝ_after`. The 9 entries of
 //! a full `A` (scale, cross-axis, and the gyro-to-accelerometer misalignment) minimise the
 //! mismatch by Levenberg–Marquardt, Jacobian by central differences. The residual of a motion is
-//! the mismatch's two components perpendicular to `ĝ_after` (≈ angle errors in radians). A
+//! the mismatch's two components perpendicular to `ĝ_after` (≈ angle errors in radians), each
+//! divided by the motion's own angle σ when every motion gives one (generalised least squares:
+//! a motion with short or noisy still ends counts less), scaled by the σs' RMS. A
 //! rotation about gravity leaves gravity unchanged, so motions must turn about varied axes.
 //!
 //! The motions of a recording are cut between its still holds by [`crate::still::motions`].
@@ -33,6 +35,11 @@ pub struct GyroMotion {
     pub rates: Vec<Vec3>,
     /// Sample interval, in seconds.
     pub dt: f64,
+    /// One-sigma of each component of the motion's angle mismatch from its own noise
+    /// (gravity directions at the still ends, gyroscope noise over the turn), radians. When every
+    /// motion has one, the fit weighs each by its inverse (generalised least squares); `None`
+    /// weighs all motions alike.
+    pub angle_sigma: Option<f64>,
 }
 
 /// Rotation (body at the end → body at the start) from integrating `A·rates` with RK4 on the
@@ -59,14 +66,13 @@ struct GyroProblem {
     motions: Vec<(Vec3, Vec3, Vec3, Vec3)>,
     rates: Vec<Vec<Vec3>>,
     dt: Vec<f64>,
+    /// Per motion: the factor its two angle errors are multiplied by in the least squares.
+    weights: Vec<f64>,
 }
 
-fn matrix_from(p: &DVector<f64>) -> Mat3 {
-    Mat3::from_row_slice(p.as_slice())
-}
-
-impl LeastSquaresProblem for GyroProblem {
-    fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
+impl GyroProblem {
+    /// The two angle errors (radians) of every motion, unweighted.
+    fn angle_errors(&self, p: &DVector<f64>) -> DVector<f64> {
         let a = matrix_from(p);
         let mut r = DVector::zeros(2 * self.motions.len());
         for (k, ((before, _after, e1, e2), (rates, dt))) in self
@@ -78,6 +84,37 @@ impl LeastSquaresProblem for GyroProblem {
             let predicted = integrate_rotation(&a, rates, *dt).inverse() * before;
             r[2 * k] = e1.dot(&predicted);
             r[2 * k + 1] = e2.dot(&predicted);
+        }
+        r
+    }
+}
+
+/// Relative weight of each motion: `σ̄/σₖ` when every motion states its angle σ (positive and
+/// finite), `σ̄` their RMS so that a weighted residual reads as an angle; all 1 otherwise.
+fn motion_weights(motions: &[GyroMotion]) -> Vec<f64> {
+    let sigmas: Option<Vec<f64>> = motions
+        .iter()
+        .map(|m| m.angle_sigma.filter(|s| s.is_finite() && *s > 0.0))
+        .collect();
+    match sigmas {
+        Some(sigmas) if !sigmas.is_empty() => {
+            let mean_square = sigmas.iter().map(|s| s * s).sum::<f64>() / sigmas.len() as f64;
+            sigmas.iter().map(|s| mean_square.sqrt() / s).collect()
+        }
+        _ => vec![1.0; motions.len()],
+    }
+}
+
+fn matrix_from(p: &DVector<f64>) -> Mat3 {
+    Mat3::from_row_slice(p.as_slice())
+}
+
+impl LeastSquaresProblem for GyroProblem {
+    fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
+        let mut r = self.angle_errors(p);
+        for (k, w) in self.weights.iter().enumerate() {
+            r[2 * k] *= w;
+            r[2 * k + 1] *= w;
         }
         r
     }
@@ -150,6 +187,7 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
         motions: prepared,
         rates: motions.iter().map(|m| m.rates.clone()).collect(),
         dt: motions.iter().map(|m| m.dt).collect(),
+        weights: motion_weights(motions),
     };
     let a0 = start.copied().unwrap_or_else(Mat3::identity);
     if a0.iter().any(|v| !v.is_finite()) {
@@ -179,8 +217,9 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
     let std = covariance
         .as_ref()
         .map(|c| calibration_std(c, &FULL_MATRIX_LAYOUT));
-    let residuals: Vec<f64> = sol
-        .residuals
+    // Reported in angle, unweighted.
+    let residuals: Vec<f64> = problem
+        .angle_errors(&sol.params)
         .as_slice()
         .chunks(2)
         .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt())

@@ -12,6 +12,9 @@
 //! the sway correction of their still ends ([`super::gyro_moves`]), so the fit is run twice,
 //! the second time with the ends turned by the first result.
 //!
+//! Each move counts by the inverse of its own angle noise ([`super::gyro_moves::motion_of`]),
+//! the gyroscope's white noise taken from the rest's scatter when the board lay still.
+//!
 //! The σ of `A` adds to the moves' scatter what the fit inherits from the accelerometer's
 //! calibration and the bias ([`super::gyro_nuisance`]): errors common to every move.
 
@@ -118,14 +121,18 @@ pub fn complete_gyro(
         fit.gyro.cal.b,
         Vec3::from(fit.uncertainties.gyro_bias_dps.map(f64::to_radians)),
     );
-    let (bias, bias_sigma) = match rest_bias(rest, still_rate) {
+    let table = rest_bias(rest, still_rate);
+    let (bias, bias_sigma) = match table {
         Some(table) => combine(holds, table),
         None => holds,
     };
+    // The rest's per-sample scatter is the gyroscope's white noise (no hand on the board).
+    let rate_noise = table.map(|(_, se)| se.norm() / 3f64.sqrt() * (rest.len() as f64).sqrt());
     let nuisance = Nuisance {
         accel: &fit.accel,
         bias,
         bias_sigma,
+        rate_noise,
     };
     let result = fit_scale(moves, &nuisance, still_rate);
     let (scale_fit, summary) = match result {
@@ -169,9 +176,10 @@ fn fit_scale(
     still_rate: f64,
 ) -> Result<(Fit, GyroScale), FitError> {
     let (accel, bias) = (&nuisance.accel.cal, &nuisance.bias);
-    let first = motions_of(moves, accel, &Mat3::identity(), bias, still_rate);
+    let noise = nuisance.rate_noise;
+    let first = motions_of(moves, accel, &Mat3::identity(), bias, still_rate, noise);
     let rough = fit_gyro_scale(&first, None)?;
-    let motions = motions_of(moves, accel, &rough.cal.a, bias, still_rate);
+    let motions = motions_of(moves, accel, &rough.cal.a, bias, still_rate, noise);
     let mut fit = fit_gyro_scale(&motions, Some(&rough.cal.a))?;
     let inherited = inherited_covariance(moves, &fit.cal.a, nuisance, still_rate);
     if let (Some(own), Some(inherited)) = (fit.covariance.as_mut(), inherited) {

@@ -25,6 +25,8 @@ pub struct Nuisance<'a> {
     pub bias: Vec3,
     /// One-sigma of the bias per axis, rad/s.
     pub bias_sigma: Vec3,
+    /// White noise of one gyroscope sample, rad/s (`None`: estimated from each move's ends).
+    pub rate_noise: Option<f64>,
 }
 
 /// The entry of a calibration a parameter name (`"A12"`, `"b3"`) stands for.
@@ -61,7 +63,7 @@ pub fn inherited_covariance(
 ) -> Option<DMatrix<f64>> {
     let accel = &nuisance.accel.cal;
     let refit = |accel: &Calibration, bias: &Vec3| -> Option<(usize, DVector<f64>)> {
-        let motions = motions_of(moves, accel, a_fit, bias, still_rate);
+        let motions = motions_of(moves, accel, a_fit, bias, still_rate, nuisance.rate_noise);
         let fit = fit_gyro_scale(&motions, Some(a_fit)).ok()?;
         Some((motions.len(), entries(&fit.cal.a)))
     };

@@ -69,6 +69,7 @@ pub fn motions_between_holds(
             gravity_after: accel.apply(&after.mean),
             rates: rows.iter().map(|w| (w - bias) * unit_scale).collect(),
             dt,
+            angle_sigma: None,
         });
     }
     Ok(motions)
