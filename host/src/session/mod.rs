@@ -43,6 +43,7 @@ mod gyro_nuisance;
 pub mod hold;
 pub mod journal;
 mod mag_alignment;
+pub mod mag_guidance;
 mod mag_phase;
 pub mod motion;
 pub mod motioncal;
