@@ -23,6 +23,8 @@ pub(super) struct Terminal {
     pub(super) bar: ProgressBar,
     last_line: Option<Instant>,
     last_coverage: usize,
+    /// Also write the magnetometer's coverage updates as JSON lines (`--json`).
+    json: bool,
 }
 
 impl Terminal {
@@ -46,7 +48,16 @@ impl Terminal {
             bar,
             last_line: None,
             last_coverage: usize::MAX,
+            json: false,
         }
+    }
+
+    /// With `on`, coverage updates of the magnetometer phase are also written to stderr as one
+    /// JSON object a line (`"event": "mag_coverage"`, with the guidance), for scripts that run
+    /// `--json`; the prose line is then left out in plain mode.
+    pub(super) fn with_json_events(mut self, on: bool) -> Self {
+        self.json = on;
+        self
     }
 
     fn line(&self, text: &str) {
@@ -57,14 +68,14 @@ impl Terminal {
         }
     }
 
-    /// Plain mode: at most one progress line every two seconds.
+    /// At most one progress line every two seconds (plain mode's bars, `--json` events).
     fn throttled(&mut self, text: &str) {
         if self
             .last_line
             .is_none_or(|t| t.elapsed() >= Duration::from_secs(2))
         {
             self.last_line = Some(Instant::now());
-            eprintln!("{text}");
+            self.line(text);
         }
     }
 
@@ -293,7 +304,10 @@ impl SessionObserver for Terminal {
                 self.clear_bar();
                 self.line(
                     "\nMagnetometer: turn the board slowly through all directions (roll, pitch \
-                     and yaw), away from steel, magnets and cables.",
+                     and yaw), away from steel, magnets and cables. The hint below names the \
+                     board's ends (+X, -Y, …) and faces (components +Z, underside -Z) as the \
+                     position pictures do; a turn about the vertical moves only the field's \
+                     horizontal part, so some directions need a tilt first.",
                 );
             }
             SessionEvent::MagCoverage {
@@ -301,22 +315,42 @@ impl SessionObserver for Terminal {
                 regions,
                 samples,
                 empty,
+                guidance,
             } => {
-                let missing = match empty.first() {
-                    None => "every direction reached".to_string(),
-                    Some(next) => format!(
-                        "next: {} ({} direction{} still empty)",
-                        pointing_hint(next),
-                        empty.len(),
-                        if empty.len() == 1 { "" } else { "s" }
-                    ),
+                let next = match (guidance, empty.first()) {
+                    (_, None) => "every direction reached".to_string(),
+                    (Some(g), Some(_)) => format!("next: {}", g.text),
+                    (None, Some(region)) => format!("next: {}", pointing_hint(region)),
                 };
-                let message = format!("{covered}/{regions} directions, {samples} samples; {missing}");
-                if self.plain && *covered != self.last_coverage {
+                let counts = format!(
+                    "{covered}/{regions} directions, {samples} samples, {} empty",
+                    empty.len()
+                );
+                if *covered != self.last_coverage {
                     self.last_coverage = *covered;
                     self.last_line = None;
                 }
-                self.bar("coverage", *regions as u64, *covered as u64, message);
+                if self.json {
+                    let line = serde_json::json!({
+                        "event": "mag_coverage",
+                        "covered": covered,
+                        "regions": regions,
+                        "samples": samples,
+                        "empty": empty,
+                        "guidance": guidance,
+                    });
+                    self.throttled(&line.to_string());
+                }
+                // One bar, its message the counts and, below them, the instruction: both
+                // redrawn in place.
+                let message = if self.plain {
+                    format!("{counts}; {next}")
+                } else {
+                    format!("{counts}\n{:>12}{next}", "")
+                };
+                if !(self.json && self.plain) {
+                    self.bar("coverage", *regions as u64, *covered as u64, message);
+                }
             }
             SessionEvent::RestPrompt => {
                 self.last_line = None;
