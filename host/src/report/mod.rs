@@ -19,8 +19,8 @@ use serde_json::Value;
 
 use crate::device::ParamsFile;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
-use imucal_protocol::apply_sensor;
 use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
+use imucal_protocol::apply_sensor;
 
 /// File of a session directory holding the `--analyze` residual analysis as text, with the
 /// extended terms it added; the report shows it when present.

@@ -363,8 +363,7 @@ pub fn coverage_map(cover: &Coverage, min_samples: usize) -> Result<String, Plot
         } else {
             // Square-root shading so that sparsely sampled regions stay visible.
             let shade = (count as f64 / top as f64).sqrt();
-            let fade =
-                |full: u8| (255.0 - (255.0 - f64::from(full)) * (0.25 + 0.75 * shade)) as u8;
+            let fade = |full: u8| (255.0 - (255.0 - f64::from(full)) * (0.25 + 0.75 * shade)) as u8;
             RGBColor(fade(AFTER.0), fade(AFTER.1), fade(AFTER.2))
         }
     };
@@ -415,11 +414,7 @@ pub fn coverage_map(cover: &Coverage, min_samples: usize) -> Result<String, Plot
             // Keep the labels of the ±X column and of the poles inside the frame.
             let az = if az > 170.0 { -170.0 } else { az };
             let el = el.clamp(-84.0, 84.0);
-            let colour: &'static RGBColor = if count < min_samples {
-                &BEFORE
-            } else {
-                &SHAPE
-            };
+            let colour: &'static RGBColor = if count < min_samples { &BEFORE } else { &SHAPE };
             let style = TextStyle::from(("sans-serif", 12).into_font())
                 .color(colour)
                 .pos(plotters::style::text_anchor::Pos::new(

@@ -65,24 +65,44 @@ fn round_degrees(deg: f64) -> f64 {
     ((deg / 5.0).round() * 5.0).max(5.0)
 }
 
-/// Words for a board side named by `direction_name`: `+X end`, `components face (+Z)`.
-fn side_words(direction: &Vec3) -> String {
-    let parts: Vec<String> = (0..3)
-        .filter(|&i| direction[i].abs() > 0.3)
-        .map(|i| {
-            let positive = direction[i] > 0.0;
-            let sign = if positive { '+' } else { '-' };
-            match i {
-                2 if positive => "the components face (+Z)".to_string(),
-                2 => "the underside (-Z)".to_string(),
-                _ => format!("the {sign}{} end", if i == 0 { 'X' } else { 'Y' }),
-            }
-        })
-        .collect();
-    match parts.as_slice() {
-        [one] => one.clone(),
-        [first @ .., last] => format!("{} and {last}", first.join(", ")),
-        [] => direction_name(direction),
+/// Share of a unit tilt direction below which an axis is left unnamed: sin 22.5°, an axis that
+/// adds less than half the 45° between neighbouring region axes to the direction.
+const NAMED_SHARE: f64 = 0.383;
+
+/// `d` with the axes it barely involves set to zero, so that it names one end, one corner or one
+/// end with a face.
+fn prominent(d: &Vec3) -> Vec3 {
+    d.map(|v| if v.abs() >= NAMED_SHARE { v } else { 0.0 })
+}
+
+/// Words for the side of the board at `side` (from [`prominent`]) and whether they are plural:
+/// `the +X end`, `the +X-Y corner`, `the components face (+Z)`, `the -Y end and the underside
+/// (-Z)`.
+fn side_words(side: &Vec3) -> (String, bool) {
+    let mut ends = String::new();
+    for (i, axis) in ['X', 'Y'].iter().enumerate() {
+        if side[i] != 0.0 {
+            ends.push(if side[i] > 0.0 { '+' } else { '-' });
+            ends.push(*axis);
+        }
+    }
+    let ends = match ends.len() {
+        0 => None,
+        2 => Some(format!("the {ends} end")),
+        _ => Some(format!("the {ends} corner")),
+    };
+    let face = if side.z > 0.0 {
+        Some("the components face (+Z)")
+    } else if side.z < 0.0 {
+        Some("the underside (-Z)")
+    } else {
+        None
+    };
+    match (ends, face) {
+        (Some(e), Some(f)) => (format!("{e} and {f}"), true),
+        (Some(e), None) => (e, false),
+        (None, Some(f)) => (f.to_string(), false),
+        (None, None) => (direction_name(side), false),
     }
 }
 
@@ -92,7 +112,11 @@ fn angle_deg(a: &Vec3, b: &Vec3) -> f64 {
 
 /// Any unit vector perpendicular to `v` (unit).
 fn any_perpendicular(v: &Vec3) -> Vec3 {
-    let helper = if v.x.abs() < 0.9 { Vec3::x() } else { Vec3::y() };
+    let helper = if v.x.abs() < 0.9 {
+        Vec3::x()
+    } else {
+        Vec3::y()
+    };
     v.cross(&helper).normalize()
 }
 
@@ -154,22 +178,22 @@ pub fn guidance(up: &Vec3, field: &Vec3, target: &Vec3) -> Option<MagGuidance> {
             .try_normalize(1e-9)
             .unwrap_or_else(|| any_perpendicular(&u));
         let degrees = round_degrees(tilt_deg.abs());
-        let heading = if delta > 20.0 && delta < 160.0 {
-            ", then turn about the vertical"
+        let (raise, lower) = (prominent(&towards), prominent(&-towards));
+        let ((up_words, plural), (down_words, _)) = (side_words(&raise), side_words(&lower));
+        let (rise, go) = if plural {
+            ("rise", "go")
         } else {
-            ""
+            ("rises", "goes")
         };
         (
             Turn::Tilt {
-                raise: direction_name(&towards),
-                lower: direction_name(&-towards),
+                raise: direction_name(&raise),
+                lower: direction_name(&lower),
                 degrees,
             },
             format!(
-                "for {target_name}: tilt about {degrees:.0}° so {} rises and {} goes down{heading} \
-                 (turning about the vertical alone cannot reach it)",
-                side_words(&towards),
-                side_words(&-towards)
+                "for {target_name}: tilt about {degrees:.0}° so {up_words} {rise} and \
+                 {down_words} {go} down (a turn about the vertical alone cannot reach it)"
             ),
         )
     };
@@ -217,7 +241,8 @@ impl Attitude {
     pub fn push(&mut self, sample: &UnitSample) {
         let weight = 1.0 / Self::SAMPLES;
         let blend = |mean: Option<Vec3>, x: Vec3| {
-            Some(mean.map_or(x, |m| m + (x - m) * weight)).filter(|v| v.iter().all(|c| c.is_finite()))
+            Some(mean.map_or(x, |m| m + (x - m) * weight))
+                .filter(|v| v.iter().all(|c| c.is_finite()))
         };
         self.accel = blend(self.accel, Vec3::from(sample.accel));
         self.mag = blend(self.mag, Vec3::from(sample.mag));
@@ -283,8 +308,8 @@ mod tests {
             let delta = angle_deg(&up, &field);
             for t in region_directions() {
                 let new_up = tilted_up(&up, delta, &t);
-                let tilt = Rotation3::rotation_between(&up, &new_up)
-                    .unwrap_or_else(Rotation3::identity);
+                let tilt =
+                    Rotation3::rotation_between(&up, &new_up).unwrap_or_else(Rotation3::identity);
                 let (u2, f2) = (tilt * up, tilt * field);
                 assert!((angle_deg(&u2, &t) - delta).abs() < 1e-6);
                 // The tilt is the smallest that puts t on the field's cone around up.
@@ -327,7 +352,13 @@ mod tests {
         let (_, after) = seen(&turned, 0.0);
         assert!((after - Vec3::y()).norm() < 1e-9, "{after}");
         let g = guidance(&up, &field, &-Vec3::y()).expect("guidance");
-        assert!(matches!(g.turn, Turn::Heading { clockwise: false, .. }));
+        assert!(matches!(
+            g.turn,
+            Turn::Heading {
+                clockwise: false,
+                ..
+            }
+        ));
         assert!(g.text.contains("counter-clockwise"), "{}", g.text);
     }
 
@@ -340,7 +371,9 @@ mod tests {
             Turn::Tilt { degrees, .. } => assert_eq!(*degrees, 30.0),
             other => panic!("expected a tilt, got {other:?}"),
         }
-        assert!(g.text.contains("turning about the vertical alone cannot reach it"));
+        assert!(g
+            .text
+            .contains("a turn about the vertical alone cannot reach it"));
     }
 
     #[test]
@@ -363,8 +396,36 @@ mod tests {
                 degrees: 45.0
             }
         );
-        assert!(g.text.contains("the components face (+Z) rises"), "{}", g.text);
-        assert!(g.text.contains("the underside (-Z) goes down"), "{}", g.text);
+        assert!(
+            g.text.contains("the components face (+Z) rises"),
+            "{}",
+            g.text
+        );
+        assert!(
+            g.text.contains("the underside (-Z) goes down"),
+            "{}",
+            g.text
+        );
+    }
+
+    #[test]
+    fn a_diagonal_tilt_names_the_corner_that_rises() {
+        // Flat, field horizontal along +X: the +X+Y-Z corner direction needs the +X+Y corner up.
+        let g = guidance(&Vec3::z(), &Vec3::x(), &Vec3::new(1.0, 1.0, -1.0)).expect("guidance");
+        assert_eq!(
+            g.turn,
+            Turn::Tilt {
+                raise: "+X+Y".into(),
+                lower: "-X-Y".into(),
+                degrees: 35.0
+            }
+        );
+        assert!(
+            g.text
+                .contains("the +X+Y corner rises and the -X-Y corner goes down"),
+            "{}",
+            g.text
+        );
     }
 
     #[test]
