@@ -173,3 +173,70 @@ fn report_command_fits_a_real_recording_and_checks_the_radius_against_the_model(
     assert!(html.matches("<svg").count() >= 9);
     let _ = std::fs::remove_dir_all(out);
 }
+
+/// The report's coverage uses the cells, the centre, the samples and the minimum per region of
+/// the session's screen: samples of the moves between positions count, the final rest does not.
+#[test]
+fn the_report_counts_coverage_in_the_same_regions_as_the_session_screen() {
+    use imucal::report::region_coverage;
+    use imucal::session::coverage::{sphere_centre, Coverage, REGIONS};
+    use imucal::session::SessionOptions;
+
+    let dir = scratch("regions");
+    write_session(&dir);
+    let bias = Vec3::new(12.5, -30.0, 7.0);
+    let raw = |u: &Vec3| bias + u * FIELD_UT;
+    // Moves between positions reach the upper part, the tumble the +X half below it; the rest
+    // lies still at the -X-Y-Z corner, which nothing else reaches.
+    let all = directions(800);
+    let positions: Vec<Vec3> = all.iter().filter(|u| u.z > 0.2).map(raw).collect();
+    let tumble: Vec<Vec3> = all
+        .iter()
+        .filter(|u| u.z <= 0.2 && u.x > 0.0)
+        .map(raw)
+        .collect();
+    let rest: Vec<Vec3> = (0..60)
+        .map(|_| raw(&Vec3::new(-1.0, -1.0, -1.0).normalize()))
+        .collect();
+    let mut csv = String::from("t_s,mx,my,mz,temp_c,phase\n");
+    let rows = [
+        ("positions", &positions),
+        ("tumble", &tumble),
+        ("rest", &rest),
+    ];
+    let mut t = 0.0;
+    for (phase, samples) in rows {
+        for m in samples {
+            t += 0.01;
+            writeln!(csv, "{t:.3},{:.6},{:.6},{:.6},25.0,{phase}", m.x, m.y, m.z).unwrap();
+        }
+    }
+    std::fs::write(dir.join("mag_samples.csv"), csv).unwrap();
+
+    // What the magnetometer phase counts on screen: every sample up to its end.
+    let min = SessionOptions::default().mag_min_per_region;
+    let seen: Vec<Vec3> = positions.iter().chain(&tumble).copied().collect();
+    let screen = Coverage::of(&seen, &sphere_centre(&seen).expect("a centre"));
+    let with_rest: Vec<Vec3> = seen.iter().chain(&rest).copied().collect();
+    let rest_counted = Coverage::of(&with_rest, &sphere_centre(&with_rest).expect("a centre"));
+    // The rest would fill a region of its own if it were counted.
+    assert_eq!(rest_counted.covered(min), screen.covered(min) + 1);
+    assert!(screen.covered(min) < REGIONS);
+
+    let data = from_session_dir(&dir).expect("a complete session directory");
+    let mag = data.mag.as_ref().expect("magnetometer samples");
+    let report = region_coverage(mag).expect("countable");
+    assert_eq!(report.counts, screen.counts);
+    let html = render_html(&data).expect("renders");
+    let empty = screen.empty_regions(min);
+    assert!(empty.contains(&"-X-Y-Z".to_string()));
+    let expected = format!(
+        "{} of {REGIONS} directions with at least {min} samples",
+        screen.covered(min)
+    );
+    assert!(html.contains(&expected), "{expected}");
+    assert!(html.contains(&format!("empty: {}", empty.join(" "))));
+    // The map labels every region with its count.
+    assert!(html.contains(&format!("-X-Y-Z {}", screen.counts[0])));
+    let _ = std::fs::remove_dir_all(dir);
+}

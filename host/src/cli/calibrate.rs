@@ -203,7 +203,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         yes: args.yes,
         accept_poor: args.accept_poor,
     };
-    let mut terminal = Terminal::new(plain, policy, port.clone());
+    let mut terminal = Terminal::new(plain, policy, port.clone()).with_json_events(args.json);
     let result = run_session_with(&mut client, &options, &mut terminal, &control);
     terminal.bar.finish_and_clear();
     let outcome = result.map_err(|error| {

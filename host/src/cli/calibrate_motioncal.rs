@@ -68,7 +68,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         yes: args.yes,
         accept_poor: args.accept_poor,
     };
-    let mut terminal = Terminal::new(plain, policy, port.clone());
+    let mut terminal = Terminal::new(plain, policy, port.clone()).with_json_events(args.json);
     let outcome = run_motioncal_session(&mut client, &options, &mut terminal)?;
     terminal.bar.finish_and_clear();
 

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use super::write_policy::{WriteDecision, WritePolicy};
 use imucal::device::PoseProgress;
 use imucal::report::gain::{gain, gain_text};
+use imucal::session::mag_guidance::MagGuidance;
 use imucal::session::{
     RestErrors, SessionEvent, SessionFit, SessionObserver, SessionOutcome, VerdictLevel,
 };
@@ -23,6 +24,8 @@ pub(super) struct Terminal {
     pub(super) bar: ProgressBar,
     last_line: Option<Instant>,
     last_coverage: usize,
+    /// Also write the magnetometer's coverage updates as JSON lines (`--json`).
+    json: bool,
 }
 
 impl Terminal {
@@ -46,7 +49,16 @@ impl Terminal {
             bar,
             last_line: None,
             last_coverage: usize::MAX,
+            json: false,
         }
+    }
+
+    /// With `on`, coverage updates of the magnetometer phase are also written to stderr as one
+    /// JSON object a line (`"event": "mag_coverage"`, with the guidance), for scripts that run
+    /// `--json`; the prose line is then left out in plain mode.
+    pub(super) fn with_json_events(mut self, on: bool) -> Self {
+        self.json = on;
+        self
     }
 
     fn line(&self, text: &str) {
@@ -57,14 +69,14 @@ impl Terminal {
         }
     }
 
-    /// Plain mode: at most one progress line every two seconds.
+    /// At most one progress line every two seconds (plain mode's bars, `--json` events).
     fn throttled(&mut self, text: &str) {
         if self
             .last_line
             .is_none_or(|t| t.elapsed() >= Duration::from_secs(2))
         {
             self.last_line = Some(Instant::now());
-            eprintln!("{text}");
+            self.line(text);
         }
     }
 
@@ -109,6 +121,33 @@ fn pointing_hint(region: &str) -> String {
         [] => region.to_string(),
     };
     format!("turn the board so {side} points north and down (south of the equator: north and up)")
+}
+
+/// The coverage bar's message: the counts and the instruction towards the nearest empty region.
+/// On a terminal the instruction is the message's second line, so both are redrawn in place and
+/// no earlier hint lingers; plain mode joins them on one line.
+fn coverage_message(
+    covered: usize,
+    regions: usize,
+    samples: usize,
+    empty: &[String],
+    guidance: Option<&MagGuidance>,
+    plain: bool,
+) -> String {
+    let next = match (guidance, empty.first()) {
+        (_, None) => "every direction reached".to_string(),
+        (Some(g), Some(_)) => format!("next: {}", g.text),
+        (None, Some(region)) => format!("next: {}", pointing_hint(region)),
+    };
+    let counts = format!(
+        "{covered}/{regions} directions, {samples} samples, {} empty",
+        empty.len()
+    );
+    if plain {
+        format!("{counts}; {next}")
+    } else {
+        format!("{counts}\n{:>12}{next}", "")
+    }
 }
 
 /// Stillness in the units of the summary: accelerometer σ in mg, gyroscope σ in °/s.
@@ -293,7 +332,10 @@ impl SessionObserver for Terminal {
                 self.clear_bar();
                 self.line(
                     "\nMagnetometer: turn the board slowly through all directions (roll, pitch \
-                     and yaw), away from steel, magnets and cables.",
+                     and yaw), away from steel, magnets and cables. The hint below names the \
+                     board's ends (+X, -Y, …) and faces (components +Z, underside -Z) as the \
+                     position pictures do; a turn about the vertical moves only the field's \
+                     horizontal part, so some directions need a tilt first.",
                 );
             }
             SessionEvent::MagCoverage {
@@ -301,22 +343,28 @@ impl SessionObserver for Terminal {
                 regions,
                 samples,
                 empty,
+                guidance,
             } => {
-                let missing = match empty.first() {
-                    None => "every direction reached".to_string(),
-                    Some(next) => format!(
-                        "next: {} ({} direction{} still empty)",
-                        pointing_hint(next),
-                        empty.len(),
-                        if empty.len() == 1 { "" } else { "s" }
-                    ),
-                };
-                let message = format!("{covered}/{regions} directions, {samples} samples; {missing}");
-                if self.plain && *covered != self.last_coverage {
+                if *covered != self.last_coverage {
                     self.last_coverage = *covered;
                     self.last_line = None;
                 }
-                self.bar("coverage", *regions as u64, *covered as u64, message);
+                if self.json {
+                    let line = serde_json::json!({
+                        "event": "mag_coverage",
+                        "covered": covered,
+                        "regions": regions,
+                        "samples": samples,
+                        "empty": empty,
+                        "guidance": guidance,
+                    });
+                    self.throttled(&line.to_string());
+                }
+                let message =
+                    coverage_message(*covered, *regions, *samples, empty, guidance.as_ref(), self.plain);
+                if !(self.json && self.plain) {
+                    self.bar("coverage", *regions as u64, *covered as u64, message);
+                }
             }
             SessionEvent::RestPrompt => {
                 self.last_line = None;
@@ -431,6 +479,29 @@ mod tests {
         let text = stillness_text(true, 0.0098_0665, 1.0_f64.to_radians());
         assert!(text.contains("accel σ 1.0 mg"), "{text}");
         assert!(text.contains("gyro σ 1.000 °/s"), "{text}");
+    }
+
+    #[test]
+    fn the_coverage_message_gives_the_attitude_instruction_on_its_own_line() {
+        use imucal::fit::Vec3;
+        // Flat, the field along +X and dipping: -Z needs a tilt.
+        let g = imucal::session::mag_guidance::guidance(
+            &Vec3::z(),
+            &Vec3::new(0.5, 0.0, -0.866),
+            &-Vec3::z(),
+        )
+        .expect("guidance");
+        let empty = vec!["-Z".to_string()];
+        let bar = coverage_message(25, 26, 1800, &empty, Some(&g), false);
+        let lines: Vec<&str> = bar.lines().collect();
+        assert_eq!(lines.len(), 2, "{bar}");
+        assert!(lines[0].starts_with("25/26 directions, 1800 samples, 1 empty"));
+        assert!(lines[1].contains(&g.text), "{bar}");
+        let plain = coverage_message(25, 26, 1800, &empty, Some(&g), true);
+        assert_eq!(plain.lines().count(), 1);
+        // Without an attitude the hint falls back to the field's direction in the room.
+        assert!(coverage_message(25, 26, 1800, &empty, None, true).contains("points north"));
+        assert!(coverage_message(26, 26, 1800, &[], Some(&g), true).contains("every direction"));
     }
 
     #[test]

@@ -19,6 +19,7 @@ use serde_json::Value;
 
 use crate::device::ParamsFile;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
+use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
 use imucal_protocol::apply_sensor;
 
 /// File of a session directory holding the `--analyze` residual analysis as text, with the
@@ -115,6 +116,9 @@ pub struct MagSamples {
     pub calibrated_unit: String,
     /// The fitted ellipsoid of the raw samples: centre `b` and shape `field·A⁻¹`.
     pub ellipsoid: Option<(Vec3, Mat3)>,
+    /// Raw samples whose directions the coverage counts: for a session, those its screen counted
+    /// (the moves between positions and the tumble, not the final rest); for a recording, `raw`.
+    pub counted: Vec<Vec3>,
 }
 
 /// Everything one report shows.
@@ -182,10 +186,12 @@ struct MagColumns {
     time_s: Vec<f64>,
     raw: Vec<Vec3>,
     temp_c: Vec<f64>,
+    /// Samples of the positions and tumble phases (every sample without a phase column).
+    counted: Vec<Vec3>,
 }
 
 /// Reads `mag_samples.csv` (`t_s,mx,my,mz,temp_c,phase`): the tumble samples if there are
-/// any, otherwise every sample.
+/// any, otherwise every sample; and apart, the samples the session's coverage counted.
 fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
     let text = read(path)?;
     let mut lines = text.lines();
@@ -210,6 +216,7 @@ fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
     ];
     let phase = header.iter().position(|h| *h == "phase");
     let mut rows: Vec<(bool, f64, Vec3, f64)> = Vec::new();
+    let mut counted = Vec::new();
     for (index, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
         let number = |k: usize| {
@@ -224,9 +231,12 @@ fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
                     )
                 })
         };
-        let tumble = phase
-            .and_then(|p| fields.get(p))
-            .is_some_and(|p| *p == "tumble");
+        let phase_name = phase.and_then(|p| fields.get(p)).copied();
+        let tumble = phase_name == Some("tumble");
+        let reading = Vec3::new(number(mx)?, number(my)?, number(mz)?);
+        if phase_name != Some("rest") {
+            counted.push(reading);
+        }
         rows.push((
             tumble,
             number(t)?,
@@ -241,6 +251,7 @@ fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
         time_s: rows.iter().map(|r| r.1).collect(),
         raw: rows.iter().map(|r| r.2).collect(),
         temp_c: rows.iter().map(|r| r.3).collect(),
+        counted,
     })
 }
 
@@ -281,6 +292,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         time_s,
         raw: mag_raw,
         temp_c: mag_temp,
+        counted,
     } = read_mag_csv(&dir.join("mag_samples.csv"))?;
     let mag_calibrated = mag_raw
         .iter()
@@ -297,6 +309,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         raw_unit: "µT".to_string(),
         calibrated_unit: "µT".to_string(),
         ellipsoid: ellipsoid_shape(&mag_a, field).map(|s| (Vec3::from(params.mag.b), s)),
+        counted,
     });
 
     let mut data = ReportData {
@@ -445,33 +458,39 @@ fn parameter_table(p: &SensorParameters) -> String {
     )
 }
 
-/// Coverage in the 26 regions of the session's screen: the count the session showed, when known
-/// (it includes the field seen during the moves between positions), and the count of the
-/// plotted samples alone, from their sphere centre with the session's minimum per region.
-fn session_regions_text(raw: &[Vec3], on_screen: Option<u64>) -> String {
-    use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
-    let plotted = sphere_centre(raw).map(|centre| {
-        let min = crate::session::SessionOptions::default().mag_min_per_region;
-        let cover = Coverage::of(raw, &centre);
-        (cover.covered(min), cover.empty_regions(min))
-    });
-    let plotted_text = match &plotted {
-        None => "the plotted samples' directions are not countable (no sphere centre)".to_string(),
-        Some((covered, empty)) if empty.is_empty() => {
-            format!("the plotted samples reach {covered} of {REGIONS} directions")
-        }
-        Some((covered, empty)) => format!(
-            "the plotted samples reach {covered} of {REGIONS} directions (empty: {})",
-            empty.join(" ")
-        ),
+/// Samples a region needs to count as reached: the session's own minimum.
+fn region_min_samples() -> usize {
+    crate::session::SessionOptions::default().mag_min_per_region
+}
+
+/// Coverage of `mag` in the 26 regions of the session's screen: the samples it counted, their
+/// sphere centre and the same region cells ([`crate::session::coverage`]); `None` when the
+/// samples fix no centre.
+pub fn region_coverage(mag: &MagSamples) -> Option<Coverage> {
+    let centre = sphere_centre(&mag.counted)?;
+    Some(Coverage::of(&mag.counted, &centre))
+}
+
+/// The coverage in words, with the count the session's summary recorded when it differs
+/// (a summary written by an older version counted regions with a single sample).
+fn session_regions_text(cover: Option<&Coverage>, on_screen: Option<u64>) -> String {
+    let min = region_min_samples();
+    let Some(cover) = cover else {
+        return "the samples' directions are not countable (no sphere centre)".to_string();
     };
-    match on_screen {
-        Some(n) => format!(
-            "{n} of {REGIONS} directions reached in the session, as its screen showed (moves \
-             between positions included); {plotted_text}"
-        ),
-        None => plotted_text,
+    let covered = cover.covered(min);
+    let empty = cover.empty_regions(min);
+    let mut text = format!(
+        "{covered} of {REGIONS} directions with at least {min} samples, as the session's \
+         screen counts them (moves between positions included)"
+    );
+    if !empty.is_empty() {
+        text.push_str(&format!("; empty: {}", empty.join(" ")));
     }
+    if let Some(n) = on_screen.filter(|n| usize::try_from(*n).ok() != Some(covered)) {
+        text.push_str(&format!("; the session's summary recorded {n}"));
+    }
+    text
 }
 
 /// Smallest temperature span worth an axis, °C: below it a plot against temperature is a
@@ -587,18 +606,13 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             )?));
         }
         body.push_str("</div><h3>Sphere coverage</h3>");
-        body.push_str(&figure(&plots::coverage_map(&mag.calibrated)?));
-        let empty = plots::coverage_counts(&mag.calibrated)
-            .iter()
-            .flatten()
-            .filter(|c| **c == 0)
-            .count();
+        let cover = region_coverage(mag);
+        if let Some(cover) = &cover {
+            body.push_str(&figure(&plots::coverage_map(cover, region_min_samples())?));
+        }
         summary_rows.push((
             "sphere coverage".to_string(),
-            format!(
-                "{}; {empty} of 288 cells (15° × 15°) never sampled",
-                session_regions_text(&mag.raw, data.session_regions_covered)
-            ),
+            session_regions_text(cover.as_ref(), data.session_regions_covered),
         ));
     }
 

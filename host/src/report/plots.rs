@@ -7,6 +7,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::fit::{Mat3, Vec3};
+use crate::session::coverage::{region_directions, region_name, Coverage};
 
 /// Why a plot could not be drawn.
 #[derive(Debug, thiserror::Error)]
@@ -329,43 +330,53 @@ pub fn residual_against(
     Ok(svg)
 }
 
-/// Cells of the coverage map: azimuth in 15° steps, elevation in 15° steps.
-const AZIMUTH_CELLS: usize = 24;
-const ELEVATION_CELLS: usize = 12;
+/// Tile size of the coverage map, degrees: fine enough that the regions' borders show.
+const TILE_DEG: f64 = 5.0;
 
-/// Sample count per (azimuth, elevation) cell of the directions of `points` (about the origin).
-pub fn coverage_counts(points: &[Vec3]) -> Vec<Vec<u32>> {
-    let mut counts = vec![vec![0u32; ELEVATION_CELLS]; AZIMUTH_CELLS];
-    for p in points {
-        let norm = p.norm();
-        if !(norm.is_finite() && norm > 0.0) {
-            continue;
-        }
-        let azimuth = p.y.atan2(p.x).to_degrees() + 180.0;
-        let elevation = (p.z / norm).clamp(-1.0, 1.0).asin().to_degrees() + 90.0;
-        let a = ((azimuth / 15.0) as usize).min(AZIMUTH_CELLS - 1);
-        let e = ((elevation / 15.0) as usize).min(ELEVATION_CELLS - 1);
-        if let Some(cell) = counts.get_mut(a).and_then(|col| col.get_mut(e)) {
-            *cell += 1;
-        }
-    }
-    counts
+/// Azimuth and elevation of `d`, degrees.
+fn azimuth_elevation(d: &Vec3) -> (f64, f64) {
+    let n = d.norm();
+    (
+        d.y.atan2(d.x).to_degrees(),
+        (d.z / n).clamp(-1.0, 1.0).asin().to_degrees(),
+    )
 }
 
-/// Map of sampled field directions: cells shaded by sample count, empty cells marked.
-pub fn coverage_map(points: &[Vec3]) -> Result<String, PlotError> {
+/// Map of the field directions in the session's 26 regions ([`crate::session::coverage`]): the
+/// same cells, centre and minimum per region as the session's screen. Each 5° tile of the
+/// azimuth–elevation plane takes the colour of the region its direction falls in; regions
+/// with fewer than `min_samples` samples stay white with a red label.
+pub fn coverage_map(cover: &Coverage, min_samples: usize) -> Result<String, PlotError> {
     const FIGURE: &str = "sphere coverage";
-    let counts = coverage_counts(points);
-    let top = counts.iter().flatten().copied().max().unwrap_or(1).max(1);
+    let directions = region_directions();
+    let top = cover.counts.iter().copied().max().unwrap_or(1).max(1);
+    let region_of = |d: &Vec3| {
+        directions
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.dot(d).total_cmp(&b.1.dot(d)))
+            .map_or(0, |(i, _)| i)
+    };
+    let colour_of = |count: usize| {
+        if count < min_samples {
+            WHITE
+        } else {
+            // Square-root shading so that sparsely sampled regions stay visible.
+            let shade = (count as f64 / top as f64).sqrt();
+            let fade = |full: u8| (255.0 - (255.0 - f64::from(full)) * (0.25 + 0.75 * shade)) as u8;
+            RGBColor(fade(AFTER.0), fade(AFTER.1), fade(AFTER.2))
+        }
+    };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1020, 380)).into_drawing_area();
         root.fill(&WHITE).map_err(plot_error(FIGURE))?;
+        let caption = format!(
+            "field directions in the session's 26 regions (reading less its sphere centre, as \
+             counted on screen); white: fewer than {min_samples} samples"
+        );
         let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "sphere coverage of the calibrated field direction (white: never sampled)",
-                ("sans-serif", 15),
-            )
+            .caption(caption, ("sans-serif", 15))
             .margin(8)
             .x_label_area_size(32)
             .y_label_area_size(48)
@@ -373,33 +384,46 @@ pub fn coverage_map(points: &[Vec3]) -> Result<String, PlotError> {
             .map_err(plot_error(FIGURE))?;
         chart
             .configure_mesh()
-            .x_desc("azimuth atan2(y, x) (°)")
+            .x_desc("azimuth atan2(y, x) of the field in the board frame (°)")
             .y_desc("elevation (°)")
             .x_labels(13)
             .y_labels(7)
             .draw()
             .map_err(plot_error(FIGURE))?;
-        let cells = counts
-            .iter()
-            .enumerate()
-            .flat_map(|(a, column)| column.iter().enumerate().map(move |(e, c)| (a, e, *c)));
+        let columns = (360.0 / TILE_DEG) as usize;
+        let rows = (180.0 / TILE_DEG) as usize;
+        let tiles = (0..columns).flat_map(|a| (0..rows).map(move |e| (a, e)));
         chart
-            .draw_series(cells.map(|(a, e, c)| {
-                let x0 = -180.0 + 15.0 * a as f64;
-                let y0 = -90.0 + 15.0 * e as f64;
-                // Square-root shading so that sparsely sampled cells stay visible.
-                let shade = (f64::from(c) / f64::from(top)).sqrt();
-                let colour = if c == 0 {
-                    WHITE
-                } else {
-                    let fade = |full: u8| {
-                        (255.0 - (255.0 - f64::from(full)) * (0.25 + 0.75 * shade)) as u8
-                    };
-                    RGBColor(fade(AFTER.0), fade(AFTER.1), fade(AFTER.2))
-                };
-                Rectangle::new([(x0, y0), (x0 + 15.0, y0 + 15.0)], colour.filled())
+            .draw_series(tiles.map(|(a, e)| {
+                let x0 = -180.0 + TILE_DEG * a as f64;
+                let y0 = -90.0 + TILE_DEG * e as f64;
+                let (az, el) = (
+                    (x0 + TILE_DEG / 2.0).to_radians(),
+                    (y0 + TILE_DEG / 2.0).to_radians(),
+                );
+                let d = Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+                let count = cover.counts.get(region_of(&d)).copied().unwrap_or(0);
+                Rectangle::new(
+                    [(x0, y0), (x0 + TILE_DEG, y0 + TILE_DEG)],
+                    colour_of(count).filled(),
+                )
             }))
             .map_err(plot_error(FIGURE))?;
+        let labels = directions.iter().zip(&cover.counts).map(|(d, &count)| {
+            let (az, el) = azimuth_elevation(d);
+            // Keep the labels of the ±X column and of the poles inside the frame.
+            let az = if az > 170.0 { -170.0 } else { az };
+            let el = el.clamp(-84.0, 84.0);
+            let colour: &'static RGBColor = if count < min_samples { &BEFORE } else { &SHAPE };
+            let style = TextStyle::from(("sans-serif", 12).into_font())
+                .color(colour)
+                .pos(plotters::style::text_anchor::Pos::new(
+                    plotters::style::text_anchor::HPos::Center,
+                    plotters::style::text_anchor::VPos::Center,
+                ));
+            Text::new(format!("{} {count}", region_name(d)), (az, el), style)
+        });
+        chart.draw_series(labels).map_err(plot_error(FIGURE))?;
         root.present().map_err(plot_error(FIGURE))?;
     }
     Ok(svg)

@@ -137,6 +137,7 @@ fn mag_samples(
         raw_unit: outcome.input_unit.to_string(),
         calibrated_unit: outcome.output_unit.clone(),
         ellipsoid: ellipsoid_shape(&fit.cal.a, fit.reference).map(|s| (fit.cal.b, s)),
+        counted: points.clone(),
     });
     data.verdict.push(format!(
         "magnetometer: residual RMS {:.2e} of the field over {} samples",

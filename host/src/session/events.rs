@@ -4,6 +4,7 @@
 use imucal_protocol::{ParamStatus, StreamKind};
 use serde::Serialize;
 
+use super::mag_guidance::MagGuidance;
 use super::motion::MotionState;
 use super::solve::SessionFit;
 use super::targets::Target;
@@ -109,6 +110,9 @@ pub enum SessionEvent<'a> {
         samples: usize,
         /// Names of the regions still short of samples.
         empty: Vec<String>,
+        /// How to turn the board towards the nearest of them, from the current attitude (`None`
+        /// once all are full or before the attitude is known).
+        guidance: Option<MagGuidance>,
     },
     /// The board should be put down.
     RestPrompt,

@@ -9,6 +9,7 @@ use std::time::Instant;
 use super::coverage::{self, Coverage, REGIONS};
 use super::error::SessionError;
 use super::events::{Phase, SessionEvent};
+use super::mag_guidance::Attitude;
 use super::runner::Runner;
 use super::solve;
 use crate::fit::Vec3;
@@ -47,12 +48,14 @@ impl<L: Read + Write> Runner<'_, L> {
         // Directions seen while moving between the positions count as well: the tumble only
         // fills in what they left empty.
         let mut last_update = 0;
+        let mut attitude = Attitude::default();
         let regions = REGIONS;
         let needed_at_timeout = (self.options.mag_accept_fraction * regions as f64).ceil() as usize;
         loop {
             let chunk = self.read_chunk()?;
             for sample in &chunk.samples {
                 self.record_mag(sample, Phase::Tumble);
+                attitude.push(sample);
             }
             let count = self.mag.len();
             let timed_out = start.elapsed() > self.options.mag_timeout;
@@ -81,6 +84,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 regions,
                 samples: count,
                 empty: empty.clone(),
+                guidance: attitude.guidance(&cover, self.options.mag_min_per_region),
             });
             if count >= self.options.mag_min_samples
                 && (covered == regions || self.fit_suffices(covered, needed_at_timeout, &all))

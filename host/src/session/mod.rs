@@ -44,6 +44,7 @@ mod gyro_nuisance;
 pub mod hold;
 pub mod journal;
 mod mag_alignment;
+pub mod mag_guidance;
 mod mag_phase;
 pub mod motion;
 pub mod motioncal;
@@ -102,6 +103,8 @@ pub struct SessionOutcome {
     pub mag_samples: Vec<MagSample>,
     /// Coverage of the magnetometer phase.
     pub coverage: Coverage,
+    /// Samples a region needed to count as covered ([`SessionOptions::mag_min_per_region`]).
+    pub mag_min_per_region: usize,
     /// The fit.
     pub fit: SessionFit,
     /// The gyroscope's scale and misalignment, `None` when they could not be fitted (the
@@ -270,6 +273,7 @@ fn run_phases<L: Read + Write>(
         extra_positions_note,
         mag_samples: Vec::new(),
         coverage,
+        mag_min_per_region: options.mag_min_per_region,
         written: false,
         verified: false,
         param_status: None,

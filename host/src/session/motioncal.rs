@@ -20,6 +20,7 @@ use thiserror::Error;
 
 use super::coverage::{sphere_centre, Coverage, REGIONS};
 use super::events::{SessionEvent, SessionObserver};
+use super::mag_guidance::Attitude;
 use super::motion::MotionMonitor;
 use super::options::SessionOptions;
 use super::runner::unix_now;
@@ -168,6 +169,8 @@ struct Collector<'a> {
     hold: Vec<UnitSample>,
     hold_target: Option<usize>,
     mag_points: Vec<Vec3>,
+    /// The latest attitude, for the magnetometer guidance.
+    attitude: Attitude,
     prompted: Option<usize>,
 }
 
@@ -182,6 +185,7 @@ impl<'a> Collector<'a> {
             hold: Vec::new(),
             hold_target: None,
             mag_points: Vec::new(),
+            attitude: Attitude::default(),
             prompted: None,
         }
     }
@@ -213,6 +217,7 @@ impl<'a> Collector<'a> {
     /// Take one reading; a finished hold becomes a pose.
     fn push(&mut self, sample: UnitSample, observer: &mut dyn SessionObserver) {
         let state = self.monitor.push(&sample);
+        self.attitude.push(&sample);
         let still = state.as_ref().is_some_and(|s| s.still);
         if !still {
             self.mag_points.push(Vec3::from(sample.mag));
@@ -334,6 +339,9 @@ fn collect<'a, L: Read + Write>(
                 regions: REGIONS,
                 samples: collector.mag_points.len(),
                 empty: coverage.empty_regions(session.mag_min_per_region),
+                guidance: collector
+                    .attitude
+                    .guidance(&coverage, session.mag_min_per_region),
             });
             if collector.mag_done(&coverage) {
                 return Ok((collector, index));

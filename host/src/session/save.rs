@@ -53,7 +53,8 @@ pub struct SessionSummary {
     pub extra_positions: String,
     /// Magnetometer samples fitted from the tumble (before thinning) and regions covered.
     pub mag_tumble_samples: usize,
-    /// Regions of the sphere with enough samples, of 26.
+    /// Regions of the sphere with enough samples (the session's minimum per region, as its
+    /// screen counted them), of 26.
     pub mag_regions_covered: usize,
     /// Reference field, µT, and where it came from.
     pub field_ut: f64,
@@ -100,7 +101,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         poses: outcome.poses.len(),
         extra_positions: outcome.extra_positions_note.clone(),
         mag_tumble_samples: tumble,
-        mag_regions_covered: outcome.coverage.covered(1),
+        mag_regions_covered: outcome.coverage.covered(outcome.mag_min_per_region),
         field_ut: outcome.fit.field_ut,
         field_source: outcome.fit.field_source,
         gravity_mps2: outcome.fit.gravity_mps2,
