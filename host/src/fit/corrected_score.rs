@@ -9,7 +9,7 @@
 //! measurement error models"; T. Nakamura 1990, "Corrected score function for errors-in-variables
 //! models", Biometrika 77).
 
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 
 use super::lm::{LeastSquaresProblem, LmSolution};
 use super::{Mat3, Vec3};
@@ -73,9 +73,8 @@ pub(super) fn solve_corrected_score<P: LeastSquaresProblem>(
 ) -> Option<DVector<f64>> {
     let mut p = start.clone();
     for _ in 0..30 {
-        let r = problem.residuals(&p);
         // Accumulated normal equations: no Jacobian is formed for large sample counts.
-        let (jtj, jtr) = problem.normal_equations(&p, &r);
+        let (_, jtj, jtr) = evaluate(problem, &p);
         let score = jtr - score_bias(points, weights, &p, noise_var);
         let step = jtj.cholesky()?.solve(&(-score));
         if !step.iter().all(|v| v.is_finite()) {
@@ -89,14 +88,25 @@ pub(super) fn solve_corrected_score<P: LeastSquaresProblem>(
     None
 }
 
+/// Residuals, `JᵀJ` and `Jᵀr` at `p`, in one pass when the problem offers it.
+fn evaluate<P: LeastSquaresProblem>(
+    problem: &P,
+    p: &DVector<f64>,
+) -> (DVector<f64>, DMatrix<f64>, DVector<f64>) {
+    problem.residuals_with_normal_equations(p).unwrap_or_else(|| {
+        let r = problem.residuals(p);
+        let (jtj, jtr) = problem.normal_equations(p, &r);
+        (r, jtj, jtr)
+    })
+}
+
 /// `sol` moved to `params`: residuals, normal matrix and cost there.
 pub(super) fn re_evaluate<P: LeastSquaresProblem>(
     problem: &P,
     mut sol: LmSolution,
     params: DVector<f64>,
 ) -> LmSolution {
-    sol.residuals = problem.residuals(&params);
-    sol.jtj = problem.normal_equations(&params, &sol.residuals).0;
+    (sol.residuals, sol.jtj, _) = evaluate(problem, &params);
     sol.cost = sol.residuals.norm_squared();
     sol.params = params;
     sol
