@@ -93,11 +93,13 @@ fn evaluate<P: LeastSquaresProblem>(
     problem: &P,
     p: &DVector<f64>,
 ) -> (DVector<f64>, DMatrix<f64>, DVector<f64>) {
-    problem.residuals_with_normal_equations(p).unwrap_or_else(|| {
-        let r = problem.residuals(p);
-        let (jtj, jtr) = problem.normal_equations(p, &r);
-        (r, jtj, jtr)
-    })
+    problem
+        .residuals_with_normal_equations(p)
+        .unwrap_or_else(|| {
+            let r = problem.residuals(p);
+            let (jtj, jtr) = problem.normal_equations(p, &r);
+            (r, jtj, jtr)
+        })
 }
 
 /// `sol` moved to `params`: residuals, normal matrix and cost there.

@@ -35,10 +35,10 @@ use super::li::{fit_li, LiOptions};
 use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::leave_one_out_rms;
-use super::norm_loo::first_order_loo_rms;
 use super::norm_jacobian::{
     jacobian_row, norm_residual, residuals_and_normal_equations, NormSamples,
 };
+use super::norm_loo::first_order_loo_rms;
 use super::six_position::fit_six_position;
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{check_finite_points, check_finite_poses};
@@ -148,11 +148,7 @@ impl NormProblem {
                 at += 1;
             }
         }
-        (
-            DVector::from_vec(res),
-            jtj,
-            DVector::from_row_slice(&grad),
-        )
+        (DVector::from_vec(res), jtj, DVector::from_row_slice(&grad))
     }
 }
 

@@ -10,7 +10,7 @@
 //! units of the reference is `eᵢ + (rᵢ/w'ᵢ)·hᵢᵢ/(1 − hᵢᵢ)`, `eᵢ = |R(x̃ᵢ − b̃)| − 1` the plain
 //! norm residual and `w'ᵢ = ∂rᵢ/∂n` its weight. One pass, `O(N·p²)`.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, SMatrix, SVector};
 
 use super::loo::rms_of_all;
 use super::norm_jacobian::{jacobian_row, norm_residual, NormSamples};
@@ -28,10 +28,15 @@ pub(super) fn first_order_loo_rms(
     samples: NormSamples<'_>,
     jtj: &DMatrix<f64>,
 ) -> Option<f64> {
-    if samples.points.len() <= jtj.ncols() {
+    if samples.points.len() <= 9 || jtj.shape() != (9, 9) {
         return None;
     }
-    let inverse = jtj.clone().cholesky()?.inverse();
+    let inverse: SMatrix<f64, 9, 9> = jtj
+        .clone()
+        .cholesky()?
+        .inverse()
+        .fixed_view::<9, 9>(0, 0)
+        .into_owned();
     rms_of_all(
         samples
             .points
@@ -44,17 +49,17 @@ pub(super) fn first_order_loo_rms(
 }
 
 /// The first-order held-out norm residual of one sample; `None` at leverage 1 or above.
-fn held_out(r: &Mat3, b: &Vec3, x: &Vec3, w: f64, k: f64, inverse: &DMatrix<f64>) -> Option<f64> {
+fn held_out(
+    r: &Mat3,
+    b: &Vec3,
+    x: &Vec3,
+    w: f64,
+    k: f64,
+    inverse: &SMatrix<f64, 9, 9>,
+) -> Option<f64> {
     let n = (r * (x - b)).norm();
-    let row = jacobian_row(r, b, x, w, k);
-    let mut leverage = 0.0;
-    for i in 0..9 {
-        let mut m_row = 0.0;
-        for (j, g) in row.iter().enumerate() {
-            m_row += inverse[(i, j)] * g;
-        }
-        leverage += row[i] * m_row;
-    }
+    let row = SVector::<f64, 9>::from(jacobian_row(r, b, x, w, k));
+    let leverage = row.dot(&(inverse * row));
     if leverage.is_nan() || leverage >= 1.0 || n == 0.0 {
         return None;
     }
