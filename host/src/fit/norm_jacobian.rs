@@ -23,14 +23,16 @@ pub(super) struct NormSamples<'a> {
 }
 
 impl NormSamples<'_> {
-    fn len(&self) -> usize {
+    /// The number of samples.
+    pub fn len(&self) -> usize {
         self.points
             .len()
             .min(self.weights.len())
             .min(self.tangential.len())
     }
 
-    fn range(&self, range: std::ops::Range<usize>) -> Self {
+    /// The samples in `range`.
+    pub fn range(&self, range: std::ops::Range<usize>) -> Self {
         Self {
             points: &self.points[range.clone()],
             weights: &self.weights[range.clone()],
@@ -60,26 +62,44 @@ pub(super) fn residuals_and_normal_equations(
     res: &mut [f64],
 ) -> ([f64; 45], [f64; 9]) {
     let n = samples.len().min(res.len());
-    let res = &mut res[..n];
+    in_two_halves(
+        n,
+        &mut res[..n],
+        |range, part| block_sums(r, b, samples.range(range), part),
+        |(mut upper, mut grad), (second_upper, second_grad)| {
+            upper
+                .iter_mut()
+                .zip(second_upper)
+                .for_each(|(a, b)| *a += b);
+            grad.iter_mut().zip(second_grad).for_each(|(a, b)| *a += b);
+            (upper, grad)
+        },
+    )
+}
+
+/// `part` over samples `0..n` (with `out`, one entry per sample or empty, cut to match), in two
+/// halves on two threads from [`PARALLEL_MIN_SAMPLES`] on, the halves joined by `add`. The split
+/// depends only on `n`, so the result is the same on any machine.
+pub(super) fn in_two_halves<T: Send>(
+    n: usize,
+    out: &mut [f64],
+    part: impl Fn(std::ops::Range<usize>, &mut [f64]) -> T + Sync,
+    add: impl FnOnce(T, T) -> T,
+) -> T {
     if n < PARALLEL_MIN_SAMPLES {
-        return block_sums(r, b, samples.range(0..n), res);
+        return part(0..n, out);
     }
     let half = n / 2;
-    let (first_res, second_res) = res.split_at_mut(half);
-    let ((mut upper, mut grad), (second_upper, second_grad)) = std::thread::scope(|scope| {
-        let second = scope.spawn(|| block_sums(r, b, samples.range(half..n), second_res));
-        let first = block_sums(r, b, samples.range(0..half), first_res);
+    let (first_out, second_out) = out.split_at_mut(half.min(out.len()));
+    let (first, second) = std::thread::scope(|scope| {
+        let second = scope.spawn(|| part(half..n, second_out));
+        let first = part(0..half, first_out);
         let second = second
             .join()
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
         (first, second)
     });
-    upper
-        .iter_mut()
-        .zip(second_upper)
-        .for_each(|(a, b)| *a += b);
-    grad.iter_mut().zip(second_grad).for_each(|(a, b)| *a += b);
-    (upper, grad)
+    add(first, second)
 }
 
 /// Samples from which the normal equations are summed on two threads: below this a pass takes
@@ -87,7 +107,7 @@ pub(super) fn residuals_and_normal_equations(
 const PARALLEL_MIN_SAMPLES: usize = 100_000;
 
 /// Samples per block: four `f64` lanes fill a 256-bit vector, two 128-bit ones.
-const LANES: usize = 4;
+pub(super) const LANES: usize = 4;
 
 /// The upper triangle of `JᵀJ` and `Jᵀr` over the given samples, block by block with one
 /// accumulator per lane; the residuals go to `res` (as long as the samples).
@@ -99,11 +119,9 @@ fn block_sums(
 ) -> ([f64; 45], [f64; 9]) {
     let mut upper = [[0.0; LANES]; 45];
     let mut grad = [[0.0; LANES]; 9];
-    let n = res.len();
-    let mut start = 0;
-    while start < n {
-        let valid = LANES.min(n - start);
-        let (rows, block_res) = block_rows(r, b, samples.range(start..start + valid));
+    let n = samples.len().min(res.len());
+    for_each_block(r, b, samples.range(0..n), |start, valid, block| {
+        let (rows, block_res) = (&block.rows, &block.res);
         res[start..start + valid].copy_from_slice(&block_res[..valid]);
         let mut at = 0;
         for i in 0..9 {
@@ -117,20 +135,59 @@ fn block_sums(
                 at += 1;
             }
         }
-        start += valid;
-    }
+    });
     (
         upper.map(|lanes| lanes.iter().sum()),
         grad.map(|lanes| lanes.iter().sum()),
     )
 }
 
-/// The Jacobian rows (`rows[c][lane]`, as [`jacobian_row`] up to rounding) and residuals
-/// ([`norm_residual`], exactly) of up to [`LANES`] samples, computed lane by lane so that every
-/// operation is one vector operation. Lanes past the samples have weight 0: zero rows and
-/// residuals.
+/// Calls `f(start, valid, block)` for each block of [`LANES`] samples (the last may hold fewer,
+/// `valid`), `start` the index of its first sample.
 #[inline(always)]
-fn block_rows(r: &Mat3, b: &Vec3, samples: NormSamples<'_>) -> ([[f64; LANES]; 9], [f64; LANES]) {
+pub(super) fn for_each_block(
+    r: &Mat3,
+    b: &Vec3,
+    samples: NormSamples<'_>,
+    mut f: impl FnMut(usize, usize, &Block),
+) {
+    let n = samples.len();
+    let mut start = 0;
+    while start < n {
+        let valid = LANES.min(n - start);
+        f(
+            start,
+            valid,
+            &block_rows(r, b, samples.range(start..start + valid)),
+        );
+        start += valid;
+    }
+}
+
+/// Up to [`LANES`] samples evaluated together, one lane each.
+pub(super) struct Block {
+    /// `u = x − b` per axis.
+    pub u: [[f64; LANES]; 3],
+    /// The calibrated direction `v̂ = R(x − b)/n` per axis (zero at the centre).
+    pub direction: [[f64; LANES]; 3],
+    /// `1/n` (zero at the centre).
+    pub inverse_norm: [f64; LANES],
+    /// The norm `n = |R(x − b)|`.
+    pub norm: [f64; LANES],
+    /// `∂r/∂n = w(1 + k/n²)`.
+    pub slope: [f64; LANES],
+    /// The weight `w`.
+    pub weight: [f64; LANES],
+    /// Jacobian rows, `rows[c][lane]` (as [`jacobian_row`] up to rounding).
+    pub rows: [[f64; LANES]; 9],
+    /// Residuals ([`norm_residual`]).
+    pub res: [f64; LANES],
+}
+
+/// Up to [`LANES`] samples, computed lane by lane so that every operation is one vector
+/// operation. Lanes past the samples have weight 0: zero rows and residuals.
+#[inline(always)]
+fn block_rows(r: &Mat3, b: &Vec3, samples: NormSamples<'_>) -> Block {
     let mut u = [[0.0; LANES]; 3];
     let mut w = [0.0; LANES];
     let mut k = [0.0; LANES];
@@ -148,20 +205,35 @@ fn block_rows(r: &Mat3, b: &Vec3, samples: NormSamples<'_>) -> ([[f64; LANES]; 9
         w[lane] = *wi;
         k[lane] = *ki;
     }
-    let mut rows = [[0.0; LANES]; 9];
-    let mut res = [0.0; LANES];
+    let mut block = Block {
+        u,
+        direction: [[0.0; LANES]; 3],
+        inverse_norm: [0.0; LANES],
+        norm: [0.0; LANES],
+        slope: [0.0; LANES],
+        weight: w,
+        rows: [[0.0; LANES]; 9],
+        res: [0.0; LANES],
+    };
+    let rows = &mut block.rows;
     for lane in 0..LANES {
         let (ux, uy, uz) = (u[0][lane], u[1][lane], u[2][lane]);
         let v0 = r[(0, 0)] * ux + r[(0, 1)] * uy + r[(0, 2)] * uz;
         let v1 = r[(1, 0)] * ux + r[(1, 1)] * uy + r[(1, 2)] * uz;
         let v2 = r[(2, 0)] * ux + r[(2, 1)] * uy + r[(2, 2)] * uz;
         let n = (v0 * v0 + v1 * v1 + v2 * v2).sqrt();
-        res[lane] = norm_residual(n, w[lane], k[lane]);
+        block.res[lane] = norm_residual(n, w[lane], k[lane]);
         // At the centre (n = 0) the row is zero, as in `jacobian_row`.
         let inv = if n > 0.0 { 1.0 / n } else { 0.0 };
         // d(n − k/n)/dn = 1 + k/n².
         let scale = w[lane] * (1.0 + k[lane] * inv * inv);
         let (h0, h1, h2) = (v0 * inv, v1 * inv, v2 * inv);
+        block.norm[lane] = n;
+        block.inverse_norm[lane] = inv;
+        block.slope[lane] = scale;
+        block.direction[0][lane] = h0;
+        block.direction[1][lane] = h1;
+        block.direction[2][lane] = h2;
         let (s0, s1, s2) = (scale * h0, scale * h1, scale * h2);
         rows[0][lane] = s0 * ux;
         rows[1][lane] = s0 * uy;
@@ -174,7 +246,7 @@ fn block_rows(r: &Mat3, b: &Vec3, samples: NormSamples<'_>) -> ([[f64; LANES]; 9
         rows[7][lane] = -(r[(0, 1)] * s0 + r[(1, 1)] * s1 + r[(2, 1)] * s2);
         rows[8][lane] = -(r[(0, 2)] * s0 + r[(1, 2)] * s1 + r[(2, 2)] * s2);
     }
-    (rows, res)
+    block
 }
 
 /// One row of the Jacobian: the derivative of `w·(n − k/n − 1)`, `n = |R(x − b)|`, with respect

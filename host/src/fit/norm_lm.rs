@@ -353,13 +353,9 @@ pub fn refine_lm_detailed(
                 .iter()
                 .map(|sigma| (sigma / s * noise_scale).powi(2))
                 .collect();
-            if let Some(corrected) = solve_corrected_score(
-                &problem,
-                &problem.points,
-                &problem.weights,
-                &sol.params,
-                &noise_var,
-            ) {
+            if let Some(corrected) =
+                solve_corrected_score(problem.samples(), &sol.jtj, &sol.params, &noise_var)
+            {
                 sol = re_evaluate(&problem, sol, corrected);
             }
         }

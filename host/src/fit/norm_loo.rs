@@ -10,10 +10,9 @@
 //! units of the reference is `eᵢ + (rᵢ/w'ᵢ)·hᵢᵢ/(1 − hᵢᵢ)`, `eᵢ = |R(x̃ᵢ − b̃)| − 1` the plain
 //! norm residual and `w'ᵢ = ∂rᵢ/∂n` its weight. One pass, `O(N·p²)`.
 
-use nalgebra::{DMatrix, SMatrix, SVector};
+use nalgebra::{DMatrix, SMatrix};
 
-use super::loo::rms_of_all;
-use super::norm_jacobian::{jacobian_row, norm_residual, NormSamples};
+use super::norm_jacobian::{for_each_block, in_two_halves, NormSamples, LANES};
 use super::{Mat3, Vec3};
 
 /// RMS over the samples of the first-order held-out relative norm residual (see the module
@@ -28,7 +27,8 @@ pub(super) fn first_order_loo_rms(
     samples: NormSamples<'_>,
     jtj: &DMatrix<f64>,
 ) -> Option<f64> {
-    if samples.points.len() <= 9 || jtj.shape() != (9, 9) {
+    let n = samples.len();
+    if n <= 9 || jtj.shape() != (9, 9) {
         return None;
     }
     let inverse: SMatrix<f64, 9, 9> = jtj
@@ -37,37 +37,55 @@ pub(super) fn first_order_loo_rms(
         .inverse()
         .fixed_view::<9, 9>(0, 0)
         .into_owned();
-    rms_of_all(
-        samples
-            .points
-            .iter()
-            .zip(samples.weights)
-            .zip(samples.tangential)
-            .map(|((x, &w), &k)| held_out(r, b, x, w, k, &inverse))
-            .collect(),
-    )
+    let total = in_two_halves(
+        n,
+        &mut [],
+        |range, _| held_out_sum_of_squares(r, b, samples.range(range), &inverse),
+        |a, b| Some(a? + b?),
+    )?;
+    Some((total / n as f64).sqrt())
 }
 
-/// The first-order held-out norm residual of one sample; `None` at leverage 1 or above.
-fn held_out(
+/// Sum of the squared first-order held-out norm residuals; `None` when a sample has leverage 1
+/// or above, sits at the centre, or gives a non-finite residual.
+fn held_out_sum_of_squares(
     r: &Mat3,
     b: &Vec3,
-    x: &Vec3,
-    w: f64,
-    k: f64,
+    samples: NormSamples<'_>,
     inverse: &SMatrix<f64, 9, 9>,
 ) -> Option<f64> {
-    let n = (r * (x - b)).norm();
-    let row = SVector::<f64, 9>::from(jacobian_row(r, b, x, w, k));
-    let leverage = row.dot(&(inverse * row));
-    if leverage.is_nan() || leverage >= 1.0 || n == 0.0 {
-        return None;
-    }
-    // ∂r/∂n = w(1 + k/n²): the weight between the fitted residual and the plain norm.
-    let slope = w * (1.0 + k / (n * n));
-    let shift = norm_residual(n, w, k) / slope * leverage / (1.0 - leverage);
-    let e = n - 1.0 + shift;
-    e.is_finite().then_some(e)
+    let mut total = 0.0;
+    let mut all_predicted = true;
+    for_each_block(r, b, samples, |_, valid, block| {
+        // Leverage hᵢᵢ = gᵢᵀ(JᵀJ)⁻¹gᵢ, lane by lane.
+        let mut leverage = [0.0; LANES];
+        for i in 0..9 {
+            let mut m_row = [0.0; LANES];
+            for j in 0..9 {
+                for lane in 0..LANES {
+                    m_row[lane] += inverse[(i, j)] * block.rows[j][lane];
+                }
+            }
+            for lane in 0..LANES {
+                leverage[lane] += block.rows[i][lane] * m_row[lane];
+            }
+        }
+        for lane in 0..valid {
+            let (h, norm) = (leverage[lane], block.norm[lane]);
+            if h.is_nan() || h >= 1.0 || norm == 0.0 {
+                all_predicted = false;
+                continue;
+            }
+            // The fitted residual moves by rᵢhᵢᵢ/(1 − hᵢᵢ); the norm by that over ∂r/∂n.
+            let e = norm - 1.0 + block.res[lane] / block.slope[lane] * h / (1.0 - h);
+            if e.is_finite() {
+                total += e * e;
+            } else {
+                all_predicted = false;
+            }
+        }
+    });
+    all_predicted.then_some(total)
 }
 
 #[cfg(test)]
