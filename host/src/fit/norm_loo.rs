@@ -61,17 +61,17 @@ fn held_out_sum_of_squares(
         let mut leverage = [0.0; LANES];
         for i in 0..9 {
             let mut m_row = [0.0; LANES];
-            for j in 0..9 {
-                for lane in 0..LANES {
-                    m_row[lane] += inverse[(i, j)] * block.rows[j][lane];
+            for (j, row) in block.rows.iter().enumerate() {
+                for (m, g) in m_row.iter_mut().zip(row) {
+                    *m += inverse[(i, j)] * g;
                 }
             }
             for lane in 0..LANES {
                 leverage[lane] += block.rows[i][lane] * m_row[lane];
             }
         }
-        for lane in 0..valid {
-            let (h, norm) = (leverage[lane], block.norm[lane]);
+        for (lane, &h) in leverage.iter().enumerate().take(valid) {
+            let norm = block.norm[lane];
             if h.is_nan() || h >= 1.0 || norm == 0.0 {
                 all_predicted = false;
                 continue;
