@@ -1,7 +1,12 @@
 //! Speed of the fits: Li's ellipsoid and the norm-model LM on 10⁶ magnetometer samples, the
 //! 12-pose accelerometer LM, the 300-sample magnetometer LM, and the leave-one-out of the
 //! sample-level min/max and the pose-level axis-aligned and Li fits.
+//! The LM on 10⁶ samples also prints its CPU time per fit (both threads), its residual
+//! evaluations and the time of its parts, since criterion's wall time on a shared machine
+//! includes waiting for a core.
 //! Run: `cargo bench -p imucal --bench fit_speed`.
+
+mod common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use imucal::fit::axis_aligned::fit_axis_aligned_poses;
@@ -59,6 +64,7 @@ fn bench_fits(c: &mut Criterion) {
         b.iter(|| fit_mag_lm(&million, 50.0).map(|f| f.cal))
     });
     group.finish();
+    print_lm_cpu(&million);
     // Magnetometer samples as one-sample poses, as `fit --method minmax` passes them.
     let as_poses = |points: &[imucal::fit::Vec3]| -> Vec<Pose> {
         points.iter().map(|p| Pose::single(*p)).collect()
@@ -83,6 +89,46 @@ fn bench_fits(c: &mut Criterion) {
     c.bench_function("lm_mag_300_samples", |b| {
         b.iter(|| fit_mag_lm(&cloud300, 50.0).map(|f| f.cal))
     });
+}
+
+/// CPU seconds per call of `f`, over `runs` calls; `None` without `/proc`.
+fn cpu_per_call<T>(runs: usize, mut f: impl FnMut() -> T) -> Option<f64> {
+    let before = common::cpu_seconds()?;
+    for _ in 0..runs {
+        std::hint::black_box(f());
+    }
+    Some((common::cpu_seconds()? - before) / runs as f64)
+}
+
+/// CPU time of the LM on 10⁶ samples (both threads), of its Li start and of the whole fit, with
+/// the number of residual evaluations and the first-order leave-one-out it reports.
+fn print_lm_cpu(points: &[imucal::fit::Vec3]) {
+    const RUNS: usize = 5;
+    let Ok(fit) = fit_mag_lm(points, 50.0) else {
+        println!("fit/lm_1e6_mag_samples: the fit failed");
+        return;
+    };
+    let li = cpu_per_call(RUNS, || {
+        fit_li(
+            points,
+            50.0,
+            LiOptions {
+                subtract_mean: true,
+            },
+        )
+        .map(|f| f.cal)
+    });
+    let lm = cpu_per_call(RUNS, || fit_mag_lm(points, 50.0).map(|f| f.cal));
+    if let (Some(li), Some(lm)) = (li, lm) {
+        println!(
+            "fit/lm_1e6_mag_samples: {lm:.3} CPU s per fit (Li start {li:.3} s), {} residual \
+             evaluations, {}, leave-one-out RMS {:.4e} (in-sample {:.4e})",
+            fit.iterations,
+            fit.termination.map_or("-", |t| t.name()),
+            fit.loo_rms.unwrap_or(f64::NAN),
+            fit.rms
+        );
+    }
 }
 
 criterion_group!(benches, bench_fits);

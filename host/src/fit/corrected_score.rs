@@ -9,9 +9,10 @@
 //! measurement error models"; T. Nakamura 1990, "Corrected score function for errors-in-variables
 //! models", Biometrika 77).
 
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 
 use super::lm::{LeastSquaresProblem, LmSolution};
+use super::norm_jacobian::{for_each_block, in_two_halves, NormSamples, LANES};
 use super::{Mat3, Vec3};
 
 /// The upper-triangular `R` of the parameter vector `A11 A12 A13 A22 A23 A33 b1 b2 b3`.
@@ -19,65 +20,78 @@ pub(super) fn upper_from_params(p: &DVector<f64>) -> Mat3 {
     Mat3::new(p[0], p[1], p[2], 0.0, p[3], p[4], 0.0, 0.0, p[5])
 }
 
-/// `Σᵢ E[rᵢ·∇rᵢ]` at `p` to second order in the noise (per-axis variance `noise_var[i]` of
-/// point `i`, scaled units): the residual and its gradient share the noise of `xᵢ`, so the
-/// least-squares score `Jᵀr` does not vanish in expectation at the truth. With `u = x − b`,
-/// `v = Ru`, `v̂ = v/|v|`, `P_t = I − v̂v̂ᵀ` and `n` the noise: `r ≈ w·v̂ᵀRn`,
-/// `∂r/∂R_jk = w·v̂_j(n)·u_k(n)`, `∂r/∂b = −w·Rᵀv̂(n)` with `v̂(n) ≈ v̂ + P_tRn/|v|`, so
-/// `E[r ∂r/∂R_jk] = w²σ²(v̂_j (Rᵀv̂)_k + u_k (P_tRRᵀv̂)_j/|v|)` and
-/// `E[r ∂r/∂b] = −w²σ² RᵀP_tRRᵀv̂/|v|`.
-fn score_bias(
-    points: &[Vec3],
-    weights: &[f64],
-    p: &DVector<f64>,
-    noise_var: &[f64],
-) -> DVector<f64> {
+/// The corrected score `Jᵀr − Σᵢ E[rᵢ·∇rᵢ]` at `p`, the expectation to second order in the noise
+/// (per-axis variance `noise_var[i]` of point `i`, scaled units): the residual and its gradient
+/// share the noise of `xᵢ`, so the least-squares score `Jᵀr` does not vanish in expectation at
+/// the truth. With `u = x − b`, `v = Ru`, `v̂ = v/|v|`, `P_t = I − v̂v̂ᵀ` and `n` the noise:
+/// `r ≈ w·v̂ᵀRn`, `∂r/∂R_jk = w·v̂_j(n)·u_k(n)`, `∂r/∂b = −w·Rᵀv̂(n)` with
+/// `v̂(n) ≈ v̂ + P_tRn/|v|`, so `E[r ∂r/∂R_jk] = w²σ²(v̂_j (Rᵀv̂)_k + u_k (P_tRRᵀv̂)_j/|v|)` and
+/// `E[r ∂r/∂b] = −w²σ² RᵀP_tRRᵀv̂/|v|`. One pass, in blocks of lanes, on two threads for large
+/// problems.
+fn corrected_score(samples: NormSamples<'_>, p: &DVector<f64>, noise_var: &[f64]) -> DVector<f64> {
     let r = upper_from_params(p);
     let b = Vec3::new(p[6], p[7], p[8]);
-    let mut total = DVector::zeros(9);
-    for ((x, w), var) in points.iter().zip(weights).zip(noise_var) {
-        let u = x - b;
-        let v = r * u;
-        let n = v.norm();
-        if n == 0.0 {
-            continue;
+    let n = samples.len().min(noise_var.len());
+    let total = in_two_halves(
+        n,
+        &mut [],
+        |range, _| score_sums(&r, &b, samples.range(range.clone()), &noise_var[range]),
+        |mut first, second| {
+            first.iter_mut().zip(second).for_each(|(a, b)| *a += b);
+            first
+        },
+    );
+    DVector::from_row_slice(&total)
+}
+
+/// The corrected score of [`corrected_score`] over the given samples.
+fn score_sums(r: &Mat3, b: &Vec3, samples: NormSamples<'_>, noise_var: &[f64]) -> [f64; 9] {
+    let mut acc = [[0.0; LANES]; 9];
+    for_each_block(r, b, samples, |start, valid, block| {
+        let mut c = [0.0; LANES];
+        for (lane, var) in noise_var[start..start + valid].iter().enumerate() {
+            c[lane] = block.weight[lane] * block.weight[lane] * var;
         }
-        let vh = v / n;
-        let radial = r.transpose() * vh;
-        let tangential = (r * radial - vh * vh.dot(&(r * radial))) / n;
-        let c = w * w * var;
-        for (k, &(row, col)) in UPPER_ENTRIES.iter().enumerate() {
-            total[k] += c * (vh[row] * radial[col] + u[col] * tangential[row]);
+        for lane in 0..LANES {
+            let vh = Vec3::from_fn(|i, _| block.direction[i][lane]);
+            let u = Vec3::from_fn(|i, _| block.u[i][lane]);
+            let radial = r.transpose() * vh;
+            let r_radial = r * radial;
+            let tangential = (r_radial - vh * vh.dot(&r_radial)) * block.inverse_norm[lane];
+            let db = -(r.transpose() * tangential);
+            let c = c[lane];
+            let score = |k: usize| block.rows[k][lane] * block.res[lane];
+            for (k, &(row, col)) in UPPER_ENTRIES.iter().enumerate() {
+                acc[k][lane] += score(k) - c * (vh[row] * radial[col] + u[col] * tangential[row]);
+            }
+            for k in 0..3 {
+                acc[6 + k][lane] += score(6 + k) - c * db[k];
+            }
         }
-        let db = -(r.transpose() * tangential);
-        for k in 0..3 {
-            total[6 + k] += c * db[k];
-        }
-    }
-    total
+    });
+    acc.map(|lanes| lanes.iter().sum())
 }
 
 /// Entries `(row, col)` of the upper-triangular parameters, in parameter order.
 const UPPER_ENTRIES: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
 
-/// Corrected score (Stefanski 1989; Nakamura 1990): solve `Jᵀr − Σ E[r∇r] = 0` by Gauss–Newton
-/// from the least-squares solution `start`. The least-squares root is biased at second order
-/// in the noise, and on partial coverage that bias is amplified along the poorly determined
-/// direction; the corrected root is not. `None` when the iteration does not settle.
-pub(super) fn solve_corrected_score<P: LeastSquaresProblem>(
-    problem: &P,
-    points: &[Vec3],
-    weights: &[f64],
+/// Corrected score (Stefanski 1989; Nakamura 1990): solve `Jᵀr − Σ E[r∇r] = 0` from the
+/// least-squares solution `start`, where the normal matrix is `jtj`. The least-squares root is
+/// biased at second order in the noise, and on partial coverage that bias is amplified along
+/// the poorly determined direction; the corrected root is not. The iteration keeps `jtj` (a
+/// chord method): the root lies O(σ²) from `start`, so `JᵀJ` changes by as little, and each
+/// step, like a Gauss–Newton one, gains a factor of order σ (the residual's curvature term).
+/// `None` when the iteration does not settle.
+pub(super) fn solve_corrected_score(
+    samples: NormSamples<'_>,
+    jtj: &DMatrix<f64>,
     start: &DVector<f64>,
     noise_var: &[f64],
 ) -> Option<DVector<f64>> {
+    let factor = jtj.clone().cholesky()?;
     let mut p = start.clone();
     for _ in 0..30 {
-        let r = problem.residuals(&p);
-        // Accumulated normal equations: no Jacobian is formed for large sample counts.
-        let (jtj, jtr) = problem.normal_equations(&p, &r);
-        let score = jtr - score_bias(points, weights, &p, noise_var);
-        let step = jtj.cholesky()?.solve(&(-score));
+        let step = factor.solve(&(-corrected_score(samples, &p, noise_var)));
         if !step.iter().all(|v| v.is_finite()) {
             return None;
         }
@@ -89,14 +103,27 @@ pub(super) fn solve_corrected_score<P: LeastSquaresProblem>(
     None
 }
 
+/// Residuals, `JᵀJ` and `Jᵀr` at `p`, in one pass when the problem offers it.
+fn evaluate<P: LeastSquaresProblem>(
+    problem: &P,
+    p: &DVector<f64>,
+) -> (DVector<f64>, DMatrix<f64>, DVector<f64>) {
+    problem
+        .residuals_with_normal_equations(p)
+        .unwrap_or_else(|| {
+            let r = problem.residuals(p);
+            let (jtj, jtr) = problem.normal_equations(p, &r);
+            (r, jtj, jtr)
+        })
+}
+
 /// `sol` moved to `params`: residuals, normal matrix and cost there.
 pub(super) fn re_evaluate<P: LeastSquaresProblem>(
     problem: &P,
     mut sol: LmSolution,
     params: DVector<f64>,
 ) -> LmSolution {
-    sol.residuals = problem.residuals(&params);
-    sol.jtj = problem.normal_equations(&params, &sol.residuals).0;
+    (sol.residuals, sol.jtj, _) = evaluate(problem, &params);
     sol.cost = sol.residuals.norm_squared();
     sol.params = params;
     sol

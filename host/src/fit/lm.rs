@@ -28,6 +28,17 @@ pub trait LeastSquaresProblem {
         let j = self.jacobian(p);
         (j.transpose() * &j, j.transpose() * r)
     }
+    /// The residual with `JᵀJ` and `Jᵀr` at `p`, for problems where the normal equations come
+    /// at little more than the cost of the residual (they share the per-residual work). The
+    /// solver then evaluates every trial point this way and needs no second pass after
+    /// accepting it. `None` (the default): the solver asks for [`Self::residuals`] at trial
+    /// points and for [`Self::normal_equations`] only at accepted ones.
+    fn residuals_with_normal_equations(
+        &self,
+        _p: &DVector<f64>,
+    ) -> Option<(DVector<f64>, DMatrix<f64>, DVector<f64>)> {
+        None
+    }
 }
 
 /// Stopping rules and the starting damping (MINPACK's `ftol`, `xtol`, `gtol`, `maxfev`).
@@ -202,7 +213,10 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
     opts: &LmOptions,
 ) -> Result<LmSolution, LmFailure> {
     let mut p = start;
-    let mut r = problem.residuals(&p);
+    let (mut r, start_normal) = match problem.residuals_with_normal_equations(&p) {
+        Some((r, jtj, grad)) => (r, Some((jtj, grad))),
+        None => (problem.residuals(&p), None),
+    };
     let mut cost = sum_of_squares(&r);
     if !cost.is_finite() || p.iter().any(|v| !v.is_finite()) {
         return Err(LmFailure::new(
@@ -212,7 +226,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
         ));
     }
     let zero_cost = f64::EPSILON * f64::EPSILON * cost;
-    let (mut jtj, mut grad) = problem.normal_equations(&p, &r);
+    let (mut jtj, mut grad) = start_normal.unwrap_or_else(|| problem.normal_equations(&p, &r));
     let mut lambda = opts.initial_lambda;
     let mut nu = 2.0;
     let mut evaluations = 0;
@@ -237,6 +251,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
                 cost,
                 evaluations,
                 Termination::ExactFit,
+                Some(jtj),
             ));
         }
         if gradient_cosine(&jtj, &grad, cost) <= opts.gradient_tolerance {
@@ -247,6 +262,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
                 cost,
                 evaluations,
                 Termination::GradientConverged,
+                Some(jtj),
             ));
         }
         if evaluations >= opts.max_iterations {
@@ -285,7 +301,10 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             .map_or(f64::INFINITY, |gn| -gn.dot(&grad) / cost);
 
         let p_new = &p + &step;
-        let r_new = problem.residuals(&p_new);
+        let (r_new, normal_new) = match problem.residuals_with_normal_equations(&p_new) {
+            Some((r, jtj, grad)) => (r, Some((jtj, grad))),
+            None => (problem.residuals(&p_new), None),
+        };
         evaluations += 1;
         let cost_new = sum_of_squares(&r_new);
         let predicted = -(2.0 * step.dot(&grad) + step.dot(&(&jtj * &step)));
@@ -309,7 +328,10 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             p = p_new;
             r = r_new;
             cost = cost_new;
-            need_jacobian = true;
+            match normal_new {
+                Some(normal) => (jtj, grad) = normal,
+                None => need_jacobian = true,
+            }
             lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
             nu = 2.0;
         } else {
@@ -324,7 +346,8 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             (false, false) => None,
         };
         if let Some(t) = termination {
-            return Ok(finish(problem, p, r, cost, evaluations, t));
+            let current = (!need_jacobian).then_some(jtj);
+            return Ok(finish(problem, p, r, cost, evaluations, t, current));
         }
         if lambda > 1e16 {
             return Err(LmFailure::new(
@@ -339,6 +362,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
     }
 }
 
+/// The solution at `params`; `jtj` is the normal matrix there when already known.
 fn finish<P: LeastSquaresProblem + ?Sized>(
     problem: &P,
     params: DVector<f64>,
@@ -346,8 +370,9 @@ fn finish<P: LeastSquaresProblem + ?Sized>(
     cost: f64,
     iterations: usize,
     termination: Termination,
+    jtj: Option<DMatrix<f64>>,
 ) -> LmSolution {
-    let (jtj, _) = problem.normal_equations(&params, &residuals);
+    let jtj = jtj.unwrap_or_else(|| problem.normal_equations(&params, &residuals).0);
     LmSolution {
         params,
         residuals,

@@ -367,3 +367,62 @@ fn the_budget_failure_names_its_reason() {
     let message = err.into_fit_error("lm").to_string();
     assert!(message.contains("evaluation_budget"), "{message}");
 }
+
+/// `inner` evaluated with its normal equations at every trial point, as the norm model does.
+struct WithNormalEquations<P>(P);
+impl<P: LeastSquaresProblem> LeastSquaresProblem for WithNormalEquations<P> {
+    fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
+        self.0.residuals(p)
+    }
+    fn jacobian(&self, p: &DVector<f64>) -> DMatrix<f64> {
+        self.0.jacobian(p)
+    }
+    fn residuals_with_normal_equations(
+        &self,
+        p: &DVector<f64>,
+    ) -> Option<(DVector<f64>, DMatrix<f64>, DVector<f64>)> {
+        let r = self.0.residuals(p);
+        let (jtj, grad) = self.0.normal_equations(p, &r);
+        Some((r, jtj, grad))
+    }
+}
+
+#[test]
+fn normal_equations_with_every_trial_point_give_the_same_iterations_and_result() {
+    // A noisy decay (non-zero residual at the minimum, rejected steps on the way) and Rosenbrock:
+    // the same arithmetic at the same points, so the runs agree to the last bit.
+    let t: Vec<f64> = (0..40).map(|i| f64::from(i) * 0.1).collect();
+    let y: Vec<f64> = t
+        .iter()
+        .enumerate()
+        .map(|(i, t)| 5.0 * (-1.3 * t).exp() + 0.7 + 0.05 * (2.1 * i as f64).sin())
+        .collect();
+    let decay = || Decay {
+        t: t.clone(),
+        y: y.clone(),
+    };
+    let start = DVector::from_vec(vec![1.0, 3.0, -1.0]);
+    let opts = LmOptions::default();
+    let runs = [
+        (
+            levenberg_marquardt(&decay(), start.clone(), &opts),
+            levenberg_marquardt(&WithNormalEquations(decay()), start, &opts),
+        ),
+        (
+            levenberg_marquardt(&Rosenbrock, DVector::from_vec(vec![-1.2, 1.0]), &opts),
+            levenberg_marquardt(
+                &WithNormalEquations(Rosenbrock),
+                DVector::from_vec(vec![-1.2, 1.0]),
+                &opts,
+            ),
+        ),
+    ];
+    for (plain, fused) in runs {
+        let (plain, fused) = (plain.unwrap(), fused.unwrap());
+        assert_eq!(plain.params, fused.params);
+        assert_eq!(plain.iterations, fused.iterations);
+        assert_eq!(plain.termination, fused.termination);
+        assert_eq!(plain.jtj, fused.jtj);
+        assert_eq!(plain.cost, fused.cost);
+    }
+}

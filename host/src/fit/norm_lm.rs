@@ -35,7 +35,10 @@ use super::li::{fit_li, LiOptions};
 use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::leave_one_out_rms;
-use super::norm_jacobian::{jacobian_row, summed_normal_equations};
+use super::norm_jacobian::{
+    jacobian_row, norm_residual, residuals_and_normal_equations, NormSamples,
+};
+use super::norm_loo::first_order_loo_rms;
 use super::six_position::fit_six_position;
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{check_finite_points, check_finite_poses};
@@ -105,6 +108,9 @@ pub struct NormLmOutcome {
     pub fit: Fit,
     /// `χ²/(N − 9)`: about 1 when the residual is at the noise floor given by `sigma`.
     pub reduced_chi_square: Option<f64>,
+    /// Leave-one-out RMS of the relative norm residual to first order, from the leverages of
+    /// the final normal matrix ([`super::norm_loo`]): one pass, not one refit per point.
+    pub first_order_loo_rms: Option<f64>,
 }
 
 /// The weighted norm residual in centred, scaled coordinates.
@@ -118,6 +124,34 @@ struct NormProblem {
     tangential: Vec<f64>,
 }
 
+impl NormProblem {
+    fn samples(&self) -> NormSamples<'_> {
+        NormSamples {
+            points: &self.points,
+            weights: &self.weights,
+            tangential: &self.tangential,
+        }
+    }
+
+    /// Residuals, `JᵀJ` and `Jᵀr` at `p` in one pass ([`residuals_and_normal_equations`]).
+    fn evaluate(&self, p: &DVector<f64>) -> (DVector<f64>, DMatrix<f64>, DVector<f64>) {
+        let r = upper_from_params(p);
+        let b = Vec3::new(p[6], p[7], p[8]);
+        let mut res = vec![0.0; self.points.len()];
+        let (upper, grad) = residuals_and_normal_equations(&r, &b, self.samples(), &mut res);
+        let mut jtj = DMatrix::zeros(9, 9);
+        let mut at = 0;
+        for i in 0..9 {
+            for j in i..9 {
+                jtj[(i, j)] = upper[at];
+                jtj[(j, i)] = upper[at];
+                at += 1;
+            }
+        }
+        (DVector::from_vec(res), jtj, DVector::from_row_slice(&grad))
+    }
+}
+
 impl LeastSquaresProblem for NormProblem {
     fn residuals(&self, p: &DVector<f64>) -> DVector<f64> {
         let r = upper_from_params(p);
@@ -128,11 +162,7 @@ impl LeastSquaresProblem for NormProblem {
                 .iter()
                 .zip(&self.weights)
                 .zip(&self.tangential)
-                .map(|((x, w), k)| {
-                    let n = (r * (x - b)).norm();
-                    let corrected = if n > 0.0 { n - k / n } else { 0.0 };
-                    w * (corrected - 1.0)
-                }),
+                .map(|((x, w), k)| norm_residual((r * (x - b)).norm(), *w, *k)),
         )
     }
 
@@ -154,26 +184,24 @@ impl LeastSquaresProblem for NormProblem {
         j
     }
 
-    /// `JᵀJ` and `Jᵀr` accumulated row by row, never holding `J` ([`summed_normal_equations`]).
+    /// `JᵀJ` and `Jᵀr` accumulated row by row, never holding `J`; the residual is recomputed in
+    /// the same pass (equal to `res` bit for bit).
     fn normal_equations(
         &self,
         p: &DVector<f64>,
-        res: &DVector<f64>,
+        _res: &DVector<f64>,
     ) -> (DMatrix<f64>, DVector<f64>) {
-        let r = upper_from_params(p);
-        let b = Vec3::new(p[6], p[7], p[8]);
-        let (upper, grad) =
-            summed_normal_equations(&r, &b, &self.points, &self.weights, &self.tangential, res);
-        let mut jtj = DMatrix::zeros(9, 9);
-        let mut at = 0;
-        for i in 0..9 {
-            for j in i..9 {
-                jtj[(i, j)] = upper[at];
-                jtj[(j, i)] = upper[at];
-                at += 1;
-            }
-        }
-        (jtj, DVector::from_row_slice(&grad))
+        let (_, jtj, grad) = self.evaluate(p);
+        (jtj, grad)
+    }
+
+    /// One pass gives the normal equations with the residuals: the Jacobian row shares
+    /// `R(x − b)` and its norm with the residual, so this costs about a residual evaluation.
+    fn residuals_with_normal_equations(
+        &self,
+        p: &DVector<f64>,
+    ) -> Option<(DVector<f64>, DMatrix<f64>, DVector<f64>)> {
+        Some(self.evaluate(p))
     }
 }
 
@@ -259,7 +287,7 @@ pub fn refine_lm_detailed(
     } else {
         Mat3::identity()
     };
-    let scaled: Vec<Vec3> = obs.points.iter().map(|p| (p - centre) / s).collect();
+    let mut scaled: Vec<Vec3> = obs.points.iter().map(|p| (p - centre) / s).collect();
     let mut params = DVector::from_vec(vec![
         r0[(0, 0)],
         r0[(0, 1)],
@@ -276,7 +304,13 @@ pub fn refine_lm_detailed(
     // from the first solution, where also the noise-induced lengthening is corrected.
     let mut iterations = 0;
     let mut solution: Option<LmSolution> = None;
+    // The problem of the last pass (its points move from pass to pass, never copied).
+    let mut last_problem: Option<NormProblem> = None;
     for pass in 0..2 {
+        let points = match last_problem.take() {
+            Some(problem) => problem.points,
+            None => std::mem::take(&mut scaled),
+        };
         let r = upper_from_params(&params);
         let b = Vec3::new(params[6], params[7], params[8]);
         // With unknown noise `sigma` is relative; its scale comes from the first pass's residual.
@@ -285,7 +319,7 @@ pub fn refine_lm_detailed(
             _ => 1.0,
         };
         let frobenius2 = r.norm_squared();
-        let (weights, tangential) = scaled
+        let (weights, tangential) = points
             .iter()
             .zip(&obs.sigma)
             .map(|(x, sigma)| {
@@ -306,7 +340,7 @@ pub fn refine_lm_detailed(
             })
             .unzip();
         let problem = NormProblem {
-            points: scaled.clone(),
+            points,
             weights,
             tangential,
         };
@@ -319,20 +353,17 @@ pub fn refine_lm_detailed(
                 .iter()
                 .map(|sigma| (sigma / s * noise_scale).powi(2))
                 .collect();
-            if let Some(corrected) = solve_corrected_score(
-                &problem,
-                &problem.points,
-                &problem.weights,
-                &sol.params,
-                &noise_var,
-            ) {
+            if let Some(corrected) =
+                solve_corrected_score(problem.samples(), &sol.jtj, &sol.params, &noise_var)
+            {
                 sol = re_evaluate(&problem, sol, corrected);
             }
         }
         params = sol.params.clone();
         solution = Some(sol);
+        last_problem = Some(problem);
     }
-    let Some(sol) = solution else {
+    let (Some(sol), Some(problem)) = (solution, last_problem) else {
         return Err(FitError::NotConverged {
             method: Method::Lm.name(),
             iterations,
@@ -406,9 +437,16 @@ pub fn refine_lm_detailed(
         coverage_factor,
         reference,
     };
+    let first_order_loo_rms = first_order_loo_rms(
+        &upper_from_params(&params),
+        &Vec3::new(params[6], params[7], params[8]),
+        problem.samples(),
+        &sol.jtj,
+    );
     Ok(NormLmOutcome {
         fit,
         reduced_chi_square: chi2_red,
+        first_order_loo_rms,
     })
 }
 
@@ -452,9 +490,9 @@ fn guard_outcome(
     hint: CoverageHint,
     start: Option<&Calibration>,
 ) -> Result<NormLmOutcome, FitError> {
-    let (fit, chi2) = match outcome {
-        Ok(o) => (Ok(o.fit), o.reduced_chi_square),
-        Err(e) => (Err(e), None),
+    let (fit, chi2, loo) = match outcome {
+        Ok(o) => (Ok(o.fit), o.reduced_chi_square, o.first_order_loo_rms),
+        Err(e) => (Err(e), None, None),
     };
     guard_fit(
         fit,
@@ -473,6 +511,7 @@ fn guard_outcome(
     .map(|fit| NormLmOutcome {
         fit,
         reduced_chi_square: chi2,
+        first_order_loo_rms: loo,
     })
 }
 
@@ -533,7 +572,8 @@ pub fn fit_accel_lm_detailed(poses: &[Pose], reference: f64) -> Result<NormLmOut
 }
 
 /// The default magnetometer fit: LM on the norm model over samples, started from Li's ellipsoid
-/// with mean subtraction (seed 000 Table 2); the noise is estimated from the residual.
+/// with mean subtraction (seed 000 Table 2); the noise is estimated from the residual. The
+/// leave-one-sample-out RMS is the first-order one of [`super::norm_loo`] (one pass, no refits).
 pub fn fit_mag_lm(points: &[Vec3], reference: f64) -> Result<Fit, FitError> {
     fit_mag_lm_detailed(points, reference).map(|o| o.fit)
 }
@@ -573,6 +613,10 @@ pub fn fit_mag_lm_detailed(points: &[Vec3], reference: f64) -> Result<NormLmOutc
         CoverageHint::Samples,
         judge_by.as_ref(),
     )
+    .map(|mut outcome| {
+        outcome.fit.loo_rms = outcome.first_order_loo_rms;
+        outcome
+    })
 }
 
 /// Cramér–Rao bound of the upper-triangular norm-model parameters (`A11 A12 A13 A22 A23 A33
