@@ -14,7 +14,8 @@ if [ ! -x "$work/venv/bin/python" ]; then
     "$work/venv/bin/pip" install --quiet numpy
 fi
 py="$work/venv/bin/python"
-array="$work/points-$points.f64"
+# Absolute: cargo runs the bench from the package directory.
+array="$(cd "$work" && pwd)/points-$points.f64"
 
 # One array for both: a tilted, offset ellipsoid with noise, seeded.
 "$py" - "$points" "$array" <<'PY'
