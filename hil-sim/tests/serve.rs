@@ -193,27 +193,34 @@ fn streaming_follows_the_sample_rate_times_the_speed() {
 }
 
 #[test]
-fn sustained_streaming_rate_over_the_pty_is_measured() {
-    // Far faster than the board can be simulated: the loop runs flat out and the measured rate
-    // is the throughput of simulation plus pty.
+fn flat_out_streaming_over_the_pty_loses_no_batch() {
+    // Far faster than the board can be simulated: the loop runs flat out, so the pty and the
+    // host reader are under the heaviest load they will see. `stream_for` asserts that batch
+    // indices are contiguous; the throughput is printed, not asserted (it depends on the machine).
     let speed = 1000.0;
     let handle = start(speed);
     let mut port = Port::open(&handle);
     port.request(RequestBody::hello());
-    let (samples, _, bytes, wall_s) = stream_for(&mut port, Duration::from_secs(3));
-    let rate = samples as f64 / wall_s;
+    let (samples, span_s, bytes, wall_s) = stream_for(&mut port, Duration::from_secs(1));
     let stats = handle.stop().unwrap();
     println!(
-        "sustained: {rate:.0} samples/s over the pty ({:.0} kB/s, {:.2} bytes/sample), \
+        "flat out: {:.0} samples/s over the pty ({:.0} kB/s, {:.2} bytes/sample), \
          simulated {:.1} s in {:.1} s wall, {} messages dropped by the board",
+        samples as f64 / wall_s,
         bytes as f64 / wall_s / 1e3,
         bytes as f64 / samples as f64,
         stats.sim_time_s,
         stats.wall_time_s,
         stats.messages_refused
     );
-    // Enough for a guided session at 20× real time (2380 samples/s) even in a debug build.
-    assert!(rate > RATE_HZ * 20.0, "only {rate:.0} samples/s");
+    assert!(samples >= 20, "only {samples} samples in 1 s at {speed}x");
+    // The stamps keep the board's clock however fast the loop runs: samples − 1 periods span the
+    // stream. 1 % allows the batch-tick quantisation of the two end stamps on a short stream.
+    let stamped_rate = (samples - 1) as f64 / span_s;
+    assert!(
+        (stamped_rate - RATE_HZ).abs() < 0.01 * RATE_HZ,
+        "stamped rate {stamped_rate:.3} Hz, board runs at {RATE_HZ} Hz"
+    );
 }
 
 #[test]
