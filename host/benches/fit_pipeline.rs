@@ -2,7 +2,9 @@
 //! printing): reading, still detection and the input checks, then every sensor's default fit
 //! (the accelerometer chain with its leave-one-pose-out, the gyroscope bias, the magnetometer LM
 //! on every sample). Each stage is timed alone as well, and the CPU time of whole fits printed.
-//! The recording is [`imucal::synthetic::write_long_recording`] in a temporary file.
+//! The recording is [`imucal::synthetic::write_long_recording`] in a temporary file. The
+//! `stages` group times the parts of the checks changed for speed on the same recording: the
+//! magnetometer stream's outlier screen and the windowed variances of still detection.
 //! Run: `cargo bench -p imucal --bench fit_pipeline`.
 
 mod common;
@@ -11,7 +13,9 @@ use std::io::Write;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use imucal::pipeline::{calibrate, check_input, FitOptions, InputOptions};
-use imucal::recording::{LoadOptions, Recording};
+use imucal::recording::{LoadOptions, Recording, Sensor};
+use imucal::stats::descriptive::window_variances;
+use imucal::stats::robust::screen_stream;
 
 const ROWS: usize = 1_000_000;
 
@@ -52,8 +56,34 @@ fn bench_pipeline(c: &mut Criterion) {
     group.bench_function("calibrate_1e6_rows", |b| {
         b.iter(|| calibrate(&input, &fit_options).map(|c| c.sensors.len()))
     });
+    group.bench_function("check_and_calibrate_1e6_rows", |b| {
+        b.iter_batched(
+            || recording.clone(),
+            |r| {
+                let input = check_input(r, &sensors, &input_options, None);
+                calibrate(&input, &fit_options).map(|c| c.sensors.len())
+            },
+            BatchSize::LargeInput,
+        )
+    });
     group.bench_function("whole_fit_1e6_rows", |b| b.iter(whole));
     group.finish();
+
+    let mut stages = c.benchmark_group("stages");
+    stages.sample_size(10);
+    let mag = recording
+        .samples(Sensor::Mag)
+        .expect("the recording has a magnetometer");
+    stages.bench_function("screen_stream_1e6_mag_samples", |b| {
+        b.iter(|| screen_stream(mag).dropped)
+    });
+    let accel = recording
+        .samples(Sensor::Accel)
+        .expect("the recording has an accelerometer");
+    stages.bench_function("window_variances_1e6_rows", |b| {
+        b.iter(|| window_variances(accel, 50).len())
+    });
+    stages.finish();
 
     // CPU time per whole fit (both threads), beside criterion's wall time.
     const FITS: usize = 3;

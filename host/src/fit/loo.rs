@@ -75,13 +75,16 @@ pub fn held_out_errors(
     let errors = poses
         .iter()
         .enumerate()
-        .map(|(i, held_out)| {
-            let cal = calibration_without(i).ok()?;
-            let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
-            r.is_finite().then_some(r)
-        })
+        .map(|(i, held_out)| held_out_error(&calibration_without(i).ok()?, held_out, reference))
         .collect();
     Some(errors)
+}
+
+/// The relative norm residual `(|A(x − b)| − ref)/ref` of the held-out pose `held_out` under
+/// `cal` (fitted without it), `None` when not finite.
+pub fn held_out_error(cal: &Calibration, held_out: &Pose, reference: f64) -> Option<f64> {
+    let r = (cal.apply(&held_out.mean).norm() - reference) / reference;
+    r.is_finite().then_some(r)
 }
 
 /// RMS of the held-out errors, or `None` when any pose could not be predicted (or there are

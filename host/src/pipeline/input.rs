@@ -175,7 +175,13 @@ fn checked_mag_points(
     if screening.dropped > 0 {
         warnings.push(stream_outliers_sentence(&screening, all.len()));
     }
-    let points = thin(&screening.kept(all), options.max_mag_samples);
+    let kept = screening.kept(all);
+    // Every sample kept (the default): the screened vector itself, not a copy of it.
+    let points = if options.max_mag_samples == 0 || kept.len() <= options.max_mag_samples {
+        kept
+    } else {
+        thin(&kept, options.max_mag_samples)
+    };
     let verdict = match input_checks::check_mag_coverage(&points) {
         Err(e) => MagVerdict::Refused(e.to_string()),
         Ok(()) => {

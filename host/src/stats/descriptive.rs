@@ -71,28 +71,38 @@ pub fn mad_sigma(values: &[f64]) -> f64 {
 
 /// Per-window variance of each axis for windows starting at `0..=n−w` (two-pass per window
 /// via prefix sums of values centred on the global mean, which keeps large raw offsets from
-/// cancelling digits).
+/// cancelling digits). Only the last `w + 1` prefix sums are kept (a ring), not all `n + 1`:
+/// the same sums in the same order, without two more arrays the length of the recording.
 pub fn window_variances(x: &[Vec3], w: usize) -> Vec<Vec3> {
     let n = x.len();
     if n < w || w < 2 {
         return Vec::new();
     }
     let mean = x.iter().sum::<Vec3>() / n as f64;
-    let mut s1 = vec![Vec3::zeros(); n + 1];
-    let mut s2 = vec![Vec3::zeros(); n + 1];
-    for (i, v) in x.iter().enumerate() {
-        let d = v - mean;
-        s1[i + 1] = s1[i] + d;
-        s2[i + 1] = s2[i] + d.component_mul(&d);
-    }
     let wf = w as f64;
-    (0..=n - w)
-        .map(|s| {
-            let sum = s1[s + w] - s1[s];
-            let sq = s2[s + w] - s2[s];
-            (sq - sum.component_mul(&sum) / wf).map(|v| (v / (wf - 1.0)).max(0.0))
-        })
-        .collect()
+    // Slot `i % (w + 1)` holds the prefix sums of the first `i` values.
+    let mut s1 = vec![Vec3::zeros(); w + 1];
+    let mut s2 = vec![Vec3::zeros(); w + 1];
+    let (mut p1, mut p2) = (Vec3::zeros(), Vec3::zeros());
+    let mut out = Vec::with_capacity(n - w + 1);
+    for i in 0..=n {
+        if i > 0 {
+            let d = x[i - 1] - mean;
+            p1 += d;
+            p2 += d.component_mul(&d);
+        }
+        if i >= w {
+            // Read the window's start before slot `i % (w + 1)` is overwritten (it is another
+            // slot: `w` is not a multiple of `w + 1`).
+            let start = (i - w) % (w + 1);
+            let sum = p1 - s1[start];
+            let sq = p2 - s2[start];
+            out.push((sq - sum.component_mul(&sum) / wf).map(|v| (v / (wf - 1.0)).max(0.0)));
+        }
+        s1[i % (w + 1)] = p1;
+        s2[i % (w + 1)] = p2;
+    }
+    out
 }
 
 /// Smallest positive step between consecutive samples on each axis (the quantisation step
@@ -123,6 +133,50 @@ mod tests {
         assert!((v[0].x - 5.0 / 3.0).abs() < 1e-9);
         let direct = mean_variance(x[1..5].iter()).map(|(_, var, _)| var.x);
         assert!((v[1].x - direct.unwrap_or(f64::NAN)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn ring_window_variances_equal_the_full_prefix_sums_bit_for_bit() {
+        // The form with every prefix sum kept, as it was first written.
+        fn reference(x: &[Vec3], w: usize) -> Vec<Vec3> {
+            let n = x.len();
+            let mean = x.iter().sum::<Vec3>() / n as f64;
+            let mut s1 = vec![Vec3::zeros(); n + 1];
+            let mut s2 = vec![Vec3::zeros(); n + 1];
+            for (i, v) in x.iter().enumerate() {
+                let d = v - mean;
+                s1[i + 1] = s1[i] + d;
+                s2[i + 1] = s2[i] + d.component_mul(&d);
+            }
+            let wf = w as f64;
+            (0..=n - w)
+                .map(|s| {
+                    let sum = s1[s + w] - s1[s];
+                    let sq = s2[s + w] - s2[s];
+                    (sq - sum.component_mul(&sum) / wf).map(|v| (v / (wf - 1.0)).max(0.0))
+                })
+                .collect()
+        }
+        let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let x: Vec<Vec3> = (0..2000)
+            .map(|i| Vec3::new(9.8 + next(), 1e4 * (i as f64 * 0.01).sin(), next() - 0.5))
+            .collect();
+        for w in [2, 5, 50, 1999, 2000] {
+            let got = window_variances(&x, w);
+            let want = reference(&x, w);
+            assert_eq!(got.len(), want.len());
+            for (g, e) in got.iter().zip(&want) {
+                for k in 0..3 {
+                    assert_eq!(g[k].to_bits(), e[k].to_bits(), "w = {w}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -159,17 +159,92 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
                     let hi = (i + STREAM_HALF_WINDOW + 1).min(n);
                     // The neighbours without the sample itself: on a steady turn the sample
                     // would be its own window's median, and the deviations would collapse to 0.
-                    let mut neighbours: Vec<f64> = (lo..hi)
-                        .filter(|&j| j != i)
-                        .filter_map(|j| samples.get(j).map(|s| s[k]))
-                        .collect();
-                    samples[i][k] - median(&mut neighbours)
+                    // They live on the stack: one heap vector per sample and axis cost more
+                    // than the median itself on a long stream.
+                    let mut neighbours = [0.0; 2 * STREAM_HALF_WINDOW];
+                    let mut len = 0;
+                    for j in (lo..hi).filter(|&j| j != i) {
+                        neighbours[len] = samples[j][k];
+                        len += 1;
+                    }
+                    samples[i][k] - small_median(&mut neighbours[..len])
                 })
                 .collect()
         })
         .collect();
     let step = quantisation_step(samples);
     screen_axes(&axes, &[step.x, step.y, step.z])
+}
+
+/// [`median`] of a handful of values, bit for bit: a sort in the same total order
+/// ([`f64::total_cmp`]) puts the same value at the upper middle as selection does, and the lower
+/// middle is taken as [`median`] takes it (the largest by [`f64::max`] of the values below).
+fn small_median(values: &mut [f64]) -> f64 {
+    let n = values.len();
+    if n == 0 {
+        return 0.0;
+    }
+    if let Ok(six) = <&mut [f64; 6]>::try_from(&mut *values) {
+        sort_six(six);
+    } else {
+        insertion_sort(values);
+    }
+    let upper = values[n / 2];
+    if n % 2 == 1 {
+        upper
+    } else {
+        let lower = values[..n / 2]
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (lower + upper)
+    }
+}
+
+/// The key of a value with `bits` in [`f64::total_cmp`]'s order as a signed integer (the same
+/// map that function uses; applying it twice gives the bits back).
+fn total_order_key(bits: i64) -> i64 {
+    bits ^ (((bits >> 63) as u64) >> 1) as i64
+}
+
+/// Sort six values in [`f64::total_cmp`]'s order with a 12-comparator network on their integer
+/// keys: no data-dependent branches, unlike a comparison sort, on the interior of every stream.
+fn sort_six(values: &mut [f64; 6]) {
+    let mut keys = values.map(|v| total_order_key(v.to_bits() as i64));
+    for (a, b) in SIX_NETWORK {
+        let (lo, hi) = (keys[a].min(keys[b]), keys[a].max(keys[b]));
+        keys[a] = lo;
+        keys[b] = hi;
+    }
+    *values = keys.map(|k| f64::from_bits(total_order_key(k) as u64));
+}
+
+/// An optimal sorting network for six inputs (Knuth, TAOCP vol. 3, §5.3.4).
+const SIX_NETWORK: [(usize, usize); 12] = [
+    (0, 5),
+    (1, 3),
+    (2, 4),
+    (1, 2),
+    (3, 4),
+    (0, 3),
+    (2, 5),
+    (0, 1),
+    (2, 3),
+    (4, 5),
+    (1, 2),
+    (3, 4),
+];
+
+/// Sort a few values in [`f64::total_cmp`]'s order.
+fn insertion_sort(values: &mut [f64]) {
+    let n = values.len();
+    for i in 1..n {
+        let mut j = i;
+        while j > 0 && values[j - 1].total_cmp(&values[j]).is_gt() {
+            values.swap(j - 1, j);
+            j -= 1;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -199,6 +274,81 @@ mod tests {
                 )
             })
             .collect()
+    }
+
+    #[test]
+    fn small_median_equals_median_by_selection_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+        // Few distinct values (ties), signed zeros and wide magnitudes, every length up to six.
+        let pool = [0.0, -0.0, 1.0, -1.0, 2.5, 1e300, -3e-300, 7.0];
+        for _ in 0..20_000 {
+            let len = rng.gen_range(0..=2 * STREAM_HALF_WINDOW);
+            let values: Vec<f64> = (0..len)
+                .map(|_| {
+                    if rng.gen_bool(0.5) {
+                        pool[rng.gen_range(0..pool.len())]
+                    } else {
+                        rng.gen_range(-10.0..10.0)
+                    }
+                })
+                .collect();
+            let expected = median(&mut values.clone());
+            let got = small_median(&mut values.clone());
+            assert_eq!(got.to_bits(), expected.to_bits(), "{values:?}");
+        }
+    }
+
+    #[test]
+    fn the_six_input_network_sorts_every_zero_one_input() {
+        // The 0-1 principle: a comparator network that sorts all 2⁶ inputs of zeros and ones
+        // sorts every input.
+        for mask in 0u32..64 {
+            let mut values: [f64; 6] = std::array::from_fn(|i| f64::from((mask >> i) & 1));
+            sort_six(&mut values);
+            assert!(
+                values.windows(2).all(|w| w[0] <= w[1]),
+                "{mask:06b}: {values:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn stream_screen_equals_the_screen_with_heap_medians() {
+        // The screen as it was written first: a heap vector of neighbours and `median` per
+        // sample and axis.
+        fn reference(samples: &[Vec3]) -> Screening {
+            let n = samples.len();
+            let axes: Vec<Vec<f64>> = (0..3)
+                .map(|k| {
+                    (0..n)
+                        .map(|i| {
+                            let lo = i.saturating_sub(STREAM_HALF_WINDOW);
+                            let hi = (i + STREAM_HALF_WINDOW + 1).min(n);
+                            let mut neighbours: Vec<f64> = (lo..hi)
+                                .filter(|&j| j != i)
+                                .map(|j| samples[j][k])
+                                .collect();
+                            samples[i][k] - median(&mut neighbours)
+                        })
+                        .collect()
+                })
+                .collect();
+            let step = quantisation_step(samples);
+            screen_axes(&axes, &[step.x, step.y, step.z])
+        }
+        let mut samples = noisy_vectors(5, 3000, 0.4);
+        // A turn, a spike and a run of repeated (quantised) readings.
+        for (i, s) in samples.iter_mut().enumerate() {
+            s.x += (i as f64 * 0.01).sin() * 30.0;
+        }
+        samples[1234].z = 5e3;
+        for s in &mut samples[2000..2100] {
+            *s = Vec3::new(1.0, 2.0, 3.0);
+        }
+        let got = screen_stream(&samples);
+        assert_eq!(got, reference(&samples));
+        assert!(!got.keep[1234]);
     }
 
     #[test]

@@ -246,3 +246,43 @@ fn a_mean_worse_than_the_best_by_more_than_its_standard_error_is_not_used() {
         choice.reason
     );
 }
+
+#[test]
+fn held_out_errors_on_two_threads_equal_refitting_each_pose_in_turn() {
+    // 52 poses (twice the 26 tilted directions): above PARALLEL_POSES, so split over threads.
+    let mut dirs = tilted_directions();
+    dirs.extend(
+        tilted_directions()
+            .iter()
+            .map(|d| d + Vec3::new(0.1, -0.05, 0.02)),
+    );
+    assert!(dirs.len() >= PARALLEL_POSES);
+    let poses = diagonal_poses(&dirs, 0.02);
+    let faces = face_labels(&poses);
+    let reference = 9.81;
+    for method in CANDIDATES {
+        let threaded = held_out_errors(&poses, &faces, reference, |rest, rest_faces| {
+            refit(method, rest, rest_faces, reference)
+        });
+        let in_turn: Vec<Option<f64>> =
+            crate::fit::loo::leave_one_out_errors(&poses, reference, |i, rest| {
+                let rest_faces: Vec<Vec3> = faces
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, _)| j != i)
+                    .map(|(_, f)| *f)
+                    .collect();
+                refit(method, rest, &rest_faces, reference)
+            })
+            .unwrap_or_default();
+        assert_eq!(threaded.len(), poses.len(), "{method:?}");
+        let bits = |e: &[Option<f64>]| -> Vec<Option<u64>> {
+            e.iter().map(|x| x.map(f64::to_bits)).collect()
+        };
+        assert_eq!(bits(&threaded), bits(&in_turn), "{method:?}");
+        if matches!(method, Method::AxisAligned | Method::Lm) {
+            // Least-squares models refit without any one of these poses.
+            assert_eq!(threaded.iter().flatten().count(), poses.len(), "{method:?}");
+        }
+    }
+}
