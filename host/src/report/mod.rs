@@ -765,8 +765,8 @@ fn parameter_table(p: &SensorParameters) -> String {
     for r in 0..3 {
         rows.push_str("<tr>");
         rows.push_str(&format!("<th>row {}</th>", r + 1));
-        for c in 0..3 {
-            rows.push_str(&cell(formats[c], p.a[(r, c)], p.std.map(|s| s.a[(r, c)])));
+        for (c, format) in formats.iter().enumerate().take(3) {
+            rows.push_str(&cell(*format, p.a[(r, c)], p.std.map(|s| s.a[(r, c)])));
         }
         rows.push_str(&cell(formats[3], p.b[r], p.std.map(|s| s.b[r])));
         rows.push_str("</tr>");

@@ -297,7 +297,9 @@ fn grouped_bars(
     figure: &'static str,
 ) -> Result<String, PlotError> {
     let n = series.iter().map(|s| s.0.len()).max().unwrap_or(0);
-    let yr = padded(series.iter().flat_map(|s| s.0.iter().copied()).chain([0.0]));
+    let data = padded(series.iter().flat_map(|s| s.0.iter().copied()).chain([0.0]));
+    // Headroom above the tallest bar for the legend in the upper right.
+    let yr = data.start..(data.end + 0.12 * series.len() as f64 * (data.end - data.start));
     let bottom = yr.start;
     let xr = -0.5..(n as f64 - 0.5);
     let width = 0.7 / series.len().max(1) as f64;
