@@ -462,9 +462,9 @@ fn uncertainties_are_named_in_words_with_their_units_and_long_text_wraps() {
     let mut data = minimal_data("good");
     data.analysis = Some(format!("{}\n", "a long line of analysis text ".repeat(20)));
     let html = render_html(&data).expect("renders");
-    assert!(html
-        .contains("accelerometer offset, per axis x, y, z: known to ± (one standard deviation)"));
-    assert!(html.contains("0.100 mg, 0.100 mg, 0.200 mg"));
+    assert!(html.contains("<th>accelerometer offset, per axis x, y, z</th>"));
+    assert!(html.contains("± 0.100 mg, ± 0.100 mg, ± 0.200 mg"));
+    assert!(html.contains("one standard deviation (±)"));
     assert!(html.contains("expected error of |m| in the worst direction"));
     assert!(
         !html.contains("accel_bias_mg"),

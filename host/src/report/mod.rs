@@ -522,15 +522,25 @@ fn uncertainty_in_words(key: &str, value: &Value) -> (String, String) {
         ),
         other => (other, ""),
     };
-    let text = match value {
-        Value::Array(items) => items
-            .iter()
-            .map(|v| with_unit(v.as_f64(), unit))
-            .collect::<Vec<_>>()
-            .join(", "),
-        other => with_unit(other.as_f64(), unit),
+    let values: Vec<Option<f64>> = match value {
+        Value::Array(items) => items.iter().map(Value::as_f64).collect(),
+        other => vec![other.as_f64()],
     };
-    (format!("{name}: known to ± (one standard deviation)"), text)
+    let known = |v: &Option<f64>| v.is_some_and(f64::is_finite);
+    // One "not estimated" for the row rather than one per axis.
+    let text = if values.iter().any(known) {
+        values
+            .iter()
+            .map(|v| match v.filter(|v| v.is_finite()) {
+                Some(_) => format!("± {}", with_unit(*v, unit)),
+                None => NOT_ESTIMATED.to_string(),
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    } else {
+        NOT_ESTIMATED.to_string()
+    };
+    (name.to_string(), text)
 }
 
 /// `value unit` to 3 significant digits, or [`NOT_ESTIMATED`].
@@ -1093,8 +1103,8 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
     if !data.uncertainty_notes.is_empty() {
         parameters.push_str(
             "<h3>How well the parameters are known</h3><p class=small>Each figure is one \
-             standard deviation: the true value lies within it about two times in three, and \
-             within three times it almost always.</p><table>",
+             standard deviation (±): the true value lies within it about two times in three, \
+             and within three times it almost always.</p><table class=text>",
         );
         for (name, value) in &data.uncertainty_notes {
             parameters.push_str(&format!(
