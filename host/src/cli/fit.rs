@@ -375,24 +375,14 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     };
     let failed = calibration.failures();
     if !failed.is_empty() {
-        // The table above already gave each reason: name the sensors only, so no error is
-        // printed twice. JSON output carries the reasons on stdout, but say them on stderr too.
-        let what = if args.json {
-            failed.join("; ")
-        } else {
-            let names: Vec<&str> = failed
-                .iter()
-                .map(|f| f.split_once(':').map_or(f.as_str(), |(name, _)| name))
-                .collect();
-            format!("{}; the reasons are above", names.join(", "))
-        };
         bail!(
-            "{} could not be fitted ({what})",
+            "{} could not be fitted ({})",
             if failed.len() == 1 {
                 "one sensor"
             } else {
                 "some sensors"
-            }
+            },
+            failed.join("; ")
         );
     }
     recorded
