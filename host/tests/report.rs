@@ -7,11 +7,13 @@ use std::process::Command;
 
 use imucal::device::ParamsFile;
 use imucal::fit::{Mat3, Vec3};
-use imucal::report::{from_session_dir, render_html, ReportData};
+use imucal::report::{from_session_dir, render_html, up_label, ReportData, SensorParameters};
 use imucal_protocol::CalibrationSet;
 
 const FIELD_UT: f64 = 48.0;
 const GRAVITY: f64 = 9.80665;
+/// The gyroscope's bias in the session's parameters, rad/s: the poses read it at rest.
+const GYRO_BIAS_RADS: [f64; 3] = [0.01, -0.02, 0.005];
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("imucal-report-{}-{name}", std::process::id()));
@@ -39,6 +41,7 @@ fn write_session(dir: &std::path::Path) {
     let accel_a = Mat3::new(1.01, 0.002, 0.0, 0.0, 0.99, -0.003, 0.0, 0.0, 1.005);
     let accel_b = Vec3::new(0.12, -0.05, 0.08);
     let mut set = CalibrationSet::identity();
+    set.gyro.b = GYRO_BIAS_RADS.map(|v| v as f32);
     set.mag.a = [0, 1, 2].map(|r| [0, 1, 2].map(|c| mag_a[(r, c)] as f32));
     set.mag.b = [0, 1, 2].map(|i| mag_b[i] as f32);
     set.accel.a = [0, 1, 2].map(|r| [0, 1, 2].map(|c| accel_a[(r, c)] as f32));
@@ -69,8 +72,9 @@ fn write_session(dir: &std::path::Path) {
         .iter()
         .map(|u| {
             let raw = accel_b + accel_inv * (u * GRAVITY);
-            serde_json::json!({"target": "pose", "target_up": [u.x, u.y, u.z],
-                "stats": {"n": 200, "accel_mean": [raw.x, raw.y, raw.z], "temp_mean_c": 26.0}})
+            serde_json::json!({"target": up_label(u), "target_up": [u.x, u.y, u.z],
+                "stats": {"n": 200, "accel_mean": [raw.x, raw.y, raw.z],
+                    "gyro_mean": GYRO_BIAS_RADS, "temp_mean_c": 26.0}})
         })
         .collect();
     std::fs::write(
@@ -105,9 +109,10 @@ fn session_report_puts_calibrated_samples_on_the_reference_sphere() {
     }
     assert_eq!(data.verdict_level, "good");
     let html = render_html(&data).expect("renders");
-    // 3 raw + 3 calibrated projections, 2 histograms, 2 against time/temperature, coverage,
-    // accelerometer bars and its temperature plot.
-    assert_eq!(html.matches("<svg").count(), 13, "figures in the page");
+    // 3 raw + 3 calibrated projections, 2 histograms, 2 against time and temperature, coverage,
+    // accelerometer bars before and after (its poses share one temperature, so no plot
+    // against it), gyroscope rates before and after.
+    assert_eq!(html.matches("<svg").count(), 15, "figures in the page");
     assert!(html.contains("Verdict: good"));
     assert!(
         html.contains("0.000 % after"),
@@ -238,5 +243,266 @@ fn the_report_counts_coverage_in_the_same_regions_as_the_session_screen() {
     assert!(html.contains(&format!("empty: {}", empty.join(" "))));
     // The map labels every region with its count.
     assert!(html.contains(&format!("-X-Y-Z {}", screen.counts[0])));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The figures of a page, each its SVG text.
+fn figures(html: &str) -> Vec<&str> {
+    html.split("<svg").skip(1).collect()
+}
+
+#[test]
+fn every_plot_but_the_coverage_map_has_a_legend() {
+    let dir = scratch("legends");
+    write_session(&dir);
+    let html = render_html(&from_session_dir(&dir).expect("session")).expect("renders");
+    let legends = [
+        "raw samples",
+        "calibrated samples",
+        "before calibration",
+        "after calibration",
+        "x axis",
+    ];
+    let mut checked = 0;
+    for svg in figures(&html) {
+        // The coverage map explains its colours in its caption.
+        if svg.contains("field directions in the session") {
+            continue;
+        }
+        assert!(
+            legends.iter().any(|l| svg.contains(l)),
+            "a figure has no legend: {}",
+            &svg[..svg.len().min(300)]
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 14);
+    // The outlines are named too, in each projection's legend.
+    let in_figures = |name: &str| figures(&html).iter().filter(|f| f.contains(name)).count();
+    assert_eq!(in_figures("fitted ellipsoid"), 3);
+    assert_eq!(in_figures("reference sphere"), 3);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn poses_are_labelled_by_the_side_that_points_up_and_many_labels_stand_vertical() {
+    let dir = scratch("labels");
+    write_session(&dir);
+    let data = from_session_dir(&dir).expect("session");
+    let accel = data.accel.as_ref().expect("poses");
+    assert_eq!(accel.labels.len(), 12);
+    assert!(
+        accel.labels.iter().all(|l| l.ends_with(" up")),
+        "{:?}",
+        accel.labels
+    );
+    let html = render_html(&data).expect("renders");
+    for label in &accel.labels {
+        assert!(
+            html.contains(&format!(">\n{label}\n</text>")),
+            "{label} not drawn"
+        );
+    }
+    // Twelve short labels fit side by side; twenty stand vertical.
+    use imucal::report::plots::pose_bars;
+    let short: Vec<String> = (0..12).map(|i| format!("+Z up #{i}")).collect();
+    let flat = pose_bars("t", "mg", &[1.0; 12], &short, false).expect("draws");
+    assert!(!flat.contains("rotate(90"));
+    let many: Vec<String> = (0..20).map(|i| format!("+Z up #{i}")).collect();
+    let vertical = pose_bars("t", "mg", &[1.0; 20], &many, false).expect("draws");
+    assert_eq!(vertical.matches("rotate(90").count(), 20);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn the_gyroscope_section_shows_each_axis_rate_at_rest_before_and_after_and_the_scale_fit() {
+    let dir = scratch("gyro");
+    write_session(&dir);
+    let mut summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    // The correction 1/1.013 on x: the sensor reads 1.3 % high.
+    summary["gyro_scale"] = serde_json::json!({
+        "scale": [1.0 / 1.013, 1.0, 1.0], "scale_sigma_pct": [0.02, 0.02, 0.03],
+        "misalignment_deg": 0.04, "misalignment_sigma_deg": 0.01, "moves_recorded": 14,
+        "moves_used": 12, "rms_deg": 0.05, "tilt_deg": [700.0, 650.0, 400.0]});
+    std::fs::write(dir.join("summary.json"), summary.to_string()).unwrap();
+    let data = from_session_dir(&dir).expect("session");
+    let gyro = data.gyro.as_ref().expect("the poses carry gyroscope means");
+    for (raw, calibrated) in gyro.raw_dps.iter().zip(&gyro.calibrated_dps) {
+        for i in 0..3 {
+            assert!((raw[i] - GYRO_BIAS_RADS[i].to_degrees()).abs() < 1e-6);
+            // The bias in the set removes the rate at rest.
+            assert!(calibrated[i].abs() < 1e-6, "{calibrated:?}");
+        }
+    }
+    let html = render_html(&data).expect("renders");
+    assert!(html.contains("<h2>Gyroscope</h2>"));
+    assert!(html.contains("gyroscope before calibration: rate at rest per pose"));
+    assert!(html.contains("gyroscope after calibration: residual rate at rest per pose"));
+    assert!(
+        html.contains("+1.300 % ± 0.0200 %"),
+        "scale error as the sensor reads"
+    );
+    assert!(html.contains("12 of 14"));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_constant_temperature_is_said_in_words_instead_of_plotted() {
+    let dir = scratch("constant-temperature");
+    write_session(&dir);
+    let html = render_html(&from_session_dir(&dir).expect("session")).expect("renders");
+    // The poses all read 26 °C; the magnetometer samples span 25–31 °C and keep their plot.
+    assert!(!html.contains("accelerometer |a| error against pose temperature"));
+    assert!(html.contains("Temperature constant at 26.0 °C during the accelerometer poses"));
+    assert!(html.contains("magnetometer norm error against temperature"));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+fn minimal_data(verdict: &str) -> ReportData {
+    let dir = scratch(&format!("badge-{verdict}"));
+    write_session(&dir);
+    let mut data = from_session_dir(&dir).expect("session");
+    let _ = std::fs::remove_dir_all(dir);
+    data.verdict_level = verdict.to_string();
+    data
+}
+
+#[test]
+fn the_badge_is_neutral_when_nothing_was_checked_and_coloured_for_the_session_levels() {
+    for (level, class) in [
+        ("good", "good"),
+        ("marginal", "marginal"),
+        ("poor", "poor"),
+        ("fitted", "neutral"),
+        ("unknown", "neutral"),
+    ] {
+        let html = render_html(&minimal_data(level)).expect("renders");
+        assert!(
+            html.contains(&format!(
+                "<p class=\"verdict {class}\">Verdict: {level}</p>"
+            )),
+            "{level}"
+        );
+    }
+}
+
+#[test]
+fn values_not_estimated_are_written_in_words_never_nan() {
+    let dir = scratch("nan");
+    write_session(&dir);
+    let mut summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    // serde_json writes a NaN as null.
+    summary["uncertainties"]["accel_norm_mg"] = serde_json::Value::Null;
+    std::fs::write(dir.join("summary.json"), summary.to_string()).unwrap();
+    let mut data = from_session_dir(&dir).expect("session");
+    data.parameters.push(SensorParameters {
+        name: "gyroscope (not estimated)".to_string(),
+        unit_in: "rad/s".to_string(),
+        unit_out: "rad/s".to_string(),
+        a: Mat3::identity() * f64::NAN,
+        b: Vec3::new(f64::NAN, 0.0, 0.0),
+        std: None,
+        to_nominal: Some(1.0),
+    });
+    let html = render_html(&data).expect("renders");
+    assert!(!html.contains("NaN"), "NaN in the page");
+    assert!(!html.contains("null"), "null in the page");
+    assert!(html.contains("unknown / not estimated"));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn scale_errors_and_axis_angles_are_shown_apart_from_the_unit_conversion() {
+    let mut data = minimal_data("fitted");
+    // Data in g reading 1.3 % high on x: A alone (9.68…) hides the error in the conversion.
+    data.parameters = vec![SensorParameters {
+        name: "accelerometer".to_string(),
+        unit_in: "g".to_string(),
+        unit_out: "m/s²".to_string(),
+        a: Mat3::from_diagonal(&Vec3::new(GRAVITY / 1.013, GRAVITY, GRAVITY)),
+        b: Vec3::zeros(),
+        std: None,
+        to_nominal: Some(GRAVITY),
+    }];
+    let html = render_html(&data).expect("renders");
+    assert!(html.contains("<td>+1.300 %</td>"), "scale error of x");
+    assert!(
+        html.contains("1 g = 9.80665 m/s²"),
+        "the conversion named apart"
+    );
+    assert!(html.contains("axes off 90° by"));
+}
+
+#[test]
+fn every_column_of_a_parameter_table_uses_one_number_format() {
+    use imucal::report::ColumnFormat;
+    // 0.97 and 0.0063 print fixed; a column holding 8e-5 prints every value scientific.
+    assert_eq!(
+        ColumnFormat::for_column(&[0.97, 0.0063, -0.0079]),
+        ColumnFormat::Fixed
+    );
+    assert_eq!(
+        ColumnFormat::for_column(&[1.006, 0.0, -8.0e-5]),
+        ColumnFormat::Scientific
+    );
+    let mut data = minimal_data("fitted");
+    data.parameters[0].a = Mat3::new(1.006, 0.015, -8.0e-5, 0.0, 1.013, 2.0e-3, 0.0, 0.0, 0.978);
+    let html = render_html(&data).expect("renders");
+    // The third column is scientific throughout, the first two fixed.
+    assert!(html.contains("-8.0000e-5"));
+    assert!(html.contains("2.0000e-3"));
+    assert!(html.contains("9.7800e-1"));
+    assert!(html.contains("1.006000"));
+}
+
+#[test]
+fn uncertainties_are_named_in_words_with_their_units_and_long_text_wraps() {
+    let mut data = minimal_data("good");
+    data.analysis = Some(format!("{}\n", "a long line of analysis text ".repeat(20)));
+    let html = render_html(&data).expect("renders");
+    assert!(html.contains("<th>accelerometer offset, per axis x, y, z</th>"));
+    assert!(html.contains("± 0.100 mg, ± 0.100 mg, ± 0.200 mg"));
+    assert!(html.contains("one standard deviation (±)"));
+    assert!(html.contains("expected error of |m| in the worst direction"));
+    assert!(
+        !html.contains("accel_bias_mg"),
+        "a field name instead of words"
+    );
+    assert!(html.contains("white-space:pre-wrap"));
+}
+
+#[test]
+fn with_analyze_the_report_shows_the_extended_terms_and_the_checks_of_both_sets() {
+    let dir = scratch("extended");
+    write_session(&dir);
+    let mut params: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("params.json")).unwrap()).unwrap();
+    params["accel"]["bias_temp"] = serde_json::json!({
+        "coeffs": [[6.6e-3, 5.7e-3, 8.8e-3], [-1.3e-4, -2.0e-4, 2.5e-4], [0.0, 0.0, 0.0]]});
+    std::fs::write(dir.join("params.json"), params.to_string()).unwrap();
+    let check = |a: f64| {
+        serde_json::json!({"accel_error_mg": a, "mag_error_pct": 0.05,
+        "gyro_rate_dps": 0.01})
+    };
+    let mut summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    summary["before"] = check(48.5);
+    summary["after"] = check(11.6);
+    summary["on_board_after"] = check(0.47);
+    std::fs::write(dir.join("summary.json"), summary.to_string()).unwrap();
+    std::fs::write(
+        dir.join(imucal::report::ANALYSIS_TEXT_FILE),
+        "accel — base model lm\nExtended terms added: accel bias_temperature (degree 2)\n",
+    )
+    .unwrap();
+    let html = render_html(&from_session_dir(&dir).expect("session")).expect("renders");
+    assert!(html.contains("<th>after, base set</th>"));
+    assert!(html.contains("<th>after, extended set (on the board)</th>"));
+    assert!(html.contains("11.600 mg") && html.contains("0.470 mg"));
+    assert!(html.contains("Extended terms on the board"));
+    assert!(html.contains("m/s²/°C²"));
+    assert!(html.contains("Extended terms added: accel bias_temperature"));
     let _ = std::fs::remove_dir_all(dir);
 }

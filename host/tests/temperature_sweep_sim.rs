@@ -102,6 +102,21 @@ fn analyzed_calibration_holds_g_within_1_mg_at_25_c_and_2_mg_over_10_to_40_c() {
         &std::fs::read_to_string(dir.join("truth.json")).expect("the session saved the truth"),
     )
     .expect("truth.json parses");
+    // `--json` and summary.json name the set on the board: the extended one, checked at rest.
+    let printed: serde_json::Value = serde_json::from_slice(&out.stdout).expect("--json summary");
+    let saved: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("summary.json")).expect("summary.json"),
+    )
+    .expect("summary.json parses");
+    assert!(
+        printed["on_board_after"]["accel_error_mg"].is_f64(),
+        "{printed}"
+    );
+    assert_ne!(
+        printed["on_board_after"], printed["after"],
+        "the extended set's own check"
+    );
+    assert_eq!(saved["on_board_after"], printed["on_board_after"]);
     let written = calibration_set(&dir.join("params.json"));
     let base = calibration_set(&dir.join("params-base.json"));
     let analysis: serde_json::Value = serde_json::from_str(

@@ -89,8 +89,10 @@ impl EffectKind {
             EffectKind::BiasTemperature(d) => (1..=d.clamp(1, 3))
                 .flat_map(|k| {
                     axes.iter().map(move |a| {
-                        let power = if k == 1 { String::new() } else { k.to_string() };
-                        (format!("c{k}_{a}"), format!("{unit}/°C{power}"))
+                        (
+                            format!("c{k}_{a}"),
+                            format!("{unit}/{}", celsius_power(usize::from(k))),
+                        )
                     })
                 })
                 .collect(),
@@ -142,3 +144,30 @@ pub const GYRO_FAMILIES: [EffectKind; 3] = [
     EffectKind::BiasDrift,
     EffectKind::GSensitivity,
 ];
+
+/// `°C`, `°C²` or `°C³`: the unit of a temperature power, written as people write it.
+pub fn celsius_power(power: usize) -> String {
+    match power {
+        1 => "°C".to_string(),
+        2 => "°C²".to_string(),
+        3 => "°C³".to_string(),
+        k => format!("°C^{k}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn temperature_powers_are_written_with_superscripts() {
+        let labels = EffectKind::BiasTemperature(3).param_labels("mg");
+        let units: Vec<&str> = labels.iter().map(|(_, u)| u.as_str()).collect();
+        assert!(units.contains(&"mg/°C"));
+        assert!(units.contains(&"mg/°C²"));
+        assert!(units.contains(&"mg/°C³"));
+        assert!(units
+            .iter()
+            .all(|u| !u.ends_with("°C2") && !u.ends_with("°C3")));
+    }
+}

@@ -237,10 +237,20 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         None
     };
 
+    // The summary names the set on the board now: the extended one when `--analyze` wrote it.
+    let mut final_summary = summary(&outcome);
+    if let Some(Ok(Some(errors))) = &closed {
+        final_summary.on_board_after = Some(*errors);
+        let path = dir.join("summary.json");
+        let text = serde_json::to_string_pretty(&final_summary)
+            .context("the summary could not be encoded")?;
+        std::fs::write(&path, text + "\n")
+            .with_context(|| format!("could not write {}", path.display()))?;
+    }
     if args.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&summary(&outcome))
+            serde_json::to_string_pretty(&final_summary)
                 .context("the summary could not be encoded")?
         );
     } else {

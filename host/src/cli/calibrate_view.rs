@@ -177,17 +177,43 @@ fn hold_progress(name: &str, progress: &PoseProgress, hold_s: f64) -> (u64, Stri
     )
 }
 
+/// What the screen shows for a figure the fit could not estimate (instead of `NaN`).
+const NOT_ESTIMATED: &str = imucal::report::NOT_ESTIMATED;
+
+/// `value` with `precision` decimals (signed when `signed`), or [`NOT_ESTIMATED`].
+fn figure(value: f64, precision: usize, signed: bool) -> String {
+    match (value.is_finite(), signed) {
+        (false, _) => NOT_ESTIMATED.to_string(),
+        (true, true) => format!("{value:>+.precision$}"),
+        (true, false) => format!("{value:.precision$}"),
+    }
+}
+
 fn triple(values: [f64; 3], precision: usize) -> String {
-    let parts: Vec<String> = values
-        .iter()
-        .map(|v| format!("{v:>+.precision$}"))
-        .collect();
+    let parts: Vec<String> = values.iter().map(|v| figure(*v, precision, true)).collect();
     format!("[{}]", parts.join(", "))
 }
 
 fn sigmas(values: [f64; 3], precision: usize) -> String {
-    let parts: Vec<String> = values.iter().map(|v| format!("{v:.precision$}")).collect();
+    let parts: Vec<String> = values
+        .iter()
+        .map(|v| figure(*v, precision, false))
+        .collect();
     format!("[{}]", parts.join(", "))
+}
+
+/// The fit summary's first line: which method fitted each sensor, the gyroscope's scale named
+/// when the moves between holds calibrated it.
+fn fit_headline(accel: imucal::fit::Method, gyro: imucal::fit::Method) -> String {
+    let gyro = if gyro == imucal::fit::Method::GyroScale {
+        "gyro bias from the holds, scale and misalignment from the moves between them"
+    } else {
+        "gyro bias from the holds (scale not calibrated)"
+    };
+    format!(
+        "Fit (accelerometer {}, {gyro}, magnetometer LM ellipsoid + dip alignment):",
+        accel.name()
+    )
 }
 
 pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
@@ -202,10 +228,7 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
         imucal::session::FieldSource::MeanRadius => "the sensor's mean radius",
     };
     let mut lines = vec![
-        format!(
-            "Fit (accelerometer {}, gyro bias from the holds, LM ellipsoid + dip alignment):",
-            fit.accel.method.name()
-        ),
+        fit_headline(fit.accel.method, fit.gyro.method),
         format!("  accelerometer model: {}", fit.accel_choice.reason),
         format!(
             "  accelerometer  offset {} mg ± {}",
@@ -218,8 +241,8 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
             sigmas(u.accel_scale_ppm, 0)
         ),
         format!(
-            "                 expected |a| error ± {:.3} mg (1σ, worst direction)",
-            u.accel_norm_mg
+            "                 expected |a| error ± {} mg (1σ, worst direction)",
+            figure(u.accel_norm_mg, 3, false)
         ),
         format!(
             "  gyroscope      bias   {} °/s ± {}",
@@ -239,11 +262,14 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
             sigmas(u.mag_bias_ut, 3)
         ),
         format!(
-            "                 expected |m| error ± {:.3} % (1σ); field {:.2} µT ({source}); {}",
-            u.mag_norm_pct,
+            "                 expected |m| error ± {} % (1σ); field {:.2} µT ({source}); {}",
+            figure(u.mag_norm_pct, 3, false),
             fit.field_ut,
             match &fit.alignment {
-                Ok(_) => format!("aligned to the accelerometer ± {:.3}°", u.alignment_deg),
+                Ok(_) => format!(
+                    "aligned to the accelerometer ± {}°",
+                    figure(u.alignment_deg, 3, false)
+                ),
                 Err(e) => format!("NOT aligned to the accelerometer ({e})"),
             }
         ),
@@ -415,8 +441,10 @@ pub(super) fn before_after_table(
     outcome: &SessionOutcome,
     extended: Option<&RestErrors>,
 ) -> String {
-    let show = |value: Option<f64>, unit: &str, precision: usize| {
-        value.map_or("—".to_string(), |v| format!("{v:.precision$} {unit}"))
+    let show = |value: Option<f64>, unit: &str, precision: usize| match value {
+        Some(v) if v.is_finite() => format!("{v:.precision$} {unit}"),
+        Some(_) => "unknown".to_string(),
+        None => "—".to_string(),
     };
     let mut columns: Vec<(&str, Option<&RestErrors>)> = vec![("before", Some(&outcome.before))];
     match extended {
@@ -472,6 +500,28 @@ mod tests {
         assert!(text.contains("0.6 of 1.2 s"), "{text}");
         // Past the hold the bar waits at 99 % for the board's answer.
         assert_eq!(hold_progress("+Z up", &progress(5.0), 1.2).0, 99);
+    }
+
+    #[test]
+    fn the_fit_headline_names_the_gyroscope_scale_when_the_moves_calibrated_it() {
+        use imucal::fit::Method;
+        let scaled = fit_headline(Method::Lm, Method::GyroScale);
+        assert!(
+            scaled.contains("scale and misalignment from the moves"),
+            "{scaled}"
+        );
+        let bias_only = fit_headline(Method::Lm, Method::GyroBias);
+        assert!(bias_only.contains("scale not calibrated"), "{bias_only}");
+    }
+
+    #[test]
+    fn figures_not_estimated_are_written_in_words() {
+        assert_eq!(figure(f64::NAN, 3, false), "unknown / not estimated");
+        assert_eq!(
+            sigmas([0.1, f64::NAN, 0.2], 2),
+            "[0.10, unknown / not estimated, 0.20]"
+        );
+        assert_eq!(triple([1.0, -2.0, 0.5], 1), "[+1.0, -2.0, +0.5]");
     }
 
     #[test]

@@ -4,8 +4,9 @@
 //!
 //! Figures: magnetometer samples in the xy, xz and yz projections, raw with the outline of the
 //! fitted ellipsoid and calibrated with the reference sphere; the accelerometer's error of `|a|`
-//! per pose; histograms of the magnetometer's norm error; the residual against time and
-//! temperature; a map of the sphere's coverage. A report is built from a session directory
+//! per pose; the gyroscope's rate at rest per pose and axis; histograms of the magnetometer's
+//! norm error; the residual against time and temperature (or a sentence when the temperature
+//! was constant); a map of the sphere's coverage. Poses are named by the side that points up. A report is built from a session directory
 //! ([`from_session_dir`]) or from any recording and its fits ([`ReportData`] filled by the
 //! caller), then rendered with [`render_html`].
 
@@ -95,6 +96,44 @@ pub struct AccelPoses {
     pub temp_c: Vec<Option<f64>>,
     /// Local gravity, m/s².
     pub gravity: f64,
+    /// Name of each pose (the side that points up, or the recording's label).
+    pub labels: Vec<String>,
+}
+
+/// The gyroscope's mean rate in each still pose, before and after calibration: at rest the
+/// calibrated rate is what the bias fit leaves (the Earth's rotation is 0.004 °/s at most).
+#[derive(Debug, Clone)]
+pub struct GyroPoses {
+    /// Mean rate per pose and axis as read, °/s.
+    pub raw_dps: Vec<[f64; 3]>,
+    /// Calibrated mean rate per pose and axis, °/s.
+    pub calibrated_dps: Vec<[f64; 3]>,
+    /// Name of each pose.
+    pub labels: Vec<String>,
+    /// The scale and misalignment fit from the moves between holds, as (what, value) rows;
+    /// empty when only the bias was calibrated.
+    pub scale_fit: Vec<(String, String)>,
+}
+
+/// The errors at rest of one parameter set, as the session measured them on the board.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RestCheck {
+    /// `| |ā| − g |`, mg.
+    pub accel_mg: Option<f64>,
+    /// `| |m̄| − H |`, % of the field.
+    pub mag_pct: Option<f64>,
+    /// `|ω̄|`, °/s.
+    pub gyro_dps: Option<f64>,
+}
+
+impl RestCheck {
+    fn of(value: &Value) -> Option<Self> {
+        value.is_object().then(|| Self {
+            accel_mg: value["accel_error_mg"].as_f64(),
+            mag_pct: value["mag_error_pct"].as_f64(),
+            gyro_dps: value["gyro_rate_dps"].as_f64(),
+        })
+    }
 }
 
 /// Magnetometer samples over many orientations.
@@ -130,11 +169,20 @@ pub struct ReportData {
     pub accel: Option<AccelPoses>,
     /// Magnetometer samples, if any.
     pub mag: Option<MagSamples>,
+    /// Gyroscope rate at rest per pose, if any.
+    pub gyro: Option<GyroPoses>,
     /// Fitted parameters per sensor.
     pub parameters: Vec<SensorParameters>,
+    /// Terms beyond `A` and `b` in the set (temperature, non-linearity, g-sensitivity), as
+    /// (sensor, term, values with unit) rows.
+    pub extended_terms: Vec<(String, String, String)>,
+    /// The checks at rest on the board, one column per set: `before` (raw), and after the base
+    /// set and, with `--analyze`, after the extended set on the board.
+    pub rest_checks: Vec<(String, RestCheck)>,
     /// Further uncertainty figures as (name, value with unit).
     pub uncertainty_notes: Vec<(String, String)>,
-    /// Overall verdict: `good`, `marginal`, `poor` or a short phrase.
+    /// Overall verdict: `good`, `marginal`, `poor` or a short phrase (`fitted` when nothing
+    /// was checked on held-out data: the badge is then neutral).
     pub verdict_level: String,
     /// Reasons and remarks behind the verdict, one sentence each.
     pub verdict: Vec<String>,
@@ -268,14 +316,32 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         .map_err(|e| format_error(&poses_path, e.to_string()))?;
     let mut raw = Vec::new();
     let mut temp = Vec::new();
+    let mut labels = Vec::new();
+    let mut gyro_raw = Vec::new();
     for pose in poses.as_array().into_iter().flatten() {
         let stats = &pose["stats"];
         let mean = vec3_of(&stats["accel_mean"])
             .ok_or_else(|| format_error(&poses_path, "a pose has no `stats.accel_mean` triple"))?;
         let t = stats["temp_mean_c"].as_f64();
+        labels.push(pose["target"].as_str().map_or_else(
+            || up_label(&vec3_of(&pose["target_up"]).unwrap_or(mean)),
+            str::to_string,
+        ));
+        gyro_raw.push(vec3_of(&stats["gyro_mean"]).map(|g| (g, t.unwrap_or(25.0))));
         raw.push(mean);
         temp.push(t);
     }
+    let labels = numbered(labels);
+    let gyro = gyro_raw.iter().all(Option::is_some).then(|| GyroPoses {
+        raw_dps: gyro_raw.iter().flatten().map(|(g, _)| degrees(g)).collect(),
+        calibrated_dps: gyro_raw
+            .iter()
+            .flatten()
+            .map(|(g, t)| degrees(&Vec3::from(apply_sensor(&set.gyro, (*g).into(), *t))))
+            .collect(),
+        labels: labels.clone(),
+        scale_fit: Vec::new(),
+    });
     let calibrated = raw
         .iter()
         .zip(&temp)
@@ -286,6 +352,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         calibrated,
         temp_c: temp,
         gravity,
+        labels,
     });
 
     let MagColumns {
@@ -315,7 +382,9 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     let mut data = ReportData {
         source: dir.display().to_string(),
         accel,
+        gyro: gyro.filter(|g| !g.raw_dps.is_empty()),
         mag,
+        extended_terms: extended_terms(&params),
         parameters: [
             ("accelerometer", "m/s²", &params.accel),
             ("gyroscope", "rad/s", &params.gyro),
@@ -356,21 +425,42 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         if let Some(map) = summary["uncertainties"].as_object() {
             data.uncertainty_notes = map
                 .iter()
-                .map(|(key, value)| (key.clone(), compact(value)))
+                .map(|(key, value)| uncertainty_in_words(key, value))
                 .collect();
         }
-        for (key, label) in [
-            ("accel_rest_error_mg", "|a| error at rest after writing, mg"),
-            (
-                "mag_rest_error_pct",
-                "|m| error at rest after writing, % of the field",
-            ),
-            ("gyro_rest_error_dps", "|ω| at rest after writing, °/s"),
-        ] {
-            if let Some(v) = summary[key].as_f64() {
-                data.uncertainty_notes
-                    .push((label.to_string(), format!("{v:.3}")));
+        // With `--analyze` the extended set replaced the base set on the board: both checks.
+        let extended =
+            summary["on_board_after"].is_object() && summary["on_board_after"] != summary["after"];
+        let mut columns = vec![("before (raw)", "before")];
+        if extended {
+            columns.push(("after, base set", "after"));
+            columns.push(("after, extended set (on the board)", "on_board_after"));
+        } else {
+            columns.push(("after (on the board)", "after"));
+        }
+        for (label, key) in columns {
+            if let Some(check) = RestCheck::of(&summary[key]) {
+                data.rest_checks.push((label.to_string(), check));
             }
+        }
+        if data.rest_checks.is_empty() {
+            // Summaries without the before/after objects carry the after-values alone.
+            let check = RestCheck {
+                accel_mg: summary["accel_rest_error_mg"].as_f64(),
+                mag_pct: summary["mag_rest_error_pct"].as_f64(),
+                gyro_dps: summary["gyro_rest_error_dps"].as_f64(),
+            };
+            if check
+                .accel_mg
+                .or(check.mag_pct)
+                .or(check.gyro_dps)
+                .is_some()
+            {
+                data.rest_checks.push(("after".to_string(), check));
+            }
+        }
+        if let Some(gyro) = data.gyro.as_mut() {
+            gyro.scale_fit = gyro_scale_rows(&summary["gyro_scale"]);
         }
     } else {
         data.verdict_level = "unknown".to_string();
@@ -380,16 +470,231 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     Ok(data)
 }
 
-/// A JSON value as short text (numbers to 4 significant digits).
-fn compact(value: &Value) -> String {
-    match value {
-        Value::Number(n) => n.as_f64().map_or(n.to_string(), |v| format!("{v:.4}")),
-        Value::Array(items) => format!(
-            "[{}]",
-            items.iter().map(compact).collect::<Vec<_>>().join(", ")
-        ),
-        other => other.to_string(),
+/// Text for a value that was not estimated (NaN, infinite or absent in the input).
+pub const NOT_ESTIMATED: &str = "unknown / not estimated";
+
+/// Rates in rad/s as °/s per axis.
+fn degrees(v: &Vec3) -> [f64; 3] {
+    [v.x, v.y, v.z].map(f64::to_degrees)
+}
+
+/// A pose's name from its up direction, e.g. `+X-Y up`.
+pub fn up_label(up: &Vec3) -> String {
+    match up.try_normalize(0.0) {
+        Some(u) => format!("{} up", crate::session::targets::direction_name(&u)),
+        None => "pose".to_string(),
     }
+}
+
+/// Labels made distinct: a repeated name gets its occurrence (`+Z up`, `+Z up #2`).
+pub fn numbered(labels: Vec<String>) -> Vec<String> {
+    let mut seen = std::collections::HashMap::<String, usize>::new();
+    labels
+        .into_iter()
+        .map(|label| {
+            let count = seen.entry(label.clone()).or_insert(0);
+            *count += 1;
+            if *count == 1 {
+                label
+            } else {
+                format!("{label} #{count}")
+            }
+        })
+        .collect()
+}
+
+/// A summary's uncertainty entry in words: what it is, per axis or worst direction, its unit
+/// and that it is one standard deviation.
+fn uncertainty_in_words(key: &str, value: &Value) -> (String, String) {
+    let (name, unit) = match key {
+        "accel_bias_mg" => ("accelerometer offset, per axis x, y, z", "mg"),
+        "accel_scale_ppm" => ("accelerometer scale factor, per axis x, y, z", "ppm"),
+        "accel_norm_mg" => ("expected error of |a| in the worst direction", "mg"),
+        "gyro_bias_dps" => ("gyroscope bias, per axis x, y, z", "°/s"),
+        "mag_bias_ut" => ("magnetometer offset, per axis x, y, z", "µT"),
+        "mag_norm_pct" => (
+            "expected error of |m| in the worst direction",
+            "% of the field",
+        ),
+        "alignment_deg" => (
+            "angle between the magnetometer's and the accelerometer's frames (RMS of the axes)",
+            "°",
+        ),
+        other => (other, ""),
+    };
+    let values: Vec<Option<f64>> = match value {
+        Value::Array(items) => items.iter().map(Value::as_f64).collect(),
+        other => vec![other.as_f64()],
+    };
+    let known = |v: &Option<f64>| v.is_some_and(f64::is_finite);
+    // One "not estimated" for the row rather than one per axis.
+    let text = if values.iter().any(known) {
+        values
+            .iter()
+            .map(|v| match v.filter(|v| v.is_finite()) {
+                Some(_) => format!("± {}", with_unit(*v, unit)),
+                None => NOT_ESTIMATED.to_string(),
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    } else {
+        NOT_ESTIMATED.to_string()
+    };
+    (name.to_string(), text)
+}
+
+/// `value unit` to 3 significant digits, or [`NOT_ESTIMATED`].
+fn with_unit(value: Option<f64>, unit: &str) -> String {
+    match value.filter(|v| v.is_finite()) {
+        // Degrees are written against the number (1.2°), other units after a space.
+        Some(v) if unit == "°" => format!("{}°", significant(v, 3)),
+        Some(v) => format!("{} {unit}", significant(v, 3))
+            .trim_end()
+            .to_string(),
+        None => NOT_ESTIMATED.to_string(),
+    }
+}
+
+/// `value` to `digits` significant digits in plain notation (scientific below 1e-4).
+fn significant(value: f64, digits: usize) -> String {
+    if value == 0.0 {
+        return "0".to_string();
+    }
+    let magnitude = value.abs().log10().floor() as i32;
+    if !(-4..6).contains(&magnitude) {
+        return format!("{value:.prec$e}", prec = digits.saturating_sub(1));
+    }
+    let decimals = (digits as i32 - 1 - magnitude).max(0) as usize;
+    format!("{value:.decimals$}")
+}
+
+/// The summary's gyroscope scale fit (`gyro_scale`) as rows for the report.
+fn gyro_scale_rows(value: &Value) -> Vec<(String, String)> {
+    let number = |key: &str| value[key].as_f64();
+    let triple = |key: &str| -> Option<[f64; 3]> {
+        let a = value[key].as_array()?;
+        Some([
+            a.first()?.as_f64()?,
+            a.get(1)?.as_f64()?,
+            a.get(2)?.as_f64()?,
+        ])
+    };
+    let Some(scale) = triple("scale") else {
+        return Vec::new();
+    };
+    let sigma = triple("scale_sigma_pct").unwrap_or([f64::NAN; 3]);
+    // `scale` is the correction (diagonal of A); the sensor reads high by its inverse, as the
+    // parameter table's scale error says.
+    let mut rows = vec![(
+        "scale error of x, y, z (how far the sensor reads from nominal, ± one standard \
+         deviation)"
+            .to_string(),
+        (0..3)
+            .map(|i| {
+                format!(
+                    "{:+.3} % ± {}",
+                    (1.0 / scale[i] - 1.0) * 100.0,
+                    with_unit(Some(sigma[i]), "%")
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+    )];
+    rows.push((
+        "largest misalignment between axes (± one standard deviation)".to_string(),
+        format!(
+            "{} ± {}",
+            with_unit(number("misalignment_deg"), "°"),
+            with_unit(number("misalignment_sigma_deg"), "°")
+        ),
+    ));
+    if let (Some(used), Some(recorded)) = (number("moves_used"), number("moves_recorded")) {
+        rows.push((
+            "moves between holds used for the fit".to_string(),
+            format!("{used:.0} of {recorded:.0}"),
+        ));
+    }
+    rows.push((
+        "angle mismatch of the moves after the fit (RMS)".to_string(),
+        with_unit(number("rms_deg"), "°"),
+    ));
+    if let Some(tilt) = triple("tilt_deg") {
+        rows.push((
+            "rotation about x, y, z over all moves".to_string(),
+            tilt.map(|t| format!("{t:.0}°")).join(", "),
+        ));
+    }
+    rows
+}
+
+/// The set's terms beyond `A` and `b` as (sensor, term, values) rows.
+fn extended_terms(params: &ParamsFile) -> Vec<(String, String, String)> {
+    let mut rows = Vec::new();
+    for (name, unit, sensor) in [
+        ("accelerometer", "m/s²", &params.accel),
+        ("gyroscope", "rad/s", &params.gyro),
+        ("magnetometer", "µT", &params.mag),
+    ] {
+        let t_ref = sensor
+            .t_ref_c
+            .map_or(String::new(), |t| format!(" (T − {t:.2} °C)"));
+        if let Some(bias) = &sensor.bias_temp {
+            for (k, coeffs) in bias.coeffs.iter().enumerate() {
+                if coeffs.iter().any(|c| *c != 0.0) {
+                    rows.push((
+                        name.to_string(),
+                        format!(
+                            "offset per {}{t_ref}",
+                            crate::analysis::effects::celsius_power(k + 1)
+                        ),
+                        axes_text(
+                            coeffs,
+                            &format!("{unit}/{}", crate::analysis::effects::celsius_power(k + 1)),
+                        ),
+                    ));
+                }
+            }
+        }
+        if let Some(scale) = sensor.scale_temp.filter(|s| s.iter().any(|c| *c != 0.0)) {
+            rows.push((
+                name.to_string(),
+                format!("scale change per °C{t_ref}"),
+                axes_text(&scale.map(|v| v * 1e6), "ppm/°C"),
+            ));
+        }
+        if let Some(nl) = &sensor.nonlinearity {
+            rows.push((
+                name.to_string(),
+                "quadratic non-linearity".to_string(),
+                axes_text(&nl.quadratic, &format!("1/({unit})")),
+            ));
+            rows.push((
+                name.to_string(),
+                "cubic non-linearity".to_string(),
+                axes_text(&nl.cubic, &format!("1/({unit})²")),
+            ));
+        }
+    }
+    if let Some(k) = &params.gyro_g_sensitivity {
+        for (r, row) in k.iter().enumerate() {
+            rows.push((
+                "gyroscope".to_string(),
+                format!("g-sensitivity, row {}", ["x", "y", "z"][r]),
+                axes_text(&row.map(f64::to_degrees), "°/s per m/s²"),
+            ));
+        }
+    }
+    rows
+}
+
+/// `x …, y …, z … unit` in one number format.
+fn axes_text(values: &[f64; 3], unit: &str) -> String {
+    let parts: Vec<String> = ["x", "y", "z"]
+        .iter()
+        .zip(values)
+        .map(|(axis, v)| format!("{axis} {v:+.3e}"))
+        .collect();
+    format!("{} {unit}", parts.join(", "))
 }
 
 /// Text made safe for HTML.
@@ -417,44 +722,112 @@ fn rms(values: &[f64]) -> f64 {
     (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt()
 }
 
-fn number(value: f64) -> String {
-    let magnitude = value.abs();
-    if value == 0.0 || (1e-2..1e5).contains(&magnitude) {
-        format!("{value:.6}")
-    } else {
-        format!("{value:.4e}")
+/// How one table column writes its numbers: fixed with six decimals when every value of the
+/// column is between 1e-4 and 1e5 (or zero), otherwise scientific with four, so a column never
+/// mixes the two.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ColumnFormat {
+    /// `1.234567`
+    Fixed,
+    /// `1.2346e-7`
+    Scientific,
+}
+
+impl ColumnFormat {
+    /// The format that suits every finite value of `column`.
+    pub fn for_column(column: &[f64]) -> Self {
+        // Six decimals keep at least three significant digits down to 1e-4.
+        let fits = |v: &f64| *v == 0.0 || (1e-4..1e5).contains(&v.abs());
+        if column.iter().filter(|v| v.is_finite()).all(fits) {
+            ColumnFormat::Fixed
+        } else {
+            ColumnFormat::Scientific
+        }
+    }
+
+    /// `value` in this format, or [`NOT_ESTIMATED`].
+    pub fn show(self, value: f64) -> String {
+        if !value.is_finite() {
+            return NOT_ESTIMATED.to_string();
+        }
+        match self {
+            ColumnFormat::Fixed => format!("{value:.6}"),
+            ColumnFormat::Scientific => format!("{value:.4e}"),
+        }
     }
 }
 
 fn parameter_table(p: &SensorParameters) -> String {
-    let cell = |value: f64, std: Option<f64>| match std {
-        Some(s) if s > 0.0 => format!(
+    let cell = |format: ColumnFormat, value: f64, std: Option<f64>| match std {
+        Some(s) if s > 0.0 && s.is_finite() => format!(
             "<td>{}<span class=std> ± {s:.2e}</span></td>",
-            number(value)
+            format.show(value)
         ),
-        _ => format!("<td>{}</td>", number(value)),
+        _ => format!("<td>{}</td>", format.show(value)),
     };
+    let columns: [Vec<f64>; 4] = [0, 1, 2, 3].map(|c| {
+        (0..3)
+            .map(|r| if c < 3 { p.a[(r, c)] } else { p.b[r] })
+            .collect()
+    });
+    let formats = columns.each_ref().map(|c| ColumnFormat::for_column(c));
     let mut rows = String::new();
     for r in 0..3 {
         rows.push_str("<tr>");
         rows.push_str(&format!("<th>row {}</th>", r + 1));
-        for c in 0..3 {
-            rows.push_str(&cell(p.a[(r, c)], p.std.map(|s| s.a[(r, c)])));
+        for (c, format) in formats.iter().enumerate().take(3) {
+            rows.push_str(&cell(*format, p.a[(r, c)], p.std.map(|s| s.a[(r, c)])));
         }
-        rows.push_str(&cell(p.b[r], p.std.map(|s| s.b[r])));
+        rows.push_str(&cell(formats[3], p.b[r], p.std.map(|s| s.b[r])));
         rows.push_str("</tr>");
     }
     let readable = p
         .to_nominal
-        .and_then(|k| gain::gain(&p.a, k))
-        .map_or(String::new(), |g| {
-            format!("<p>{}</p>", escape(&gain::gain_text(&g, 3)))
+        .and_then(|k| gain::gain(&p.a, k).map(|g| (k, g)))
+        .map_or(String::new(), |(k, g)| {
+            gain_table(&g, k, &p.unit_in, &p.unit_out)
         });
     format!(
         "<h3>{}</h3><p class=small>y = A·(x − b); x in {}, y in {}</p><table><tr><th></th><th colspan=3>A</th><th>b</th></tr>{rows}</table>{readable}",
         escape(&p.name),
         escape(&p.unit_in),
         escape(&p.unit_out)
+    )
+}
+
+/// The matrix read as a person reads it: scale factor and scale error per axis and the angles
+/// between the axes, with the unit conversion (`to_nominal` output units per input unit) apart.
+fn gain_table(g: &gain::Gain, to_nominal: f64, unit_in: &str, unit_out: &str) -> String {
+    let mut rows = String::from(
+        "<tr><th></th><th>x</th><th>y</th><th>z</th></tr><tr><th>scale factor against nominal</th>",
+    );
+    for s in g.scale {
+        rows.push_str(&format!("<td>{s:.5}</td>"));
+    }
+    rows.push_str("</tr><tr><th>scale error</th>");
+    for s in g.scale {
+        rows.push_str(&format!("<td>{:+.3} %</td>", (s - 1.0) * 100.0));
+    }
+    rows.push_str(
+        "</tr><tr><th></th><th>yz</th><th>xz</th><th>xy</th></tr><tr><th>axes off 90° by</th>",
+    );
+    for d in g.skew_deg {
+        rows.push_str(&format!("<td>{d:+.3}°</td>"));
+    }
+    rows.push_str("</tr>");
+    let conversion = if (to_nominal - 1.0).abs() < 1e-12 {
+        String::new()
+    } else {
+        format!(
+            " The unit conversion, 1 {} = {} {}, is taken out: A alone would hide these \
+             errors in it.",
+            escape(unit_in),
+            significant(to_nominal, 6),
+            escape(unit_out)
+        )
+    };
+    format!(
+        "<p class=small>Read as scale factors and angles between the sensing axes.{conversion}</p><table>{rows}</table>"
     )
 }
 
@@ -500,13 +873,32 @@ const MIN_TEMPERATURE_SPAN_C: f64 = 0.5;
 
 /// Whether `temps` span enough to plot against.
 fn temperature_varies(temps: &[f64]) -> bool {
-    let (lo, hi) = temps
+    let (lo, hi) = temperature_span(temps);
+    hi - lo >= MIN_TEMPERATURE_SPAN_C
+}
+
+fn temperature_span(temps: &[f64]) -> (f64, f64) {
+    temps
         .iter()
         .filter(|t| t.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
             (lo.min(*t), hi.max(*t))
-        });
-    hi - lo >= MIN_TEMPERATURE_SPAN_C
+        })
+}
+
+/// Why there is no plot against temperature: it stayed within [`MIN_TEMPERATURE_SPAN_C`].
+fn constant_temperature_text(what: &str, temps: &[f64]) -> String {
+    let (lo, hi) = temperature_span(temps);
+    if !lo.is_finite() {
+        return format!(
+            "No temperature was recorded with the {what}, so there is no plot against it."
+        );
+    }
+    format!(
+        "Temperature constant at {:.1} °C during the {what} (span {:.2} °C, under {MIN_TEMPERATURE_SPAN_C} °C), so there is no plot against it.",
+        (lo + hi) / 2.0,
+        hi - lo
+    )
 }
 
 fn figure(svg: &str) -> String {
@@ -532,7 +924,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
                 &format!("raw {}{}", axes.2, axes.3),
                 &mag.raw_unit,
                 &mag.raw,
-                &outline,
+                (&outline, "fitted ellipsoid"),
                 axes,
                 false,
             )?));
@@ -544,7 +936,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
                 &format!("calibrated {}{}", axes.2, axes.3),
                 &mag.calibrated_unit,
                 &mag.calibrated,
-                &sphere,
+                (&sphere, "reference sphere"),
                 axes,
                 true,
             )?));
@@ -596,16 +988,25 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             &pairs(&mag.time_s, &before),
             &pairs(&mag.time_s, &after),
         )?));
-        if let Some(temp) = mag.temp_c.as_ref().filter(|t| temperature_varies(t)) {
-            body.push_str(&figure(&plots::residual_against(
-                "magnetometer norm error against temperature",
-                "temperature (°C)",
-                "norm error (%)",
-                &pairs(temp, &before),
-                &pairs(temp, &after),
-            )?));
+        let mut constant = None;
+        match mag.temp_c.as_ref() {
+            Some(temp) if temperature_varies(temp) => {
+                body.push_str(&figure(&plots::residual_against(
+                    "magnetometer norm error against temperature",
+                    "temperature (°C)",
+                    "norm error (%)",
+                    &pairs(temp, &before),
+                    &pairs(temp, &after),
+                )?));
+            }
+            Some(temp) => constant = Some(constant_temperature_text("magnetometer samples", temp)),
+            None => constant = Some(constant_temperature_text("magnetometer samples", &[])),
         }
-        body.push_str("</div><h3>Sphere coverage</h3>");
+        body.push_str("</div>");
+        if let Some(text) = constant {
+            body.push_str(&format!("<p class=small>{}</p>", escape(&text)));
+        }
+        body.push_str("<h3>Sphere coverage</h3>");
         let cover = region_coverage(mag);
         if let Some(cover) = &cover {
             body.push_str(&figure(&plots::coverage_map(cover, region_min_samples())?));
@@ -637,21 +1038,19 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             ),
         ));
         body.push_str("<h2>Accelerometer</h2><p>Error of |a| against local gravity per pose, before and after calibration, each on its own scale.</p>");
-        let labels: Vec<String> = accel
-            .calibrated
-            .iter()
-            .map(|v| crate::session::targets::direction_name(&v.normalize()))
-            .collect();
+        let labels = &accel.labels;
         body.push_str(&figure(&plots::pose_bars(
             "accelerometer before calibration: |a| − g per pose",
+            "error of |a| (mg)",
             &before,
-            &labels,
+            labels,
             false,
         )?));
         body.push_str(&figure(&plots::pose_bars(
-            "accelerometer after calibration: |a| − g per pose",
+            "accelerometer after calibration: |a| − g per pose (own scale)",
+            "error of |a| (mg)",
             &after,
-            &labels,
+            labels,
             true,
         )?));
         let with_temp: Vec<(f64, f64, f64)> = accel
@@ -669,15 +1068,44 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
                 &with_temp.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(),
                 &with_temp.iter().map(|p| (p.0, p.2)).collect::<Vec<_>>(),
             )?));
+        } else {
+            body.push_str(&format!(
+                "<p class=small>{}</p>",
+                escape(&constant_temperature_text("accelerometer poses", &temps))
+            ));
         }
+    }
+
+    if let Some(gyro) = &data.gyro {
+        body.push_str(&gyro_section(gyro, &mut summary_rows)?);
     }
 
     let mut parameters = String::new();
     for p in &data.parameters {
         parameters.push_str(&parameter_table(p));
     }
+    if !data.extended_terms.is_empty() {
+        parameters.push_str(
+            "<h3>Extended terms on the board</h3><p class=small>Terms beyond A and b that the \
+             firmware applies (written by the residual analysis).</p><table><tr><th>sensor</th>\
+             <th>term</th><th>values</th></tr>",
+        );
+        for (sensor, term, values) in &data.extended_terms {
+            parameters.push_str(&format!(
+                "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
+                escape(sensor),
+                escape(term),
+                escape(values)
+            ));
+        }
+        parameters.push_str("</table>");
+    }
     if !data.uncertainty_notes.is_empty() {
-        parameters.push_str("<h3>Uncertainties (one sigma) and checks</h3><table>");
+        parameters.push_str(
+            "<h3>How well the parameters are known</h3><p class=small>Each figure is one \
+             standard deviation (±): the true value lies within it about two times in three, \
+             and within three times it almost always.</p><table class=text>",
+        );
         for (name, value) in &data.uncertainty_notes {
             parameters.push_str(&format!(
                 "<tr><th>{}</th><td>{}</td></tr>",
@@ -688,11 +1116,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
         parameters.push_str("</table>");
     }
 
-    let level_class = match data.verdict_level.as_str() {
-        "good" => "good",
-        "poor" => "poor",
-        _ => "marginal",
-    };
+    let level_class = badge_class(&data.verdict_level);
     let mut verdict = format!(
         "<p class=\"verdict {level_class}\">Verdict: {}</p>",
         escape(&data.verdict_level)
@@ -704,7 +1128,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
         }
         verdict.push_str("</ul>");
     }
-    let mut summary = String::from("<table>");
+    let mut summary = String::from("<table class=text>");
     for (name, value) in &summary_rows {
         summary.push_str(&format!(
             "<tr><th>{}</th><td>{}</td></tr>",
@@ -713,6 +1137,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
         ));
     }
     summary.push_str("</table>");
+    summary.push_str(&rest_check_table(&data.rest_checks));
     let notes: String = data
         .notes
         .iter()
@@ -750,7 +1175,132 @@ table{border-collapse:collapse;margin:8px 0}th,td{border:1px solid #ddd;padding:
 th{background:#f4f4f4;text-align:left}.std{color:#777}.small{color:#666;font-size:13px}\
 .row{display:flex;flex-wrap:wrap;gap:8px}.fig{display:inline-block}\
 .verdict{font-size:18px;font-weight:bold;padding:8px 12px;display:inline-block;border-radius:4px}\
-.good{background:#d9f0d3}.marginal{background:#fee8c8}.poor{background:#f4c7c3}";
+.good{background:#d9f0d3}.marginal{background:#fee8c8}.poor{background:#f4c7c3}.neutral{background:#e8e8e8}\
+pre{white-space:pre-wrap;overflow-wrap:anywhere;font-size:12px;background:#fafafa;padding:8px}\
+table.text td{text-align:left}";
+
+/// The badge's colour class for a verdict: green, orange and red only for the session's own
+/// levels; anything else (`fitted`: no held-out check) is neutral grey.
+pub fn badge_class(level: &str) -> &'static str {
+    match level {
+        "good" => "good",
+        "marginal" => "marginal",
+        "poor" => "poor",
+        _ => "neutral",
+    }
+}
+
+/// The errors at rest on the board, one column per set.
+fn rest_check_table(checks: &[(String, RestCheck)]) -> String {
+    if checks.is_empty() {
+        return String::new();
+    }
+    let mut text = String::from("<h3>Checks at rest on the board</h3><table><tr><th></th>");
+    for (name, _) in checks {
+        text.push_str(&format!("<th>{}</th>", escape(name)));
+    }
+    text.push_str("<th>target</th></tr>");
+    type Row = (
+        &'static str,
+        fn(&RestCheck) -> Option<f64>,
+        &'static str,
+        usize,
+        &'static str,
+    );
+    let rows: [Row; 3] = [
+        ("|a| error", |c| c.accel_mg, "mg", 3, "< 2 mg"),
+        ("|m| error", |c| c.mag_pct, "%", 3, "< 0.5 %"),
+        ("gyroscope rate", |c| c.gyro_dps, "°/s", 4, ""),
+    ];
+    for (name, value, unit, digits, target) in rows {
+        text.push_str(&format!("<tr><th>{name}</th>"));
+        for (_, check) in checks {
+            let cell = value(check)
+                .filter(|v| v.is_finite())
+                .map_or(NOT_ESTIMATED.to_string(), |v| {
+                    format!("{v:.digits$} {unit}")
+                });
+            text.push_str(&format!("<td>{}</td>", escape(&cell)));
+        }
+        text.push_str(&format!("<td>{}</td></tr>", escape(target)));
+    }
+    text.push_str("</table>");
+    text
+}
+
+/// RMS over poses of each axis.
+fn axis_rms(values: &[[f64; 3]]) -> [f64; 3] {
+    [0, 1, 2].map(|i| rms(&values.iter().map(|v| v[i]).collect::<Vec<_>>()))
+}
+
+/// The gyroscope's section: rate at rest per pose and axis before and after (each on its own
+/// scale), the per-axis RMS, and the scale fit from the moves.
+fn gyro_section(
+    gyro: &GyroPoses,
+    summary_rows: &mut Vec<(String, String)>,
+) -> Result<String, ReportError> {
+    let before = axis_rms(&gyro.raw_dps);
+    let after = axis_rms(&gyro.calibrated_dps);
+    let per_axis = |v: [f64; 3]| {
+        v.iter()
+            .map(|r| format!("{r:.4}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    summary_rows.push((
+        "gyroscope rate at rest, RMS over poses, x, y, z".to_string(),
+        format!(
+            "{} °/s before, {} °/s after ({} poses)",
+            per_axis(before),
+            per_axis(after),
+            gyro.raw_dps.len()
+        ),
+    ));
+    let mut body = String::from(
+        "<h2>Gyroscope</h2><p>Mean rate in each still pose, per axis, before and after \
+         calibration, each on its own scale. Held still the true rate is the Earth's rotation \
+         (0.004 °/s at most) plus whatever the hands turned the board during the hold, so what \
+         remains after calibration is the bias the fit left and that sway.</p>",
+    );
+    body.push_str(&figure(&plots::axis_bars(
+        "gyroscope before calibration: rate at rest per pose",
+        "rate (°/s)",
+        &gyro.raw_dps,
+        &gyro.labels,
+    )?));
+    body.push_str(&figure(&plots::axis_bars(
+        "gyroscope after calibration: residual rate at rest per pose (own scale)",
+        "rate (°/s)",
+        &gyro.calibrated_dps,
+        &gyro.labels,
+    )?));
+    body.push_str("<table><tr><th>RMS over poses</th><th>x</th><th>y</th><th>z</th></tr>");
+    for (name, values) in [("before, °/s", before), ("after, °/s", after)] {
+        body.push_str(&format!("<tr><th>{name}</th>"));
+        for v in values {
+            body.push_str(&format!("<td>{v:.4}</td>"));
+        }
+        body.push_str("</tr>");
+    }
+    body.push_str("</table>");
+    if gyro.scale_fit.is_empty() {
+        body.push_str(
+            "<p class=small>Scale and misalignment: not estimated (only the bias was \
+             calibrated).</p>",
+        );
+    } else {
+        body.push_str("<h3>Scale and misalignment from the moves between holds</h3><table>");
+        for (name, value) in &gyro.scale_fit {
+            body.push_str(&format!(
+                "<tr><th>{}</th><td>{}</td></tr>",
+                escape(name),
+                escape(value)
+            ));
+        }
+        body.push_str("</table>");
+    }
+    Ok(body)
+}
 
 /// The name of the report file in its directory.
 pub const REPORT_FILE: &str = "report.html";

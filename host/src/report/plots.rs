@@ -111,12 +111,13 @@ pub fn ellipse_outline(centre: &Vec3, shape: &Mat3, i: usize, j: usize) -> Vec<(
         .collect()
 }
 
-/// One projection of magnetometer samples with a closed outline (fitted ellipse or sphere).
+/// One projection of magnetometer samples with a closed outline (fitted ellipse or sphere),
+/// the legend naming both (`outline_label`, e.g. "fitted ellipsoid").
 pub fn projection(
     title: &str,
     unit: &str,
     points: &[Vec3],
-    outline: &[(f64, f64)],
+    (outline, outline_label): (&[(f64, f64)], &str),
     axes: (usize, usize, &str, &str),
     after: bool,
 ) -> Result<String, PlotError> {
@@ -136,6 +137,7 @@ pub fn projection(
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 15))
             .margin(8)
+            .margin_right(20)
             .x_label_area_size(32)
             .y_label_area_size(48)
             .build_cartesian_2d(xr, yr)
@@ -154,72 +156,191 @@ pub fn projection(
                     .iter()
                     .map(|p| Circle::new(*p, 2, colour.mix(0.45).filled())),
             )
-            .map_err(plot_error(FIGURE))?;
+            .map_err(plot_error(FIGURE))?
+            .label(if after {
+                "calibrated samples"
+            } else {
+                "raw samples"
+            })
+            .legend(move |(x, y)| Circle::new((x + 5, y), 3, colour.filled()));
+        if !outline.is_empty() {
+            chart
+                .draw_series(LineSeries::new(
+                    outline.iter().copied(),
+                    SHAPE.stroke_width(2),
+                ))
+                .map_err(plot_error(FIGURE))?
+                .label(outline_label)
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 12, y)], SHAPE.stroke_width(2)));
+        }
         chart
-            .draw_series(LineSeries::new(
-                outline.iter().copied(),
-                SHAPE.stroke_width(2),
-            ))
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 11))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
             .map_err(plot_error(FIGURE))?;
         root.present().map_err(plot_error(FIGURE))?;
     }
     Ok(svg)
 }
 
-/// Error of `|a|` per pose, mg, as bars on their own scale (so the small "after" errors are as
-/// readable as the large "before" ones), each bar labelled with its pose's orientation.
+/// Above this many poses the pose labels stand vertical, so neighbouring labels never overlap.
+pub const VERTICAL_LABELS_ABOVE: usize = 16;
+
+/// Width of a per-pose plot's drawing, px.
+const BARS_WIDTH: u32 = 1020;
+
+/// Whether the pose labels stand vertical: above [`VERTICAL_LABELS_ABOVE`] poses, or when the
+/// longest label (about 7 px a character at 12 px) is wider than its bar's slot.
+pub fn labels_vertical(labels: &[String]) -> bool {
+    let longest = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+    let slot = f64::from(BARS_WIDTH - 100) / labels.len().max(1) as f64;
+    labels.len() > VERTICAL_LABELS_ABOVE || longest as f64 * 7.0 > slot * 0.9
+}
+
+/// Height of the label area under a per-pose plot: room for the longest label when they stand
+/// vertical.
+fn pose_label_area(labels: &[String]) -> u32 {
+    if labels_vertical(labels) {
+        let longest = labels.iter().map(|l| l.chars().count()).max().unwrap_or(4);
+        (longest as u32 * 7 + 40).clamp(60, 200)
+    } else {
+        48
+    }
+}
+
+/// Draws each pose's label under its bar: horizontal for a few short labels, vertical (reading
+/// top to bottom) otherwise ([`labels_vertical`]).
+fn pose_labels<'a>(
+    root: &DrawingArea<SVGBackend<'a>, plotters::coord::Shift>,
+    chart: &ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    labels: &[String],
+    y_bottom: f64,
+    figure: &'static str,
+) -> Result<(), PlotError> {
+    use plotters::style::text_anchor::{HPos, Pos, VPos};
+    let vertical = labels_vertical(labels);
+    for (k, label) in labels.iter().enumerate() {
+        let (px, py) = chart.backend_coord(&(k as f64, y_bottom));
+        let font = ("sans-serif", 12).into_font();
+        let style = if vertical {
+            TextStyle::from(font.transform(FontTransform::Rotate90))
+                .pos(Pos::new(HPos::Left, VPos::Center))
+        } else {
+            TextStyle::from(font).pos(Pos::new(HPos::Center, VPos::Top))
+        };
+        root.draw(&Text::new(label.clone(), (px, py + 4), style))
+            .map_err(plot_error(figure))?;
+    }
+    Ok(())
+}
+
+/// Per-pose bars on their own scale (so small "after" values are as readable as large "before"
+/// ones), each bar labelled with its pose's orientation; `y_desc` names the value and unit.
 pub fn pose_bars(
     title: &str,
-    values_mg: &[f64],
+    y_desc: &str,
+    values: &[f64],
     labels: &[String],
     after: bool,
 ) -> Result<String, PlotError> {
-    const FIGURE: &str = "accelerometer residual per pose";
-    let n = values_mg.len();
-    let yr = padded(values_mg.iter().copied().chain([0.0]));
-    let colour = if after { AFTER } else { BEFORE };
+    let series = [(
+        values.to_vec(),
+        if after { AFTER } else { BEFORE },
+        if after {
+            "after calibration"
+        } else {
+            "before calibration"
+        },
+    )];
+    grouped_bars(title, y_desc, &series, labels, "residual per pose")
+}
+
+/// Colours of the x, y and z axes in the per-axis plots.
+const AXIS_COLOURS: [RGBColor; 3] = [
+    RGBColor(228, 26, 28),
+    RGBColor(77, 175, 74),
+    RGBColor(55, 126, 184),
+];
+
+/// One value per pose and axis (e.g. the gyroscope's rate at rest, °/s) as three bars per pose
+/// in the axes' colours, with a legend, on the plot's own scale.
+pub fn axis_bars(
+    title: &str,
+    y_desc: &str,
+    values: &[[f64; 3]],
+    labels: &[String],
+) -> Result<String, PlotError> {
+    let series: Vec<(Vec<f64>, RGBColor, &str)> = ["x axis", "y axis", "z axis"]
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            (
+                values.iter().map(|v| v[i]).collect(),
+                AXIS_COLOURS[i],
+                *name,
+            )
+        })
+        .collect();
+    grouped_bars(title, y_desc, &series, labels, "per-axis value per pose")
+}
+
+/// Bars of one or more series side by side at each pose, with a zero line, a legend and the
+/// poses' labels.
+fn grouped_bars(
+    title: &str,
+    y_desc: &str,
+    series: &[(Vec<f64>, RGBColor, &str)],
+    labels: &[String],
+    figure: &'static str,
+) -> Result<String, PlotError> {
+    let n = series.iter().map(|s| s.0.len()).max().unwrap_or(0);
+    let data = padded(series.iter().flat_map(|s| s.0.iter().copied()).chain([0.0]));
+    // Headroom above the tallest bar for the legend in the upper right.
+    let yr = data.start..(data.end + 0.12 * series.len() as f64 * (data.end - data.start));
+    let bottom = yr.start;
+    let xr = -0.5..(n as f64 - 0.5);
+    let width = 0.7 / series.len().max(1) as f64;
+    let label_area = pose_label_area(labels);
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1020, 300)).into_drawing_area();
-        root.fill(&WHITE).map_err(plot_error(FIGURE))?;
+        let root =
+            SVGBackend::with_string(&mut svg, (BARS_WIDTH, 250 + label_area)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error(figure))?;
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 15))
             .margin(8)
-            .x_label_area_size(44)
-            .y_label_area_size(60)
-            .build_cartesian_2d(-0.5..(n as f64 - 0.5), yr)
-            .map_err(plot_error(FIGURE))?;
+            .x_label_area_size(label_area)
+            .y_label_area_size(64)
+            .build_cartesian_2d(xr.clone(), yr)
+            .map_err(plot_error(figure))?;
         chart
             .configure_mesh()
-            .x_desc("pose (the axis that points up)")
-            .y_desc("error of |a| (mg)")
-            .x_labels(n.clamp(2, 40))
-            .x_label_formatter(&|v| {
-                let k = v.round();
-                if (v - k).abs() > 0.01 || k < 0.0 {
-                    return String::new();
-                }
-                labels
-                    .get(k as usize)
-                    .cloned()
-                    .unwrap_or_else(|| format!("{}", k as i64 + 1))
-            })
+            .x_desc("pose (the side that points up)")
+            .y_desc(y_desc)
+            .disable_x_mesh()
+            .x_labels(0)
             .draw()
-            .map_err(plot_error(FIGURE))?;
-        chart
-            .draw_series(values_mg.iter().enumerate().map(|(k, v)| {
-                let x = k as f64;
-                Rectangle::new([(x - 0.3, 0.0), (x + 0.3, *v)], colour.filled())
-            }))
-            .map_err(plot_error(FIGURE))?
-            .label(if after {
-                "after calibration"
-            } else {
-                "before calibration"
-            })
-            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled()));
-        zero_line_and_legend(&mut chart, -0.5..(n as f64 - 0.5), FIGURE)?;
-        root.present().map_err(plot_error(FIGURE))?;
+            .map_err(plot_error(figure))?;
+        for (s, (values, colour, label)) in series.iter().enumerate() {
+            let colour = *colour;
+            let left = -0.35 + s as f64 * width;
+            chart
+                .draw_series(values.iter().enumerate().map(|(k, v)| {
+                    let x = k as f64 + left;
+                    Rectangle::new([(x, 0.0), (x + width * 0.9, *v)], colour.filled())
+                }))
+                .map_err(plot_error(figure))?
+                .label(*label)
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled())
+                });
+        }
+        zero_line_and_legend(&mut chart, xr, figure)?;
+        pose_labels(&root, &chart, labels, bottom, figure)?;
+        root.present().map_err(plot_error(figure))?;
     }
     Ok(svg)
 }
@@ -267,6 +388,19 @@ pub fn histogram(
                 let x0 = range.start + k as f64 * width;
                 Rectangle::new([(x0, 0), (x0 + width, *c)], colour.mix(0.8).filled())
             }))
+            .map_err(plot_error(FIGURE))?
+            .label(if after {
+                "after calibration"
+            } else {
+                "before calibration"
+            })
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
             .map_err(plot_error(FIGURE))?;
         root.present().map_err(plot_error(FIGURE))?;
     }

@@ -8,7 +8,10 @@ use crate::pipeline::methods::thin_indices;
 use crate::pipeline::{CheckedInput, InputOptions, RecordingCalibration, SensorOutcome};
 use crate::recording::Sensor;
 
-use super::{ellipsoid_shape, AccelPoses, MagSamples, ReportData, SensorParameters};
+use super::{
+    ellipsoid_shape, numbered, up_label, AccelPoses, GyroPoses, MagSamples, ReportData,
+    SensorParameters,
+};
 
 fn parameters(name: &str, outcome: &SensorOutcome, fit: &Fit) -> SensorParameters {
     SensorParameters {
@@ -37,6 +40,7 @@ pub fn from_calibration(
         ..ReportData::default()
     };
     data.notes.extend(calibration.warnings.iter().cloned());
+    let mut not_fitted: Vec<(&str, String)> = Vec::new();
     for outcome in &calibration.sensors {
         let name = match outcome.sensor {
             Sensor::Accel => "accelerometer",
@@ -48,7 +52,7 @@ pub fn from_calibration(
         let fit = match &outcome.fit {
             Ok(fit) => fit,
             Err(e) => {
-                data.verdict.push(format!("{name} not fitted: {e}"));
+                not_fitted.push((name, e.clone()));
                 continue;
             }
         };
@@ -56,9 +60,10 @@ pub fn from_calibration(
         match outcome.sensor {
             Sensor::Accel => accel_poses(&mut data, input, calibration, fit),
             Sensor::Mag => mag_samples(&mut data, input, options, outcome, fit),
-            Sensor::Gyro => {}
+            Sensor::Gyro => gyro_poses(&mut data, input, outcome, fit),
         }
     }
+    data.verdict.splice(0..0, not_fitted_once(&not_fitted));
     if let (Some(field), Some(mag)) = (field, calibration.sensor(Sensor::Mag)) {
         if mag.radius_check.is_none() && mag.fit.is_ok() {
             data.notes.push(format!(
@@ -68,6 +73,22 @@ pub fn from_calibration(
         }
     }
     data
+}
+
+/// One sentence per distinct reason a sensor was not fitted, naming every sensor it stopped
+/// (the accelerometer and gyroscope share the still intervals, so often the same reason).
+pub fn not_fitted_once(failures: &[(&str, String)]) -> Vec<String> {
+    let mut sentences: Vec<(Vec<&str>, &str)> = Vec::new();
+    for (name, reason) in failures {
+        match sentences.iter_mut().find(|(_, r)| r == reason) {
+            Some((names, _)) => names.push(name),
+            None => sentences.push((vec![name], reason)),
+        }
+    }
+    sentences
+        .into_iter()
+        .map(|(names, reason)| format!("{} not fitted: {reason}", names.join(" and ")))
+        .collect()
 }
 
 fn accel_poses(
@@ -100,12 +121,60 @@ fn accel_poses(
         calibrated: means.iter().map(|m| fit.cal.apply(m)).collect(),
         temp_c,
         gravity,
+        labels: pose_labels(input, Sensor::Accel),
     });
     data.verdict.push(format!(
         "accelerometer: residual RMS {:.2e} of g over {} poses",
         fit.rms,
         means.len()
     ));
+}
+
+/// Name of each still pose of `sensor`: the side that points up (from the accelerometer's
+/// mean), with the recording's own label when it has one.
+fn pose_labels(input: &CheckedInput, sensor: Sensor) -> Vec<String> {
+    let Some(still) = &input.still else {
+        return Vec::new();
+    };
+    let labels = still
+        .intervals
+        .iter()
+        .filter(|i| i.pose(sensor).is_some())
+        .map(|i| {
+            let side = i
+                .accel
+                .as_ref()
+                .map_or("pose".to_string(), |a| up_label(&a.mean));
+            match i.label {
+                Some(label) => format!("{side} (pose {label})"),
+                None => side,
+            }
+        })
+        .collect();
+    numbered(labels)
+}
+
+/// The gyroscope's still poses before and after its fit, °/s; left out when the data's unit
+/// has no known factor to rad/s (raw counts without `--gyro-scale`).
+fn gyro_poses(data: &mut ReportData, input: &CheckedInput, outcome: &SensorOutcome, fit: &Fit) {
+    let (Some(still), Some(to_rad)) = (&input.still, outcome.to_nominal) else {
+        return;
+    };
+    // The output is in rad/s unless no scale was known.
+    if outcome.output_unit != "rad/s" {
+        return;
+    }
+    let means: Vec<Vec3> = still.poses(Sensor::Gyro).iter().map(|p| p.mean).collect();
+    if means.is_empty() {
+        return;
+    }
+    let degrees = |v: Vec3| [v.x, v.y, v.z].map(f64::to_degrees);
+    data.gyro = Some(GyroPoses {
+        raw_dps: means.iter().map(|m| degrees(m * to_rad)).collect(),
+        calibrated_dps: means.iter().map(|m| degrees(fit.cal.apply(m))).collect(),
+        labels: pose_labels(input, Sensor::Gyro),
+        scale_fit: Vec::new(),
+    });
 }
 
 fn mag_samples(
@@ -144,4 +213,32 @@ fn mag_samples(
         fit.rms,
         points.len()
     ));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_reason_shared_by_two_sensors_is_said_once_naming_both() {
+        let failures = [
+            (
+                "accelerometer",
+                "still intervals could not be found".to_string(),
+            ),
+            (
+                "gyroscope",
+                "still intervals could not be found".to_string(),
+            ),
+            ("magnetometer", "too few samples".to_string()),
+        ];
+        let sentences = not_fitted_once(&failures);
+        assert_eq!(
+            sentences,
+            [
+                "accelerometer and gyroscope not fitted: still intervals could not be found",
+                "magnetometer not fitted: too few samples"
+            ]
+        );
+    }
 }

@@ -43,6 +43,9 @@ pub struct SessionSummary {
     pub before: RestErrors,
     /// Errors at rest with the written set.
     pub after: Option<RestErrors>,
+    /// The set on the board when the session ended: the extended set `--analyze` wrote, or the
+    /// base set (then equal to `after`); `null` when nothing was written.
+    pub on_board_after: Option<RestErrors>,
     /// The port.
     pub port: String,
     /// The board's id.
@@ -96,6 +99,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         params_crc: format!("{:#010x}", outcome.fit.set.crc32()),
         before: outcome.before,
         after: outcome.after,
+        on_board_after: outcome.after,
         port: outcome.port.clone(),
         device_id: outcome.device_id.clone(),
         poses: outcome.poses.len(),

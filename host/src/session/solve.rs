@@ -418,7 +418,14 @@ fn judge(
     let mg = 1000.0 / STANDARD_GRAVITY;
     // A NaN σ (no covariance) counts as over budget.
     let within = |value: f64, limit: f64| value.partial_cmp(&limit).is_some_and(|o| o.is_le());
-    if !within(u.accel_norm_mg, budgets.accel_mg / 4.0) {
+    if !u.accel_norm_mg.is_finite() {
+        reasons.push(format!(
+            "the accelerometer's expected |a| error is unknown / not estimated (the fit gave no \
+             covariance), so not shown within a quarter of the {:.1} mg budget; hold each \
+             position longer or more still",
+            budgets.accel_mg
+        ));
+    } else if !within(u.accel_norm_mg, budgets.accel_mg / 4.0) {
         reasons.push(format!(
             "the accelerometer's expected |a| error is {:.2} mg (1σ), above a quarter of the \
              {:.1} mg budget; hold each position longer or more still",
@@ -439,10 +446,15 @@ fn judge(
     }
     if !within(u.mag_norm_pct, budgets.mag_pct / 4.0) {
         poor |= !within(u.mag_norm_pct, budgets.mag_pct);
+        let expected = if u.mag_norm_pct.is_finite() {
+            format!("{:.3} % (1σ), above", u.mag_norm_pct)
+        } else {
+            "unknown / not estimated (the fit gave no covariance), so not shown within".to_string()
+        };
         reasons.push(format!(
-            "the magnetometer's expected |m| error is {:.3} % (1σ), above a quarter of the \
-             {:.1} % budget; turn the board through more directions",
-            u.mag_norm_pct, budgets.mag_pct
+            "the magnetometer's expected |m| error is {expected} a quarter of the {:.1} % \
+             budget; turn the board through more directions",
+            budgets.mag_pct
         ));
     }
     if let Some(error) = alignment_error {

@@ -56,8 +56,9 @@ impl Target {
         Self { index, up, name }
     }
 
-    /// A five-line picture of how to hold the board for this target. Each tilt names the edges
-    /// that rise, so no two targets share a picture.
+    /// A five-line picture of how to hold the board for this target. The words name what
+    /// points up (the raised edges or corner, and whether the components face up or down), so
+    /// no two targets share a picture and each can be checked against [`Target::up`].
     pub fn picture(&self) -> [String; 5] {
         let label = direction_name(&self.up);
         let raised: Vec<(usize, f64)> = (0..3)
@@ -66,34 +67,32 @@ impl Target {
             .collect();
         let edge =
             |(i, v): (usize, f64)| format!("{}{}", if v > 0.0 { '+' } else { '-' }, axis_name(i));
+        let face = |z: f64| {
+            if z > 0.0 {
+                "components up"
+            } else {
+                "upside down"
+            }
+        };
         match raised.as_slice() {
-            [(2, z)] => {
-                let side = if *z > 0.0 {
-                    "lying flat, components up"
-                } else {
-                    "lying flat, upside down"
-                };
+            [(2, z)] => [
+                format!("        ^ {label} up"),
+                "    +----------+".to_string(),
+                format!("    |   IMU    |   lying flat, {}", face(*z)),
+                "    +----------+".to_string(),
+                "    ============ table".to_string(),
+            ],
+            [(i, v)] => {
+                let top = edge((*i, *v));
                 [
                     format!("        ^ {label} up"),
-                    "    +----------+".to_string(),
-                    format!("    |   IMU    |   {side}"),
-                    "    +----------+".to_string(),
-                    String::new(),
+                    format!("       +--+  <- the {top} edge at the top"),
+                    "       |  |   standing on the opposite edge,".to_string(),
+                    "       |  |   the board's faces vertical".to_string(),
+                    "    ===+--+=== table".to_string(),
                 ]
             }
-            [_] => [
-                format!("        ^ {label} up"),
-                "       +--+".to_string(),
-                format!("       |  |   standing on its edge, the {label} edge at the top"),
-                "       |  |".to_string(),
-                "       +--+".to_string(),
-            ],
             [first, (2, z)] => {
-                let face = if *z > 0.0 {
-                    "components up"
-                } else {
-                    "upside down"
-                };
                 let rising = edge(*first);
                 // Side view: the raised edge on the right for +, on the left for -.
                 let (slope, indents) = if first.1 > 0.0 {
@@ -111,30 +110,39 @@ impl Target {
                 [
                     format!("        ^ {label} up"),
                     line(0, &format!("the {rising} edge raised 45°,")),
-                    line(1, &format!("{face}, resting on the opposite edge")),
+                    line(1, &format!("{}, resting on the opposite edge", face(*z))),
                     line(2, "(side view)"),
                     "    ------------------ table".to_string(),
                 ]
             }
-            [first, second] => [
-                format!("        ^ {label} up"),
-                "          /\\".to_string(),
-                format!(
-                    "         /  \\   on a corner of its side: the {} and {} edges both 45° up",
-                    edge(*first),
-                    edge(*second)
-                ),
-                "         \\  /".to_string(),
-                "          \\/".to_string(),
-            ],
+            [first, second] => {
+                let top = format!("{}{}", edge(*first), edge(*second));
+                [
+                    format!("        ^ {label} up"),
+                    format!("          /\\   <- the {top} corner at the top"),
+                    "         /  \\   standing on its side, the board's faces vertical,"
+                        .to_string(),
+                    "         \\  /   turned 45° onto the opposite corner".to_string(),
+                    "    ======\\/===== table".to_string(),
+                ]
+            }
+            [a, b, (2, z)] => {
+                let corner = format!("{}{}", edge(*a), edge(*b));
+                [
+                    format!("        ^ {label} up"),
+                    format!("           _/|   <- the {corner} corner highest"),
+                    format!("         _/  /   tilted about 55° from flat, {}", face(*z)),
+                    "        /  _/    resting on the opposite corner".to_string(),
+                    "    ===|_/====== table".to_string(),
+                ]
+            }
+            // Not a direction a session asks for; named only.
             _ => [
                 format!("        ^ {label} up"),
-                "          /\\".to_string(),
-                format!(
-                    "         /  \\   balanced on the corner opposite {label}, that corner highest"
-                ),
-                "        /  /".to_string(),
-                "        \\ /".to_string(),
+                String::new(),
+                format!("    hold the board with {label} pointing up"),
+                String::new(),
+                String::new(),
             ],
         }
     }
@@ -239,5 +247,64 @@ mod tests {
         assert!(pictures[10].join("\n").contains("+X edge raised 45°"));
         assert!(pictures[11].join("\n").contains("-X edge raised 45°"));
         assert!(pictures[10].join("\n").contains("components up"));
+    }
+
+    /// The direction a person would hold up from reading a picture's words (not its title):
+    /// every edge or corner named as raised or at the top, and the face the components turn to.
+    fn up_from_words(picture: &[String; 5]) -> Vec3 {
+        let words = picture[1..].join(" ");
+        let mut up = Vec3::zeros();
+        let tokens: Vec<&str> = words.split_whitespace().collect();
+        for pair in tokens.windows(2) {
+            if !matches!(pair[1].trim_end_matches(','), "edge" | "corner") {
+                continue;
+            }
+            for signed in pair[0].as_bytes().chunks(2) {
+                let sign = match signed.first() {
+                    Some(b'+') => 1.0,
+                    Some(b'-') => -1.0,
+                    _ => continue,
+                };
+                let axis = match signed.get(1) {
+                    Some(b'X') => 0,
+                    Some(b'Y') => 1,
+                    Some(b'Z') => 2,
+                    _ => continue,
+                };
+                up[axis] += sign;
+            }
+        }
+        if words.contains("components up") {
+            up.z += 1.0;
+        }
+        if words.contains("upside down") {
+            up.z -= 1.0;
+        }
+        up.normalize()
+    }
+
+    #[test]
+    fn each_picture_shows_the_up_direction_of_its_own_pose() {
+        let mut targets = twelve_positions();
+        targets.extend(corner_positions(targets.len()));
+        for target in &targets {
+            let picture = target.picture();
+            let read = up_from_words(&picture);
+            assert!(
+                read.dot(&target.up) > 0.999,
+                "{}: the picture says {read:?} is up\n{}",
+                target.name,
+                picture.join("\n")
+            );
+            assert!(picture[0].contains(&format!("{} up", direction_name(&target.up))));
+        }
+    }
+
+    #[test]
+    fn tilts_lean_towards_their_raised_edge_in_the_side_view() {
+        let targets = twelve_positions();
+        // +X+Z: the board rises to the right ("/"); -X+Z to the left ("\").
+        assert!(targets[10].picture()[1].contains('/'));
+        assert!(targets[11].picture()[1].contains('\\'));
     }
 }
