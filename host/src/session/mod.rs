@@ -38,6 +38,7 @@ pub mod coverage;
 mod error;
 pub mod events;
 pub mod extend;
+pub mod gyro_field;
 pub mod gyro_fit;
 pub mod gyro_moves;
 mod gyro_nuisance;
@@ -260,6 +261,7 @@ fn run_phases<L: Read + Write>(
         &raw_rest,
         f64::from(options.thresholds.gyro_std_rads),
         options.gyro_budgets,
+        options.budgets.mag_pct,
     )
     .ok();
     let fit_wall_seconds = fit_start.elapsed().as_secs_f64();
