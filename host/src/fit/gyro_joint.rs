@@ -82,7 +82,11 @@ struct Prepared {
 
 /// Two orthonormal vectors perpendicular to the unit `v`.
 fn perpendicular_basis(v: &Vec3) -> [Vec3; 2] {
-    let not_parallel = if v.x.abs() < 0.9 { Vec3::x() } else { Vec3::y() };
+    let not_parallel = if v.x.abs() < 0.9 {
+        Vec3::x()
+    } else {
+        Vec3::y()
+    };
     let e1 = v.cross(&not_parallel).normalize();
     [e1, v.cross(&e1)]
 }
@@ -259,11 +263,12 @@ fn prepare(m: &JointMotion, i: usize) -> Result<Prepared, FitError> {
         )));
     };
     let field = match &m.field {
-        Some(f) if f.sigma.is_finite() && f.sigma > 0.0 => match (unit(&f.before), unit(&f.after))
-        {
-            (Some(h0), Some(h1)) => Some((h0, perpendicular_basis(&h1), f.sigma)),
-            _ => None,
-        },
+        Some(f) if f.sigma.is_finite() && f.sigma > 0.0 => {
+            match (unit(&f.before), unit(&f.after)) {
+                (Some(h0), Some(h1)) => Some((h0, perpendicular_basis(&h1), f.sigma)),
+                _ => None,
+            }
+        }
         _ => None,
     };
     Ok(Prepared {
@@ -325,9 +330,10 @@ pub fn fit_gyro_joint(motions: &[JointMotion], start: Option<&Mat3>) -> Result<J
         ));
     }
     let scale = noise_scale(sol.cost, sol.residuals.len(), 12, NoiseLevel::Known);
-    let (factor, coverage_factor, reduced) = scale.map_or((1.0, super::uncertainty::Z_95, None), |s| {
-        (s.variance_factor, s.coverage_factor, s.reduced_chi_square)
-    });
+    let (factor, coverage_factor, reduced) = scale
+        .map_or((1.0, super::uncertainty::Z_95, None), |s| {
+            (s.variance_factor, s.coverage_factor, s.reduced_chi_square)
+        });
     let full = normal_covariance(&sol.jtj).map(|c| c * factor);
     let covariance = full.map(|c| c.view((0, 0), (9, 9)).into_owned());
     if covariance
@@ -335,8 +341,7 @@ pub fn fit_gyro_joint(motions: &[JointMotion], start: Option<&Mat3>) -> Result<J
         .is_some_and(|c| (0..9).any(|i| c[(i, i)].max(0.0).sqrt() > MAX_ENTRY_STD))
     {
         return Err(FitError::Underdetermined(
-            "the gyroscope's entries are known to worse than 10 %; turn the board further"
-                .into(),
+            "the gyroscope's entries are known to worse than 10 %; turn the board further".into(),
         ));
     }
     let std = covariance
@@ -394,7 +399,10 @@ mod tests {
             let numeric = (exact.inverse() * moved).scaled_axis() / h;
             // Trapezoid sums against RK4 at 100 Hz with rates ≈ 1.5 rad/s: agreement to ~1e-3
             // of the turn, plenty for Gauss–Newton steps and a first-order covariance.
-            assert!((numeric - dk).norm() < 2e-3 * dk.norm().max(1.0), "{k}: {numeric} vs {dk}");
+            assert!(
+                (numeric - dk).norm() < 2e-3 * dk.norm().max(1.0),
+                "{k}: {numeric} vs {dk}"
+            );
         }
     }
 }

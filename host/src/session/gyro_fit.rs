@@ -162,12 +162,12 @@ pub fn complete_gyro(
         mag_budget_pct,
     });
     let result = match &reference {
-        Some(reference) => fit_joint_scale(moves, &nuisance, reference, still_rate).or_else(
-            |error| {
+        Some(reference) => {
+            fit_joint_scale(moves, &nuisance, reference, still_rate).or_else(|error| {
                 let reason = format!("the joint fit with the field failed ({error})");
                 fit_scale(moves, &nuisance, still_rate, reason)
-            },
-        ),
+            })
+        }
         None => fit_scale(
             moves,
             &nuisance,
@@ -176,11 +176,19 @@ pub fn complete_gyro(
         ),
     };
     if let Ok((_, summary)) = &result {
-        if let Some(reason) = &summary.gravity_only_reason {
-            fit.notes.push(format!(
-                "the gyroscope's scale and misalignment were fitted against gravity alone:                  {reason}; the rotation about the vertical is then seen only through the tilts"
-            ));
-        }
+        fit.notes.push(match &summary.gravity_only_reason {
+            Some(reason) => format!(
+                "the gyroscope's scale and misalignment were fitted against gravity alone: \
+                 {reason}; the rotation about the vertical is then seen only through the tilts"
+            ),
+            None => format!(
+                "the gyroscope's scale and misalignment were fitted against gravity and the \
+                 field direction ({} of {} moves with a steady field, χ²/ν {:.2})",
+                summary.field_moves,
+                summary.moves_used,
+                summary.reduced_chi_square.unwrap_or(f64::NAN)
+            ),
+        });
     }
     let (scale_fit, summary) = match result {
         Ok(found) => found,
