@@ -20,7 +20,8 @@
 //! 3. Rest: once the board lies still, raw samples give the "before" errors (taken again if the
 //!    board moved during them).
 //! 4. Fit with the library's default methods ([`solve::fit_session`]), the gyroscope's scale and
-//!    misalignment from the moves ([`gyro_fit::complete_gyro`]), show the result with its
+//!    misalignment from the moves ([`gyro_fit::complete_gyro`]; against gravity and, with an
+//!    aligned magnetometer, the field direction, [`gyro_field`]), show the result with its
 //!    uncertainties and verdict, write the set, commit, read it back and compare (CRC and every
 //!    value), then stream calibrated samples at rest for the "after" errors.
 //!
