@@ -189,6 +189,16 @@ fn main() {
             if let Some(g) = &outcome.gyro_scale {
                 let [x, y, z] = g.tilt_deg;
                 eprintln!("  tilting rotation about X, Y, Z: {x:.0}°, {y:.0}°, {z:.0}°");
+                match &g.gravity_only_reason {
+                    None => eprintln!(
+                        "  reference: gravity and field, {} moves ({:.1} s) with the field, \
+                         χ²/ν {:.2}",
+                        g.field_moves,
+                        g.field_seconds,
+                        g.reduced_chi_square.unwrap_or(f64::NAN)
+                    ),
+                    Some(reason) => eprintln!("  reference: gravity only ({reason})"),
+                }
             }
             let std = outcome.fit.gyro.std.map_or(Mat3::zeros(), |s| s.a);
             for r in 0..3 {

@@ -14,6 +14,7 @@ pub mod covariance;
 pub mod coverage;
 pub mod frosio;
 pub mod gyro_bias;
+pub mod gyro_joint;
 pub mod gyro_scale;
 pub mod li;
 pub mod li_loo;

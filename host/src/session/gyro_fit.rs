@@ -17,10 +17,18 @@
 //!
 //! The σ of `A` adds to the moves' scatter what the fit inherits from the accelerometer's
 //! calibration and the bias ([`super::gyro_nuisance`]): errors common to every move.
+//!
+//! With a magnetometer aligned to the accelerometer, the field direction at the moves' ends is a
+//! second reference ([`super::gyro_field`], [`crate::fit::gyro_joint`]): gravity cannot see a
+//! turn about the vertical, the field can, so the axis the positions tilt least (on the twelve
+//! positions, body Z) is no longer the weak one. Without a usable field (no magnetometer, no
+//! alignment, fewer than [`crate::fit::gyro_joint::MIN_FIELD_MOTIONS`] moves with a steady
+//! field, or a failed joint fit) the gravity-only fit is used and a note says why.
 
 use nalgebra::UnitQuaternion;
 use serde::Serialize;
 
+use super::gyro_field::{field_seconds, fit_with_field, FieldReference};
 use super::gyro_moves::{motions_of, tilt_per_axis_deg};
 use super::gyro_nuisance::{inherited_covariance, Nuisance};
 use super::solve::{SessionFit, VerdictLevel};
@@ -67,6 +75,17 @@ pub struct GyroScale {
     pub rms_deg: f64,
     /// Tilting rotation about each body axis over all moves, degrees.
     pub tilt_deg: [f64; 3],
+    /// Whether the field direction was a second reference (false: gravity only).
+    pub field_reference: bool,
+    /// Moves whose field direction was used.
+    pub field_moves: usize,
+    /// Seconds of stream in those moves.
+    pub field_seconds: f64,
+    /// `χ²/ν` of the noise-weighted residuals of the joint fit (`None` for gravity only, whose
+    /// noise is estimated from the residuals).
+    pub reduced_chi_square: Option<f64>,
+    /// Why the field was not used, when it was not.
+    pub gravity_only_reason: Option<String>,
 }
 
 /// Mean gyroscope rate and its standard error per axis of samples taken lying still; `None`
@@ -116,6 +135,7 @@ pub fn complete_gyro(
     rest: &[UnitSample],
     still_rate: f64,
     budgets: GyroBudgets,
+    mag_budget_pct: f64,
 ) -> Result<GyroScale, FitError> {
     let holds = (
         fit.gyro.cal.b,
@@ -134,7 +154,42 @@ pub fn complete_gyro(
         bias_sigma,
         rate_noise,
     };
-    let result = fit_scale(moves, &nuisance, still_rate);
+    let (mag, alignment) = (fit.mag.clone(), fit.alignment.clone());
+    let reference = alignment.as_ref().ok().map(|alignment| FieldReference {
+        mag: &mag,
+        alignment,
+        field_ut: fit.field_ut,
+        mag_budget_pct,
+    });
+    let result = match &reference {
+        Some(reference) => {
+            fit_joint_scale(moves, &nuisance, reference, still_rate).or_else(|error| {
+                let reason = format!("the joint fit with the field failed ({error})");
+                fit_scale(moves, &nuisance, still_rate, reason)
+            })
+        }
+        None => fit_scale(
+            moves,
+            &nuisance,
+            still_rate,
+            "the magnetometer is not aligned to the accelerometer".into(),
+        ),
+    };
+    if let Ok((_, summary)) = &result {
+        fit.notes.push(match &summary.gravity_only_reason {
+            Some(reason) => format!(
+                "the gyroscope's scale and misalignment were fitted against gravity alone: \
+                 {reason}; the rotation about the vertical is then seen only through the tilts"
+            ),
+            None => format!(
+                "the gyroscope's scale and misalignment were fitted against gravity and the \
+                 field direction ({} of {} moves with a steady field, χ²/ν {:.2})",
+                summary.field_moves,
+                summary.moves_used,
+                summary.reduced_chi_square.unwrap_or(f64::NAN)
+            ),
+        });
+    }
     let (scale_fit, summary) = match result {
         Ok(found) => found,
         Err(error) => {
@@ -169,11 +224,13 @@ pub fn complete_gyro(
 }
 
 /// Tedaldi's fit on the usable moves, twice (see the module documentation), its covariance
-/// including what it inherits from `nuisance`.
+/// Tedaldi's fit on the usable moves, twice (see the module documentation), its covariance
+/// including what it inherits from `nuisance`; `reason` says why the field is not used.
 fn fit_scale(
     moves: &[Vec<UnitSample>],
     nuisance: &Nuisance<'_>,
     still_rate: f64,
+    reason: String,
 ) -> Result<(Fit, GyroScale), FitError> {
     let (accel, bias) = (&nuisance.accel.cal, &nuisance.bias);
     let noise = nuisance.rate_noise;
@@ -186,6 +243,29 @@ fn fit_scale(
         *own += inherited;
         fit.std = Some(calibration_std(own, &FULL_MATRIX_LAYOUT));
     }
+    let mut summary = summarise(&fit, moves, motions.len());
+    summary.gravity_only_reason = Some(reason);
+    Ok((fit, summary))
+}
+
+/// The joint fit with the field ([`fit_with_field`]) and its summary.
+fn fit_joint_scale(
+    moves: &[Vec<UnitSample>],
+    nuisance: &Nuisance<'_>,
+    reference: &FieldReference<'_>,
+    still_rate: f64,
+) -> Result<(Fit, GyroScale), FitError> {
+    let (joint, motions) = fit_with_field(moves, nuisance, reference, still_rate)?;
+    let mut summary = summarise(&joint.fit, moves, motions.len());
+    summary.field_reference = true;
+    summary.field_moves = joint.field_motions;
+    summary.field_seconds = field_seconds(&motions);
+    summary.reduced_chi_square = joint.reduced_chi_square;
+    Ok((joint.fit, summary))
+}
+
+/// The people's reading of a fitted `A` (gravity only until the caller says otherwise).
+fn summarise(fit: &Fit, moves: &[Vec<UnitSample>], used: usize) -> GyroScale {
     let a = fit.cal.a;
     let sigma = fit.std.map_or(Mat3::zeros(), |s| s.a);
     let mut misalignment: f64 = 0.0;
@@ -197,17 +277,21 @@ fn fit_scale(
                 misalignment_sigma.max((sigma[(r, c)] / a[(c, c)].abs()).to_degrees());
         }
     }
-    let summary = GyroScale {
+    GyroScale {
         scale: [a[(0, 0)], a[(1, 1)], a[(2, 2)]],
         scale_sigma_pct: [0, 1, 2].map(|i| sigma[(i, i)] / a[(i, i)].abs() * 100.0),
         misalignment_deg: misalignment,
         misalignment_sigma_deg: misalignment_sigma,
         moves_recorded: moves.len(),
-        moves_used: motions.len(),
+        moves_used: used,
         rms_deg: fit.rms.to_degrees(),
         tilt_deg: tilt_per_axis_deg(moves),
-    };
-    Ok((fit, summary))
+        field_reference: false,
+        field_moves: 0,
+        field_seconds: 0.0,
+        reduced_chi_square: None,
+        gravity_only_reason: None,
+    }
 }
 
 /// Add a reason to the verdict when the scale fit's 3σ exceeds its budgets.

@@ -76,7 +76,7 @@ fn still_run(rates: impl Iterator<Item = Vec3>, still_rate: f64, max: usize) -> 
 /// Variance, per component perpendicular to it, of the mean direction of `vectors`
 /// (rad²): the scatter of the unit directions about their mean over `n − 1`, halved between the
 /// two perpendicular components, over `n`. `None` for fewer than two vectors.
-fn direction_variance(vectors: &[Vec3]) -> Option<f64> {
+pub(super) fn direction_variance(vectors: &[Vec3]) -> Option<f64> {
     let n = vectors.len();
     if n < 2 {
         return None;
@@ -134,6 +134,64 @@ pub fn motion_of(
     still_rate: f64,
     rate_noise: Option<f64>,
 ) -> Option<GyroMotion> {
+    let ends = move_ends(samples, a, bias, still_rate)?;
+    gravity_motion(&ends, samples, accel, rate_noise)
+}
+
+/// A move's still ends: its even step, bias-corrected rates, the still head and tail lengths,
+/// and each sample's rotation into the first sample's frame (`R₀←ⱼ`, integrating `a·rates`).
+pub(super) struct MoveEnds {
+    pub(super) dt: f64,
+    pub(super) rates: Vec<Vec3>,
+    pub(super) head: usize,
+    pub(super) tail: usize,
+    pub(super) to_first: Vec<UnitQuaternion<f64>>,
+}
+
+impl MoveEnds {
+    /// Last sample of the still head and first of the still tail: only the turn between them
+    /// is integrated, so the bias error acts over the turn alone.
+    pub(super) fn turn(&self) -> (usize, usize) {
+        (self.head - 1, self.rates.len() - self.tail)
+    }
+
+    /// `value(j)` of the head's samples, each turned into the frame of the head's last sample,
+    /// and of the tail's, each turned into the frame of its first (the sway correction).
+    pub(super) fn turned_ends(&self, value: impl Fn(usize) -> Vec3) -> (Vec<Vec3>, Vec<Vec3>) {
+        let (start, end) = self.turn();
+        let at_start = self.to_first[start].inverse();
+        let at_end = self.to_first[end].inverse();
+        let head = (0..self.head)
+            .map(|j| at_start * self.to_first[j] * value(j))
+            .collect();
+        let tail = (end..self.rates.len())
+            .map(|j| at_end * self.to_first[j] * value(j))
+            .collect();
+        (head, tail)
+    }
+
+    /// The angle variance per component the gyroscope's white noise `sigma_w` (rad/s per
+    /// sample) adds: `σ_ω²·dt²·N` over the turn's `N` steps and `σ_ω²·dt²·n/3` through each
+    /// end's sway correction.
+    pub(super) fn gyro_angle_var(&self, sigma_w: f64) -> f64 {
+        let (start, end) = self.turn();
+        (sigma_w * self.dt).powi(2) * ((end - start) as f64 + (self.head + self.tail) as f64 / 3.0)
+    }
+
+    /// The gyroscope's white noise per sample: `rate_noise`, or estimated from the still ends.
+    pub(super) fn rate_noise(&self, rate_noise: Option<f64>) -> f64 {
+        rate_noise.unwrap_or_else(|| rate_noise_of_ends(&self.rates, self.head, self.tail))
+    }
+}
+
+/// The still ends of `samples` (see [`MoveEnds`]); `None` when the stream has a gap or an end is
+/// not still for at least [`EDGE_MIN_SAMPLES`] samples.
+pub(super) fn move_ends(
+    samples: &[UnitSample],
+    a: &Mat3,
+    bias: &Vec3,
+    still_rate: f64,
+) -> Option<MoveEnds> {
     let dt = even_step_s(samples)?;
     let rates: Vec<Vec3> = samples.iter().map(|s| Vec3::from(s.gyro) - bias).collect();
     let edge = ((EDGE_MAX_S / dt).round() as usize).max(EDGE_MIN_SAMPLES);
@@ -142,32 +200,36 @@ pub fn motion_of(
     if head < EDGE_MIN_SAMPLES || tail < EDGE_MIN_SAMPLES || head + tail >= rates.len() {
         return None;
     }
-    // Gravity is referred to the last sample of the still head and the first of the still
-    // tail, and only the turn between them is integrated: the bias error then acts over the
-    // turn alone.
     let to_first = prefix_rotations(a, &rates, dt);
-    let gravity = |j: usize| accel.apply(&Vec3::from(samples[j].accel));
-    let (start, end) = (head - 1, rates.len() - tail);
-    let at_start = to_first[start].inverse();
-    let at_end = to_first[end].inverse();
-    let head_gravity: Vec<Vec3> = (0..head)
-        .map(|j| at_start * to_first[j] * gravity(j))
-        .collect();
-    let tail_gravity: Vec<Vec3> = (end..rates.len())
-        .map(|j| at_end * to_first[j] * gravity(j))
-        .collect();
-    let before = head_gravity.iter().sum::<Vec3>() / head as f64;
-    let after = tail_gravity.iter().sum::<Vec3>() / tail as f64;
-    let sigma_w = rate_noise.unwrap_or_else(|| rate_noise_of_ends(&rates, head, tail));
-    let step_var = (sigma_w * dt).powi(2);
+    Some(MoveEnds {
+        dt,
+        rates,
+        head,
+        tail,
+        to_first,
+    })
+}
+
+/// The gravity part of a move (see [`motion_of`]) from its still ends.
+pub(super) fn gravity_motion(
+    ends: &MoveEnds,
+    samples: &[UnitSample],
+    accel: &Calibration,
+    rate_noise: Option<f64>,
+) -> Option<GyroMotion> {
+    let (head_gravity, tail_gravity) =
+        ends.turned_ends(|j| accel.apply(&Vec3::from(samples[j].accel)));
+    let before = head_gravity.iter().sum::<Vec3>() / head_gravity.len() as f64;
+    let after = tail_gravity.iter().sum::<Vec3>() / tail_gravity.len() as f64;
     let angle_var = direction_variance(&head_gravity)?
         + direction_variance(&tail_gravity)?
-        + step_var * ((end - start) as f64 + (head + tail) as f64 / 3.0);
+        + ends.gyro_angle_var(ends.rate_noise(rate_noise));
+    let (start, end) = ends.turn();
     Some(GyroMotion {
         gravity_before: before,
         gravity_after: after,
-        rates: rates.get(start..=end)?.to_vec(),
-        dt,
+        rates: ends.rates.get(start..=end)?.to_vec(),
+        dt: ends.dt,
         angle_sigma: Some(angle_var.sqrt()),
     })
 }

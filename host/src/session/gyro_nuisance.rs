@@ -49,8 +49,23 @@ fn moved(cal: &Calibration, names: &[String], step: &DVector<f64>) -> Option<Cal
 }
 
 /// The nine entries of `a`, row-major (the scale fit's parameter order).
-fn entries(a: &Mat3) -> DVector<f64> {
+pub(super) fn entries(a: &Mat3) -> DVector<f64> {
     DVector::from_row_slice(a.transpose().as_slice())
+}
+
+/// `fit`'s calibration moved one σ along each principal axis of its covariance (`√λₖ·vₖ`);
+/// `None` without a covariance or with a parameter name that is not an entry.
+pub(super) fn principal_steps(fit: &Fit) -> Option<Vec<Calibration>> {
+    let eigen = SymmetricEigen::new(fit.covariance.as_ref()?.clone());
+    let mut steps = Vec::new();
+    for (k, &lambda) in eigen.eigenvalues.iter().enumerate() {
+        if lambda <= 0.0 {
+            continue;
+        }
+        let step = eigen.eigenvectors.column(k) * lambda.sqrt();
+        steps.push(moved(&fit.cal, &fit.param_names, &step.into_owned())?);
+    }
+    Some(steps)
 }
 
 /// Covariance (9×9, row-major entries of `A`) the fit inherits from `nuisance`, for the fit
@@ -69,19 +84,10 @@ pub fn inherited_covariance(
     };
     // The reference is refitted from the same start, so only the nuisance step differs.
     let (used, base) = refit(accel, &nuisance.bias)?;
-    let mut steps: Vec<(Calibration, Vec3)> = Vec::new();
-    let accel_cov = nuisance.accel.covariance.as_ref()?;
-    let eigen = SymmetricEigen::new(accel_cov.clone());
-    for (k, &lambda) in eigen.eigenvalues.iter().enumerate() {
-        if lambda <= 0.0 {
-            continue;
-        }
-        let step = eigen.eigenvectors.column(k) * lambda.sqrt();
-        steps.push((
-            moved(accel, &nuisance.accel.param_names, &step.into_owned())?,
-            nuisance.bias,
-        ));
-    }
+    let mut steps: Vec<(Calibration, Vec3)> = principal_steps(nuisance.accel)?
+        .into_iter()
+        .map(|accel| (accel, nuisance.bias))
+        .collect();
     for i in 0..3 {
         steps.push((*accel, nuisance.bias + Vec3::ith(i, nuisance.bias_sigma[i])));
     }

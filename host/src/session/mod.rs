@@ -20,7 +20,8 @@
 //! 3. Rest: once the board lies still, raw samples give the "before" errors (taken again if the
 //!    board moved during them).
 //! 4. Fit with the library's default methods ([`solve::fit_session`]), the gyroscope's scale and
-//!    misalignment from the moves ([`gyro_fit::complete_gyro`]), show the result with its
+//!    misalignment from the moves ([`gyro_fit::complete_gyro`]; against gravity and, with an
+//!    aligned magnetometer, the field direction, [`gyro_field`]), show the result with its
 //!    uncertainties and verdict, write the set, commit, read it back and compare (CRC and every
 //!    value), then stream calibrated samples at rest for the "after" errors.
 //!
@@ -38,6 +39,7 @@ pub mod coverage;
 mod error;
 pub mod events;
 pub mod extend;
+pub mod gyro_field;
 pub mod gyro_fit;
 pub mod gyro_moves;
 mod gyro_nuisance;
@@ -260,6 +262,7 @@ fn run_phases<L: Read + Write>(
         &raw_rest,
         f64::from(options.thresholds.gyro_std_rads),
         options.gyro_budgets,
+        options.budgets.mag_pct,
     )
     .ok();
     let fit_wall_seconds = fit_start.elapsed().as_secs_f64();
