@@ -41,15 +41,17 @@ pub fn leave_one_out_errors(
     reference: f64,
     fit: impl Fn(usize, &[Pose]) -> Result<Calibration, FitError>,
 ) -> Option<Vec<Option<f64>>> {
-    held_out_errors(poses, reference, |i| {
-        let rest: Vec<Pose> = poses
-            .iter()
-            .enumerate()
-            .filter(|&(j, _)| j != i)
-            .map(|(_, p)| p.clone())
-            .collect();
-        fit(i, &rest)
-    })
+    held_out_errors(poses, reference, |i| fit(i, &without(poses, i)))
+}
+
+/// Every item but the `i`-th, in order: the training set of fold `i`.
+pub fn without<T: Clone>(items: &[T], i: usize) -> Vec<T> {
+    items
+        .iter()
+        .enumerate()
+        .filter(|&(j, _)| j != i)
+        .map(|(_, item)| item.clone())
+        .collect()
 }
 
 /// The RMS of [`leave_one_out_rms`] given, for each pose `i`, the calibration fitted without it
@@ -77,6 +79,40 @@ pub fn held_out_errors(
         .enumerate()
         .map(|(i, held_out)| held_out_error(&calibration_without(i).ok()?, held_out, reference))
         .collect();
+    Some(errors)
+}
+
+/// Fewest poses whose held-out refits [`held_out_errors_threaded`] splits over two threads:
+/// below, a thread's start costs more than the refits it would take over.
+pub const PARALLEL_POSES: usize = 32;
+
+/// As [`held_out_errors`], the folds split over two threads when there are at least
+/// [`PARALLEL_POSES`] poses (a refit per pose of a long recording's hundreds of holds is
+/// costly, and the folds are independent); the errors are the same either way.
+pub fn held_out_errors_threaded(
+    poses: &[Pose],
+    reference: f64,
+    calibration_without: impl Fn(usize) -> Result<Calibration, FitError> + Sync,
+) -> Option<Vec<Option<f64>>> {
+    let n = poses.len();
+    if n < PARALLEL_POSES {
+        return held_out_errors(poses, reference, calibration_without);
+    }
+    if reference.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let one = |i: usize| held_out_error(&calibration_without(i).ok()?, &poses[i], reference);
+    let mid = n / 2;
+    let errors = std::thread::scope(|scope| {
+        let second = scope.spawn(|| (mid..n).map(one).collect::<Vec<_>>());
+        let mut errors: Vec<Option<f64>> = (0..mid).map(one).collect();
+        errors.extend(
+            second
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
+        );
+        errors
+    });
     Some(errors)
 }
 

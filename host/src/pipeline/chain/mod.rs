@@ -60,7 +60,7 @@ pub mod mean;
 pub mod pair;
 
 use crate::fit::axis_aligned::{fit_axis_aligned, fit_axis_aligned_poses};
-use crate::fit::loo::{held_out_error, rms_of_all};
+use crate::fit::loo::{self, rms_of_all};
 use crate::fit::minmax::{fit_minmax, minmax_calibration};
 use crate::fit::norm_lm::fit_accel_lm_detailed;
 use crate::fit::six_position::{fit_six_position, nearest_axes, six_position_calibration};
@@ -329,55 +329,19 @@ fn face_labels(poses: &[Pose]) -> Vec<Vec3> {
         .collect()
 }
 
-/// Fewest poses whose held-out refits are split over two threads: below, a thread's start
-/// costs more than the refits it would take over.
-const PARALLEL_POSES: usize = 32;
-
 /// The held-out error of every pose (`None` where the refit without it was refused), `refit`
 /// receiving the other poses and their face labels. Empty when there are fewer than two poses
-/// or the reference is not positive. The refits are independent, so on many poses the second
-/// half runs on its own thread (a refit per pose of a long recording's hundreds of holds is the
-/// chain's main cost); the errors are the same in either case.
+/// or the reference is not positive. On many poses the folds run on two threads.
 fn held_out_errors(
     poses: &[Pose],
     faces: &[Vec3],
     reference: f64,
     refit: impl Fn(&[Pose], &[Vec3]) -> Result<Calibration, FitError> + Sync,
 ) -> Vec<Option<f64>> {
-    let n = poses.len();
-    if n < 2 || reference.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return Vec::new();
-    }
-    let one = |i: usize| {
-        let rest: Vec<Pose> = poses
-            .iter()
-            .enumerate()
-            .filter(|&(j, _)| j != i)
-            .map(|(_, p)| p.clone())
-            .collect();
-        let rest_faces: Vec<Vec3> = faces
-            .iter()
-            .enumerate()
-            .filter(|&(j, _)| j != i)
-            .map(|(_, f)| *f)
-            .collect();
-        let cal = refit(&rest, &rest_faces).ok()?;
-        held_out_error(&cal, &poses[i], reference)
-    };
-    if n < PARALLEL_POSES {
-        return (0..n).map(one).collect();
-    }
-    let mid = n / 2;
-    std::thread::scope(|scope| {
-        let second = scope.spawn(|| (mid..n).map(one).collect::<Vec<_>>());
-        let mut errors: Vec<Option<f64>> = (0..mid).map(one).collect();
-        errors.extend(
-            second
-                .join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
-        );
-        errors
+    loo::held_out_errors_threaded(poses, reference, |i| {
+        refit(&loo::without(poses, i), &loo::without(faces, i))
     })
+    .unwrap_or_default()
 }
 
 /// Score the candidates on the held-out poses they can all be refit without, setting aside the

@@ -256,7 +256,7 @@ fn held_out_errors_on_two_threads_equal_refitting_each_pose_in_turn() {
             .iter()
             .map(|d| d + Vec3::new(0.1, -0.05, 0.02)),
     );
-    assert!(dirs.len() >= PARALLEL_POSES);
+    assert!(dirs.len() >= crate::fit::loo::PARALLEL_POSES);
     let poses = diagonal_poses(&dirs, 0.02);
     let faces = face_labels(&poses);
     let reference = 9.81;
@@ -266,13 +266,12 @@ fn held_out_errors_on_two_threads_equal_refitting_each_pose_in_turn() {
         });
         let in_turn: Vec<Option<f64>> =
             crate::fit::loo::leave_one_out_errors(&poses, reference, |i, rest| {
-                let rest_faces: Vec<Vec3> = faces
-                    .iter()
-                    .enumerate()
-                    .filter(|&(j, _)| j != i)
-                    .map(|(_, f)| *f)
-                    .collect();
-                refit(method, rest, &rest_faces, reference)
+                refit(
+                    method,
+                    rest,
+                    &crate::fit::loo::without(&faces, i),
+                    reference,
+                )
             })
             .unwrap_or_default();
         assert_eq!(threaded.len(), poses.len(), "{method:?}");
