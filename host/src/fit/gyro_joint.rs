@@ -26,12 +26,11 @@
 
 use nalgebra::{DMatrix, DVector, Rotation3, UnitQuaternion};
 
-use super::covariance::{calibration_std, normal_covariance, param_names, FULL_MATRIX_LAYOUT};
-use super::gyro_scale::{integrate_rotation, GyroMotion};
-use super::linalg::{condition_from_normal_matrix, rms};
+use super::covariance::normal_covariance;
+use super::gyro_scale::{gyro_matrix_fit, integrate_rotation, GyroMotion};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
 use super::uncertainty::{noise_scale, NoiseLevel};
-use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
+use super::{Fit, FitError, Mat3, Vec3};
 
 /// The field directions at the two still ends of a move.
 #[derive(Debug, Clone, PartialEq)]
@@ -344,29 +343,9 @@ pub fn fit_gyro_joint(motions: &[JointMotion], start: Option<&Mat3>) -> Result<J
             "the gyroscope's entries are known to worse than 10 %; turn the board further".into(),
         ));
     }
-    let std = covariance
-        .as_ref()
-        .map(|c| calibration_std(c, &FULL_MATRIX_LAYOUT));
     let a = Mat3::from_row_slice(&sol.params.as_slice()[..9]);
     let residuals = problem.gravity_errors(&a);
-    let fit = Fit {
-        method: Method::GyroScale,
-        cal: Calibration {
-            a,
-            b: Vec3::zeros(),
-        },
-        rms: rms(&residuals),
-        residuals,
-        loo_rms: None,
-        covariance,
-        param_names: param_names(&FULL_MATRIX_LAYOUT),
-        std,
-        condition_number: condition_from_normal_matrix(&sol.jtj),
-        iterations: sol.iterations,
-        termination: Some(sol.termination),
-        coverage_factor,
-        reference: 1.0,
-    };
+    let fit = gyro_matrix_fit(a, residuals, covariance, &sol, coverage_factor);
     Ok(JointFit {
         fit,
         field_rotation: Vec3::new(sol.params[9], sol.params[10], sol.params[11]),

@@ -19,7 +19,7 @@ use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion};
 
 use super::covariance::{calibration_std, normal_covariance, param_names, FULL_MATRIX_LAYOUT};
 use super::linalg::{condition_from_normal_matrix, rms};
-use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
 
@@ -214,9 +214,6 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
     if covariance.as_ref().is_some_and(|c| !check_precision(c)) {
         return Err(refusal());
     }
-    let std = covariance
-        .as_ref()
-        .map(|c| calibration_std(c, &FULL_MATRIX_LAYOUT));
     // Reported in angle, unweighted.
     let residuals: Vec<f64> = problem
         .angle_errors(&sol.params)
@@ -224,10 +221,31 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
         .chunks(2)
         .map(|c| c.iter().map(|v| v * v).sum::<f64>().sqrt())
         .collect();
-    Ok(Fit {
+    Ok(gyro_matrix_fit(
+        matrix_from(&sol.params),
+        residuals,
+        covariance,
+        &sol,
+        coverage_factor,
+    ))
+}
+
+/// The [`Fit`] of a full gyroscope matrix `a` (bias zero: it comes from the holds) with its
+/// angle residuals and the covariance of its 9 entries, from the solver's outcome `sol`.
+pub(super) fn gyro_matrix_fit(
+    a: Mat3,
+    residuals: Vec<f64>,
+    covariance: Option<DMatrix<f64>>,
+    sol: &LmSolution,
+    coverage_factor: f64,
+) -> Fit {
+    let std = covariance
+        .as_ref()
+        .map(|c| calibration_std(c, &FULL_MATRIX_LAYOUT));
+    Fit {
         method: Method::GyroScale,
         cal: Calibration {
-            a: matrix_from(&sol.params),
+            a,
             b: Vec3::zeros(),
         },
         rms: rms(&residuals),
@@ -241,7 +259,7 @@ pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fi
         termination: Some(sol.termination),
         coverage_factor,
         reference: 1.0,
-    })
+    }
 }
 
 /// Largest condition number of the equilibrated information matrix accepted: beyond
