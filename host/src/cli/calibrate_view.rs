@@ -8,6 +8,7 @@ use super::write_policy::{WriteDecision, WritePolicy};
 use imucal::device::PoseProgress;
 use imucal::report::gain::{gain, gain_text};
 use imucal::session::mag_guidance::MagGuidance;
+use imucal::session::rest::REST_QUANTITIES;
 use imucal::session::{
     RestErrors, SessionEvent, SessionFit, SessionObserver, SessionOutcome, VerdictLevel,
 };
@@ -459,26 +460,15 @@ pub(super) fn before_after_table(
         text.push_str(&format!("{name:>14}"));
     }
     text.push_str(&format!("{:>12}\n", "target"));
-    type Row = (
-        &'static str,
-        fn(&RestErrors) -> f64,
-        &'static str,
-        usize,
-        &'static str,
-    );
-    let rows: [Row; 3] = [
-        ("|a| error", |e| e.accel_error_mg, "mg", 2, "< 2 mg"),
-        ("|m| error", |e| e.mag_error_pct, "%", 2, "< 0.5 %"),
-        ("gyro rate", |e| e.gyro_rate_dps, "°/s", 3, ""),
-    ];
-    for (name, value, unit, precision, target) in rows {
-        text.push_str(&format!("{name:<16}"));
-        for (k, (_, errors)) in columns.iter().enumerate() {
-            // Calibrated values are small: one more decimal.
-            let digits = if k == 0 { precision } else { precision + 1 };
-            text.push_str(&format!("{:>14}", show(errors.map(value), unit, digits)));
+    for (k, quantity) in REST_QUANTITIES.iter().enumerate() {
+        text.push_str(&format!("{:<16}", quantity.label));
+        for (column, (_, errors)) in columns.iter().enumerate() {
+            // Uncalibrated values are large: one decimal fewer.
+            let digits = quantity.digits - usize::from(column == 0);
+            let value = errors.map(|e| e.values()[k]);
+            text.push_str(&format!("{:>14}", show(value, quantity.unit, digits)));
         }
-        text.push_str(&format!("{target:>12}\n"));
+        text.push_str(&format!("{:>12}\n", quantity.target));
     }
     text
 }

@@ -21,6 +21,7 @@ use serde_json::Value;
 use crate::device::ParamsFile;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
 use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
+use crate::session::rest::REST_QUANTITIES;
 use imucal_protocol::apply_sensor;
 
 /// File of a session directory holding the `--analyze` residual analysis as text, with the
@@ -127,6 +128,11 @@ pub struct RestCheck {
 }
 
 impl RestCheck {
+    /// The values in the order of [`REST_QUANTITIES`].
+    fn values(&self) -> [Option<f64>; 3] {
+        [self.accel_mg, self.mag_pct, self.gyro_dps]
+    }
+
     fn of(value: &Value) -> Option<Self> {
         value.is_object().then(|| Self {
             accel_mg: value["accel_error_mg"].as_f64(),
@@ -1200,29 +1206,18 @@ fn rest_check_table(checks: &[(String, RestCheck)]) -> String {
         text.push_str(&format!("<th>{}</th>", escape(name)));
     }
     text.push_str("<th>target</th></tr>");
-    type Row = (
-        &'static str,
-        fn(&RestCheck) -> Option<f64>,
-        &'static str,
-        usize,
-        &'static str,
-    );
-    let rows: [Row; 3] = [
-        ("|a| error", |c| c.accel_mg, "mg", 3, "< 2 mg"),
-        ("|m| error", |c| c.mag_pct, "%", 3, "< 0.5 %"),
-        ("gyroscope rate", |c| c.gyro_dps, "°/s", 4, ""),
-    ];
-    for (name, value, unit, digits, target) in rows {
-        text.push_str(&format!("<tr><th>{name}</th>"));
+    for (k, quantity) in REST_QUANTITIES.iter().enumerate() {
+        text.push_str(&format!("<tr><th>{}</th>", quantity.label));
         for (_, check) in checks {
-            let cell = value(check)
+            let (digits, unit) = (quantity.digits, quantity.unit);
+            let cell = check.values()[k]
                 .filter(|v| v.is_finite())
                 .map_or(NOT_ESTIMATED.to_string(), |v| {
                     format!("{v:.digits$} {unit}")
                 });
             text.push_str(&format!("<td>{}</td>", escape(&cell)));
         }
-        text.push_str(&format!("<td>{}</td></tr>", escape(target)));
+        text.push_str(&format!("<td>{}</td></tr>", escape(quantity.target)));
     }
     text.push_str("</table>");
     text

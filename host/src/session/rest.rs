@@ -30,6 +30,48 @@ pub struct RestErrors {
     pub accel_std_mps2: f64,
 }
 
+/// One quantity of the at-rest check, as the screen and the report show it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RestQuantity {
+    /// Row label.
+    pub label: &'static str,
+    /// Unit of the value.
+    pub unit: &'static str,
+    /// Decimals of a calibrated value (small; an uncalibrated one needs one fewer).
+    pub digits: usize,
+    /// The session's target, empty when there is none.
+    pub target: &'static str,
+}
+
+/// The quantities of [`RestErrors::values`], in that order.
+pub const REST_QUANTITIES: [RestQuantity; 3] = [
+    RestQuantity {
+        label: "|a| error",
+        unit: "mg",
+        digits: 3,
+        target: "< 2 mg",
+    },
+    RestQuantity {
+        label: "|m| error",
+        unit: "%",
+        digits: 3,
+        target: "< 0.5 %",
+    },
+    RestQuantity {
+        label: "gyro rate",
+        unit: "°/s",
+        digits: 4,
+        target: "",
+    },
+];
+
+impl RestErrors {
+    /// `| |ā| − g |` (mg), `| |m̄| − H |` (%) and `|ω̄|` (°/s): the rows of [`REST_QUANTITIES`].
+    pub fn values(&self) -> [f64; 3] {
+        [self.accel_error_mg, self.mag_error_pct, self.gyro_rate_dps]
+    }
+}
+
 fn mean_and_std(values: impl Iterator<Item = Vec3> + Clone) -> (Vec3, Vec3) {
     let n = values.clone().count().max(1) as f64;
     let mean = values.clone().sum::<Vec3>() / n;
