@@ -194,8 +194,12 @@ fn print_table(calibration: &RecordingCalibration) {
             println!("{}: {note}", result.sensor);
         }
         let fit = match &result.fit {
-            Err(e) => {
-                println!("{}: not fitted: {e}", result.sensor);
+            Err(_) => {
+                // The reason is the error at the end (standard error), said once.
+                println!(
+                    "{}: not fitted (the reason follows at the end)",
+                    result.sensor
+                );
                 continue;
             }
             Ok(fit) => fit,
@@ -375,15 +379,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     };
     let failed = calibration.failures();
     if !failed.is_empty() {
-        bail!(
-            "{} could not be fitted ({})",
-            if failed.len() == 1 {
-                "one sensor"
-            } else {
-                "some sensors"
-            },
-            failed.join("; ")
-        );
+        bail!("{}", failed.join("; "));
     }
     recorded
 }

@@ -161,20 +161,39 @@ impl RecordingCalibration {
         self.sensors.iter().find(|s| s.sensor == sensor)
     }
 
-    /// `sensor: reason` for every sensor that was not fitted, and for a magnetometer that could
-    /// not be aligned to the accelerometer fitted with it (left out of the parameter file).
+    /// What went wrong, one sentence per distinct reason naming every sensor it stopped
+    /// (`"accel and gyro not fitted: …"`, `"mag not aligned to the accelerometer …"`): the
+    /// sensors that were not fitted, and a magnetometer that could not be aligned to the
+    /// accelerometer fitted with it (left out of the parameter file). Empty when all is well.
     pub fn failures(&self) -> Vec<String> {
-        self.sensors
+        let reasons: Vec<(&str, String)> = self
+            .sensors
             .iter()
             .filter_map(|r| {
-                let reason = r
-                    .fit
-                    .as_ref()
-                    .err()
-                    .cloned()
-                    .or_else(|| r.alignment_failure())?;
-                Some(format!("{}: {reason}", r.sensor))
+                let reason = match &r.fit {
+                    Err(e) => format!("not fitted: {e}"),
+                    Ok(_) => r.alignment_failure()?,
+                };
+                Some((r.sensor.name(), reason))
             })
-            .collect()
+            .collect();
+        once_per_reason(&reasons)
     }
+}
+
+/// `"{names} {reason}"` once per distinct reason, the names of every item with that reason
+/// joined by "and", in order of first appearance (the accelerometer and the gyroscope share
+/// the still intervals, so they often fail for the same reason, which is then said once).
+pub fn once_per_reason(reasons: &[(&str, String)]) -> Vec<String> {
+    let mut sentences: Vec<(Vec<&str>, &str)> = Vec::new();
+    for (name, reason) in reasons {
+        match sentences.iter_mut().find(|(_, r)| r == reason) {
+            Some((names, _)) => names.push(name),
+            None => sentences.push((vec![name], reason)),
+        }
+    }
+    sentences
+        .into_iter()
+        .map(|(names, reason)| format!("{} {reason}", names.join(" and ")))
+        .collect()
 }

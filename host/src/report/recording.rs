@@ -4,6 +4,7 @@
 
 use crate::fit::{Fit, Vec3};
 use crate::geomag::LocalField;
+use crate::pipeline::calibration::once_per_reason;
 use crate::pipeline::methods::thin_indices;
 use crate::pipeline::{CheckedInput, InputOptions, RecordingCalibration, SensorOutcome};
 use crate::recording::Sensor;
@@ -78,17 +79,11 @@ pub fn from_calibration(
 /// One sentence per distinct reason a sensor was not fitted, naming every sensor it stopped
 /// (the accelerometer and gyroscope share the still intervals, so often the same reason).
 pub fn not_fitted_once(failures: &[(&str, String)]) -> Vec<String> {
-    let mut sentences: Vec<(Vec<&str>, &str)> = Vec::new();
-    for (name, reason) in failures {
-        match sentences.iter_mut().find(|(_, r)| r == reason) {
-            Some((names, _)) => names.push(name),
-            None => sentences.push((vec![name], reason)),
-        }
-    }
-    sentences
-        .into_iter()
-        .map(|(names, reason)| format!("{} not fitted: {reason}", names.join(" and ")))
-        .collect()
+    let reasons: Vec<(&str, String)> = failures
+        .iter()
+        .map(|(name, reason)| (*name, format!("not fitted: {reason}")))
+        .collect();
+    once_per_reason(&reasons)
 }
 
 fn accel_poses(
