@@ -37,5 +37,6 @@ as_postgres "$bin/pg_ctl" -D "$dir/data" -l "$dir/socket/server.log" -w -t 60 \
 export IMUCAL_TEST_PG_URL="postgres://postgres@/postgres?host=$dir/socket&port=$port"
 echo "PostgreSQL $("$bin/postgres" --version | awk '{print $3}') on $IMUCAL_TEST_PG_URL"
 
-cargo test "${profile[@]}" -p imucal --test history --test history_fleet --test batch_sim
-cargo bench -p imucal --bench history_write
+# `--workspace`: the feature set of the workspace's test build, which CI has just made.
+cargo test "${profile[@]}" --workspace --test history --test history_fleet --test batch_sim
+cargo bench --workspace --bench history_write

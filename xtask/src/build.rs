@@ -25,11 +25,17 @@ pub fn repo_root() -> PathBuf {
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
 }
 
+/// Where every board's release ELFs land: the boards share one target directory (their
+/// `.cargo/config.toml` sets it), so `core` and the crates they share are built once.
+pub fn firmware_release_dir() -> PathBuf {
+    repo_root().join("firmware/boards/target/thumbv7em-none-eabihf/release")
+}
+
 /// Builds the board's release ELFs with Debian's cargo (the rustup proxy ignores build-std).
 pub fn build() -> Result<Elfs, String> {
     let board = repo_root().join(BOARD_DIR);
     cargo_build_release(&board, &[])?;
-    let release = board.join("target/thumbv7em-none-eabihf/release");
+    let release = firmware_release_dir();
     let elfs = Elfs {
         firmware: release.join("imucal-qemu"),
         bench: release.join("imucal-qemu-bench"),
@@ -111,9 +117,7 @@ pub fn build_board(name: &str) -> Result<PathBuf, String> {
     let board = find_board(name)?;
     let dir = repo_root().join(board.dir);
     cargo_build_release(&dir, board.features)?;
-    let elf = dir
-        .join("target/thumbv7em-none-eabihf/release")
-        .join(board.firmware_bin);
+    let elf = firmware_release_dir().join(board.firmware_bin);
     if elf.exists() {
         Ok(elf)
     } else {
