@@ -1,6 +1,8 @@
 //! Speed of the fits: Li's ellipsoid and the norm-model LM on 10⁶ magnetometer samples, the
 //! 12-pose accelerometer LM, the 300-sample magnetometer LM, and the leave-one-out of the
-//! sample-level min/max and the pose-level axis-aligned and Li fits.
+//! sample-level min/max, the pose-level axis-aligned and Li fits, and Li's fit on magnetometer
+//! samples (first order on 10⁶, first order against exact on 2000: group `li_loo`, which also
+//! prints CPU times).
 //! The LM on 10⁶ samples also prints its CPU time per fit (both threads), its residual
 //! evaluations and the time of its parts, since criterion's wall time on a shared machine
 //! includes waiting for a core.
@@ -12,6 +14,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use imucal::fit::axis_aligned::fit_axis_aligned_poses;
 use imucal::fit::li::{fit_li, LiOptions};
 use imucal::fit::li_loo::li_leave_one_out_rms;
+use imucal::fit::li_loo_first_order::li_first_order_loo_rms;
 use imucal::fit::minmax::fit_minmax;
 use imucal::fit::norm_lm::{fit_accel_lm_detailed, fit_mag_lm};
 use imucal::fit::Pose;
@@ -83,12 +86,62 @@ fn bench_fits(c: &mut Criterion) {
     c.bench_function("li_leave_one_out_100_poses", |b| {
         b.iter(|| li_leave_one_out_rms(&means100, 9.81))
     });
+    bench_li_loo(c, &million);
     c.bench_function("lm_accel_12_poses", |b| {
         b.iter(|| fit_accel_lm_detailed(&poses, 9.81).map(|o| o.fit.cal))
     });
     c.bench_function("lm_mag_300_samples", |b| {
         b.iter(|| fit_mag_lm(&cloud300, 50.0).map(|f| f.cal))
     });
+}
+
+/// Li's fit on magnetometer samples with its leave-one-out: the fit alone and with the
+/// first-order leave-one-out on 10⁶ samples, and the exact downdate against first order on 2000.
+fn bench_li_loo(c: &mut Criterion, million: &[imucal::fit::Vec3]) {
+    let li = |points: &[imucal::fit::Vec3]| {
+        fit_li(
+            points,
+            50.0,
+            LiOptions {
+                subtract_mean: true,
+            },
+        )
+        .map(|f| f.cal)
+    };
+    let li_with_loo =
+        |points: &[imucal::fit::Vec3]| (li(points), li_first_order_loo_rms(points, 50.0));
+    let first2000 = &million[..2000];
+    let mut group = c.benchmark_group("li_loo");
+    group.sample_size(10);
+    group.bench_function("fit_only_1e6_mag_samples", |b| b.iter(|| li(million)));
+    group.bench_function("fit_and_first_order_1e6_mag_samples", |b| {
+        b.iter(|| li_with_loo(million))
+    });
+    group.bench_function("first_order_2000_mag_samples", |b| {
+        b.iter(|| li_first_order_loo_rms(first2000, 50.0))
+    });
+    group.bench_function("exact_2000_mag_samples", |b| {
+        b.iter(|| li_leave_one_out_rms(first2000, 50.0))
+    });
+    group.finish();
+    const RUNS: usize = 11;
+    let fit = cpu_per_call(RUNS, || li(million));
+    let with_loo = cpu_per_call(RUNS, || li_with_loo(million));
+    let first = li_first_order_loo_rms(million, 50.0).unwrap_or(f64::NAN);
+    if let (Some(fit), Some(with_loo)) = (fit, with_loo) {
+        println!(
+            "li_loo/1e6: {:.1} ms CPU per fit, {:.1} ms CPU with the first-order leave-one-out \
+             (both threads, {RUNS} runs); leave-one-out RMS {first:.6e}",
+            fit * 1e3,
+            with_loo * 1e3
+        );
+    }
+    let exact = li_leave_one_out_rms(first2000, 50.0).unwrap_or(f64::NAN);
+    let first = li_first_order_loo_rms(first2000, 50.0).unwrap_or(f64::NAN);
+    println!(
+        "li_loo/2000: first order {first:.9e}, exact {exact:.9e}, relative difference {:.1e}",
+        (first - exact).abs() / exact
+    );
 }
 
 /// CPU seconds per call of `f`, over `runs` calls; `None` without `/proc`.

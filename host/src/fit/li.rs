@@ -161,8 +161,9 @@ fn design_condition_number(scatter: &DMatrix<f64>) -> f64 {
     }
 }
 
-/// The 10 quadric coefficients minimising `vᵀSv` (`S = DᵀD`) under the ellipsoid constraint.
-fn constrained_quadric(s: &DMatrix<f64>) -> Result<DVector<f64>, FitError> {
+/// The 10 quadric coefficients minimising `vᵀSv` (`S = DᵀD`) under the ellipsoid constraint
+/// (an eigenvector: unit length, sign arbitrary).
+pub(super) fn constrained_quadric(s: &DMatrix<f64>) -> Result<DVector<f64>, FitError> {
     let s11 = s.view((0, 0), (6, 6)).into_owned();
     let s12 = s.view((0, 6), (6, 4)).into_owned();
     let s22 = s.view((6, 6), (4, 4)).into_owned();

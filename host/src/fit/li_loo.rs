@@ -10,7 +10,7 @@
 
 use super::li::calibration_from_scatter;
 use super::li_moments::Moments;
-use super::loo::held_out_rms;
+use super::loo::{held_out_errors, rms_of_all};
 use super::{Pose, Vec3};
 
 /// RMS over all points of the held-out relative norm residual `(|A₋ᵢ(xᵢ − b₋ᵢ)| − ref)/ref` of
@@ -18,6 +18,13 @@ use super::{Pose, Vec3};
 /// the 10×10 problem per point, independent of the number of points. `None` with fewer than
 /// eleven points (a fit without one needs ten), or when a fit without some point is refused.
 pub fn li_leave_one_out_rms(points: &[Vec3], reference: f64) -> Option<f64> {
+    rms_of_all(li_leave_one_out_errors(points, reference)?)
+}
+
+/// The held-out relative norm residual of every point, in order, as in
+/// [`li_leave_one_out_rms`]; `None` for a point whose fit without it is refused. `None` overall
+/// with fewer than eleven points or all of them at their mean.
+pub fn li_leave_one_out_errors(points: &[Vec3], reference: f64) -> Option<Vec<Option<f64>>> {
     if points.len() < 11 {
         return None;
     }
@@ -28,7 +35,7 @@ pub fn li_leave_one_out_rms(points: &[Vec3], reference: f64) -> Option<f64> {
         return None;
     }
     let as_poses: Vec<Pose> = points.iter().map(|p| Pose::single(*p)).collect();
-    held_out_rms(&as_poses, reference, |i| {
+    held_out_errors(&as_poses, reference, |i| {
         let without = moments.without(&points[i], &centre);
         calibration_from_scatter(&without.scatter(scale), &centre, scale, reference)
     })

@@ -168,6 +168,42 @@ impl Moments {
     }
 }
 
+/// The 35 monomials of `(p − centre)·inverse_scale`, in the order of the moment sums: the basis
+/// in which [`linear_form`] and [`quadratic_form`] give their coefficients; the linear form's
+/// ten come first.
+#[inline(always)]
+pub(super) fn scaled_monomials(p: &Vec3, centre: &Vec3, inverse_scale: f64) -> [f64; 35] {
+    let q = (p - centre) * inverse_scale;
+    monomials(q.x, q.y, q.z)
+}
+
+/// Monomials of degree ≤ 2, the only ones a [`linear_form`] has coefficients for: the first
+/// ten of [`scaled_monomials`].
+pub(super) const LINEAR_TERMS: usize = 10;
+
+/// Coefficients over the 35 monomials of the linear form `φ(q)ᵀw` (`φ` the design row, `w` 10
+/// numbers; only the 10 monomials of degree ≤ 2 get one).
+pub(super) fn linear_form(w: &[f64; 10]) -> [f64; 35] {
+    let mut coefficients = [0.0; 35];
+    for ((c, e), wi) in DESIGN.iter().zip(w) {
+        coefficients[moment_index(*e)] += c * wi;
+    }
+    coefficients
+}
+
+/// Coefficients over the 35 monomials of the quadratic form `φ(q)ᵀPφ(q)` (`P` 10×10): the
+/// product of design columns `j` and `k` is the monomial of the summed exponents.
+pub(super) fn quadratic_form(p: &DMatrix<f64>) -> [f64; 35] {
+    let mut coefficients = [0.0; 35];
+    for (j, (cj, ej)) in DESIGN.iter().enumerate() {
+        for (k, (ck, ek)) in DESIGN.iter().enumerate() {
+            let e = [ej[0] + ek[0], ej[1] + ek[1], ej[2] + ek[2]];
+            coefficients[moment_index(e)] += cj * ck * p[(j, k)];
+        }
+    }
+    coefficients
+}
+
 /// Position of the monomial with exponents `e` in [`EXPONENTS`] (every degree ≤ 4 is present).
 fn moment_index(e: [u8; 3]) -> usize {
     EXPONENTS.iter().position(|x| *x == e).unwrap_or(0)

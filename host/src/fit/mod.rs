@@ -18,6 +18,7 @@ pub mod gyro_joint;
 pub mod gyro_scale;
 pub mod li;
 pub mod li_loo;
+pub mod li_loo_first_order;
 pub mod li_moments;
 pub mod linalg;
 pub mod lm;

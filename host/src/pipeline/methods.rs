@@ -147,7 +147,11 @@ pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, F
             fit::li::LiOptions {
                 subtract_mean: true,
             },
-        ),
+        )
+        .map(|mut fit| {
+            fit.loo_rms = li_sample_loo_rms(points, reference);
+            fit
+        }),
         Method::Frosio => fit::frosio::fit_frosio(points, reference, &FROSIO),
         Method::Merayo => fit::merayo::fit_merayo(points, reference, true),
         Method::AxisAligned => fit::axis_aligned::fit_axis_aligned(points, reference),
@@ -157,6 +161,23 @@ pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, F
         | Method::GyroBias
         | Method::GyroScale
         | Method::MinMaxAxisAlignedMean => Err(not_for(method, "magnetometer")),
+    }
+}
+
+/// Most samples for which the magnetometer's Li fit gets its exact leave-one-out
+/// (`fit::li_loo`, one 10×10 eigenproblem per sample: ≈ 60 µs each, so ≤ 55 ms here) rather
+/// than the first-order one (`fit::li_loo_first_order`, one pass). The rule is `100·p` with
+/// `p = 9` unknowns: above it the first order's error bound `(p/N)²` of the RMS is below 1e-4,
+/// finer than the four digits the RMS is reported with.
+pub const LI_EXACT_LOO_MAX_SAMPLES: usize = 900;
+
+/// Leave-one-out RMS of Li's fit on magnetometer samples: exact up to
+/// [`LI_EXACT_LOO_MAX_SAMPLES`], first order above.
+fn li_sample_loo_rms(points: &[Vec3], reference: f64) -> Option<f64> {
+    if points.len() <= LI_EXACT_LOO_MAX_SAMPLES {
+        fit::li_loo::li_leave_one_out_rms(points, reference)
+    } else {
+        fit::li_loo_first_order::li_first_order_loo_rms(points, reference)
     }
 }
 
@@ -183,4 +204,41 @@ pub fn thin_indices(len: usize, max: usize) -> Vec<usize> {
     }
     // Evenly spaced indices i·len/max keep exactly `max` points spread over the whole recording.
     (0..max).map(|i| i * len / max).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::{mag_samples, random_calibration, rng, sphere_directions, TruthSpec};
+
+    #[test]
+    fn li_on_magnetometer_samples_reports_a_held_out_rms_on_either_side_of_the_size_rule() {
+        let spec = TruthSpec {
+            scale_error: 0.2,
+            cross_axis: 0.05,
+            offset_ratio: 2.0,
+            reference: 50.0,
+            upper_triangular: false,
+        };
+        let truth = random_calibration(&mut rng(51), &spec);
+        let mut r = rng(52);
+        let dirs = sphere_directions(&mut r, LI_EXACT_LOO_MAX_SAMPLES + 1);
+        let points = mag_samples(&mut r, &truth, &dirs, 50.0, 0.5);
+        let small = &points[..LI_EXACT_LOO_MAX_SAMPLES];
+        for set in [small, &points[..]] {
+            let fit = fit_mag(Method::Li, set, 50.0).expect("a full sphere fits");
+            let loo = fit.loo_rms.expect("a held-out RMS");
+            assert!(loo > fit.rms, "N = {}: {loo:e} ≤ {:e}", set.len(), fit.rms);
+        }
+        // At the rule, the exact form (used there) and first order agree to the printed digits.
+        let exact = fit_mag(Method::Li, small, 50.0)
+            .ok()
+            .and_then(|f| f.loo_rms);
+        let first = fit::li_loo_first_order::li_first_order_loo_rms(small, 50.0);
+        let (exact, first) = (exact.expect("exact"), first.expect("first order"));
+        assert!(
+            (exact - first).abs() <= 1e-4 * exact,
+            "{exact:e} against {first:e}"
+        );
+    }
 }
