@@ -1,6 +1,11 @@
 //! Numbers, units, labels and small tables in the words and formats the report uses.
 
-use super::*;
+use serde_json::Value;
+
+use super::{gain, MagSamples, SensorParameters};
+use crate::device::ParamsFile;
+use crate::fit::Vec3;
+use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
 
 /// Text for a value that was not estimated (NaN, infinite or absent in the input).
 pub const NOT_ESTIMATED: &str = "unknown / not estimated";
@@ -76,7 +81,7 @@ pub(super) fn uncertainty_in_words(key: &str, value: &Value) -> (String, String)
 }
 
 /// `value unit` to 3 significant digits, or [`NOT_ESTIMATED`].
-pub(super) fn with_unit(value: Option<f64>, unit: &str) -> String {
+fn with_unit(value: Option<f64>, unit: &str) -> String {
     match value.filter(|v| v.is_finite()) {
         // Degrees are written against the number (1.2°), other units after a space.
         Some(v) if unit == "°" => format!("{}°", significant(v, 3)),
@@ -88,7 +93,7 @@ pub(super) fn with_unit(value: Option<f64>, unit: &str) -> String {
 }
 
 /// `value` to `digits` significant digits in plain notation (scientific below 1e-4).
-pub(super) fn significant(value: f64, digits: usize) -> String {
+fn significant(value: f64, digits: usize) -> String {
     if value == 0.0 {
         return "0".to_string();
     }
@@ -220,7 +225,7 @@ pub(super) fn extended_terms(params: &ParamsFile) -> Vec<(String, String, String
 }
 
 /// `x …, y …, z … unit` in one number format.
-pub(super) fn axes_text(values: &[f64; 3], unit: &str) -> String {
+fn axes_text(values: &[f64; 3], unit: &str) -> String {
     let parts: Vec<String> = ["x", "y", "z"]
         .iter()
         .zip(values)
@@ -329,7 +334,7 @@ pub(super) fn parameter_table(p: &SensorParameters) -> String {
 
 /// The matrix read as a person reads it: scale factor and scale error per axis and the angles
 /// between the axes, with the unit conversion (`to_nominal` output units per input unit) apart.
-pub(super) fn gain_table(g: &gain::Gain, to_nominal: f64, unit_in: &str, unit_out: &str) -> String {
+fn gain_table(g: &gain::Gain, to_nominal: f64, unit_in: &str, unit_out: &str) -> String {
     let mut rows = String::from(
         "<tr><th></th><th>x</th><th>y</th><th>z</th></tr><tr><th>scale factor against nominal</th>",
     );
@@ -401,7 +406,7 @@ pub(super) fn session_regions_text(cover: Option<&Coverage>, on_screen: Option<u
 /// Smallest temperature span worth an axis, °C: below it a plot against temperature is a
 /// vertical stripe. Die temperature sensors of consumer IMUs resolve 0.003–0.06 °C, and a
 /// temperature coefficient only shows over a span many times that.
-pub(super) const MIN_TEMPERATURE_SPAN_C: f64 = 0.5;
+const MIN_TEMPERATURE_SPAN_C: f64 = 0.5;
 
 /// Whether `temps` span enough to plot against.
 pub(super) fn temperature_varies(temps: &[f64]) -> bool {
@@ -409,7 +414,7 @@ pub(super) fn temperature_varies(temps: &[f64]) -> bool {
     hi - lo >= MIN_TEMPERATURE_SPAN_C
 }
 
-pub(super) fn temperature_span(temps: &[f64]) -> (f64, f64) {
+fn temperature_span(temps: &[f64]) -> (f64, f64) {
     temps
         .iter()
         .filter(|t| t.is_finite())

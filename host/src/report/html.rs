@@ -1,6 +1,13 @@
 //! The report page: sections, tables and figures assembled into one self-contained HTML page.
 
-use super::*;
+use super::format::{
+    constant_temperature_text, escape, norm_error_mg, norm_error_pct, parameter_table,
+    region_coverage, region_min_samples, rms, session_regions_text, temperature_varies,
+    NOT_ESTIMATED,
+};
+use super::{plots, GyroPoses, ReportData, ReportError, RestCheck};
+use crate::fit::{Mat3, Vec3};
+use crate::session::rest::REST_QUANTITIES;
 
 pub(super) fn figure(svg: &str) -> String {
     format!("<div class=fig>{svg}</div>")
@@ -270,7 +277,7 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
     ))
 }
 
-pub(super) const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1100px}\
+const STYLE: &str = "body{font-family:sans-serif;margin:24px;color:#222;max-width:1100px}\
 h1{font-size:24px;margin-bottom:4px}h2{border-bottom:1px solid #ccc;padding-bottom:4px;margin-top:32px}\
 table{border-collapse:collapse;margin:8px 0}th,td{border:1px solid #ddd;padding:4px 8px;text-align:right;font-size:13px}\
 th{background:#f4f4f4;text-align:left}.std{color:#777}.small{color:#666;font-size:13px}\
@@ -292,7 +299,7 @@ pub fn badge_class(level: &str) -> &'static str {
 }
 
 /// The errors at rest on the board, one column per set.
-pub(super) fn rest_check_table(checks: &[(String, RestCheck)]) -> String {
+fn rest_check_table(checks: &[(String, RestCheck)]) -> String {
     if checks.is_empty() {
         return String::new();
     }
@@ -319,13 +326,13 @@ pub(super) fn rest_check_table(checks: &[(String, RestCheck)]) -> String {
 }
 
 /// RMS over poses of each axis.
-pub(super) fn axis_rms(values: &[[f64; 3]]) -> [f64; 3] {
+fn axis_rms(values: &[[f64; 3]]) -> [f64; 3] {
     [0, 1, 2].map(|i| rms(&values.iter().map(|v| v[i]).collect::<Vec<_>>()))
 }
 
 /// The gyroscope's section: rate at rest per pose and axis before and after (each on its own
 /// scale), the per-axis RMS, and the scale fit from the moves.
-pub(super) fn gyro_section(
+fn gyro_section(
     gyro: &GyroPoses,
     summary_rows: &mut Vec<(String, String)>,
 ) -> Result<String, ReportError> {

@@ -21,7 +21,6 @@ pub mod plots;
 pub mod recording;
 mod session_dir;
 
-use format::*;
 pub use format::{escape, numbered, region_coverage, up_label, ColumnFormat, NOT_ESTIMATED};
 pub use html::{badge_class, render_html};
 pub use session_dir::from_session_dir;
@@ -30,11 +29,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::device::ParamsFile;
 use crate::fit::{CalibrationStd, Mat3, Vec3};
-use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
-use crate::session::rest::REST_QUANTITIES;
-use imucal_protocol::apply_sensor;
 
 /// File of a session directory holding the `--analyze` residual analysis as text, with the
 /// extended terms it added; the report shows it when present.

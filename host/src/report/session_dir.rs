@@ -1,7 +1,20 @@
 //! Reading a session directory (`summary.json`, `params.json`, the samples) into
 //! [`ReportData`].
 
-use super::*;
+use std::path::Path;
+
+use serde_json::Value;
+
+use super::format::{
+    degrees, extended_terms, gyro_scale_rows, numbered, uncertainty_in_words, up_label,
+};
+use super::{
+    ellipsoid_shape, AccelPoses, GyroPoses, MagSamples, ReportData, ReportError, RestCheck,
+    SensorParameters, ANALYSIS_TEXT_FILE,
+};
+use crate::device::ParamsFile;
+use crate::fit::{Mat3, Vec3};
+use imucal_protocol::apply_sensor;
 
 pub(super) fn read(path: &Path) -> Result<String, ReportError> {
     std::fs::read_to_string(path).map_err(|cause| ReportError::Read {
@@ -10,14 +23,14 @@ pub(super) fn read(path: &Path) -> Result<String, ReportError> {
     })
 }
 
-pub(super) fn format_error(path: &Path, detail: impl Into<String>) -> ReportError {
+fn format_error(path: &Path, detail: impl Into<String>) -> ReportError {
     ReportError::Format {
         path: path.display().to_string(),
         detail: detail.into(),
     }
 }
 
-pub(super) fn vec3_of(value: &Value) -> Option<Vec3> {
+fn vec3_of(value: &Value) -> Option<Vec3> {
     let array = value.as_array()?;
     match array.as_slice() {
         [x, y, z] => Some(Vec3::new(x.as_f64()?, y.as_f64()?, z.as_f64()?)),
@@ -25,12 +38,12 @@ pub(super) fn vec3_of(value: &Value) -> Option<Vec3> {
     }
 }
 
-pub(super) fn mat3_of(rows: &[[f64; 3]; 3]) -> Mat3 {
+fn mat3_of(rows: &[[f64; 3]; 3]) -> Mat3 {
     Mat3::from_fn(|r, c| rows[r][c])
 }
 
 /// The columns of a session's `mag_samples.csv`.
-pub(super) struct MagColumns {
+struct MagColumns {
     time_s: Vec<f64>,
     raw: Vec<Vec3>,
     temp_c: Vec<f64>,
@@ -40,7 +53,7 @@ pub(super) struct MagColumns {
 
 /// Reads `mag_samples.csv` (`t_s,mx,my,mz,temp_c,phase`): the tumble samples if there are
 /// any, otherwise every sample; and apart, the samples the session's coverage counted.
-pub(super) fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
+fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
     let text = read(path)?;
     let mut lines = text.lines();
     let header: Vec<&str> = lines
