@@ -2,12 +2,18 @@
 //! time, the two halves of a long block parsed side by side on two threads.
 //!
 //! The result is the one a single pass line by line gives, bit for bit and error for error: each
-//! half is parsed with the same row rules into its own columns; then the halves are joined in
-//! file order. What one half cannot see of the other is settled at the join: the time check
-//! across the seam (the first time of a half against the last time before it), the line numbers
-//! of the second half (counted from its start, then shifted), and the label indices (each half
-//! interns its own labels, the join maps them to the whole file's order of first appearance).
-//! The first error in file order wins, as it would line by line.
+//! half is parsed with the same row rules, the first straight into the output columns, the
+//! second into its own; then the second is appended. What one half cannot see of the other is
+//! settled at the join: the time check across the seam (the first time of the second half
+//! against the last time before it), the line numbers of the second half (counted from its
+//! start, then shifted), and the label indices (the second half interns its own labels, the join
+//! maps them to the whole file's order of first appearance). The first error in file order wins,
+//! as it would line by line.
+//!
+//! A line is read in one pass over its bytes when it is the usual row (plain decimals, the
+//! header's number of fields, no padding): digits eight at a time, no text per field, no UTF-8
+//! check for a line of numbers alone (it is ASCII). Any other line is read by the general rules,
+//! which give the same values and errors for the usual rows too.
 
 use std::collections::HashMap;
 
@@ -199,6 +205,10 @@ pub(super) fn parse_block(
     let [first, second] = parts;
     first.reset();
     second.reset();
+    // The first part reads straight into `out`, its rows being the next ones of the file: the
+    // time check across the seam is then made as its first row is read, and only the second
+    // part's rows are copied.
+    std::mem::swap(&mut first.columns, out);
     let split = (block.bytes.len() >= PARALLEL_MIN_BYTES)
         .then(|| memchr::memchr(b'\n', &block.bytes[block.bytes.len() / 2..]))
         .flatten()
@@ -217,12 +227,13 @@ pub(super) fn parse_block(
         }
         None => parse_lines(layout, block.bytes, block.offset, first),
     }
-    let mut lines = 0;
-    for part in [&mut *first, &mut *second] {
-        join(layout.path, block.first_line + lines, part, out)?;
-        lines += part.lines;
+    std::mem::swap(&mut first.columns, out);
+    if let Some(mut err) = first.error.take() {
+        err.shift_line(block.first_line - 1);
+        return Err(err);
     }
-    Ok(lines)
+    join(layout.path, block.first_line + first.lines, second, out)?;
+    Ok(first.lines + second.lines)
 }
 
 /// Append `part`, whose first line is number `first_line`, to `out`: the time check across the
@@ -254,37 +265,218 @@ fn join(
 }
 
 /// Parse the lines of `text` (input offset `offset`) into `part`, stopping at the first error.
+///
+/// Each line is first read by [`scan_row`], in one pass over its bytes; a line that pass does
+/// not take whole (anything but plain decimals and text fields, or the wrong number of fields)
+/// is read again by [`parse_row`], the general rules, after the text check. Both give the same
+/// values and the same first error, so which one read a line never shows.
 fn parse_lines(layout: &Layout<'_>, text: &[u8], offset: u64, part: &mut Part) {
-    // Text without a zero byte that is valid UTF-8 as a whole is so line by line (a line break
-    // is one byte of UTF-8): the per-line checks are then needed only when this fails.
-    let checked = memchr::memchr(0, text).is_none() && std::str::from_utf8(text).is_ok();
+    let plan = Plan::new(layout);
+    let mut values = vec![0.0; layout.roles.len()];
     let mut start = 0;
     while start < text.len() {
-        let end = memchr::memchr(b'\n', &text[start..]).map_or(text.len(), |at| start + at);
         part.lines += 1;
-        let mut line = &text[start..end];
-        if let [rest @ .., b'\r'] = line {
-            line = rest;
-        }
-        let line_start = start;
-        start = end + 1;
-        let line = if checked {
-            // Validated above: a piece of valid text cut at line breaks is valid text.
-            std::str::from_utf8(line).unwrap_or_default()
-        } else {
-            match line_text(layout.path, line, offset + line_start as u64) {
-                Ok(l) => l,
-                Err(e) => {
-                    part.error = Some(e);
-                    return;
+        let line_no = part.lines;
+        let result = match scan_row(layout, text, start, &mut values) {
+            Some(row) => {
+                start = row.next;
+                store_scanned(layout, &plan, text, offset, &row, &values, line_no, part)
+            }
+            None => {
+                let end = memchr::memchr(b'\n', &text[start..]).map_or(text.len(), |at| start + at);
+                let mut line = &text[start..end];
+                if let [rest @ .., b'\r'] = line {
+                    line = rest;
                 }
+                let line_offset = offset + start as u64;
+                start = end + 1;
+                line_text(layout.path, line, line_offset)
+                    .and_then(|line| parse_row(layout, line, line_no, part))
             }
         };
-        if let Err(e) = parse_row(layout, line, part.lines, part) {
+        if let Err(e) = result {
             part.error = Some(e);
             return;
         }
     }
+}
+
+/// A line read whole by [`scan_row`].
+struct Scanned {
+    /// Its bytes in the text, line break (and a `\r` before it) excluded.
+    line: (usize, usize),
+    /// Start of the next line.
+    next: usize,
+    /// Bytes of the label field, if the layout has one.
+    label: Option<(usize, usize)>,
+    /// Whether the line has text fields (label or ignored columns), which may hold any bytes.
+    text_fields: bool,
+}
+
+/// The line at `text[start..]` read in one pass when every number field is a plain decimal of
+/// the fast path ([`super::decimal::fast_field`]) ended by the comma or the line break, the
+/// line has exactly the header's fields and starts and ends with no blank, byte-order mark or
+/// `#`: then `values` holds the value of each number field and the line reads, by the general
+/// rules, as the same numbers (a line of number fields alone is ASCII, hence text). `None`
+/// otherwise, having changed nothing but `values`.
+fn scan_row(layout: &Layout<'_>, text: &[u8], start: usize, values: &mut [f64]) -> Option<Scanned> {
+    let last = layout.roles.len().checked_sub(1)?;
+    let mut i = start;
+    let mut label = None;
+    let mut text_fields = false;
+    for (col, (role, value)) in layout.roles.iter().zip(values.iter_mut()).enumerate() {
+        let field = i;
+        match role {
+            Role::Time | Role::Temp | Role::Reading(_) => {
+                let (v, end) = super::decimal::fast_field(text, i)?;
+                *value = v;
+                i = end;
+            }
+            Role::Label | Role::Ignored => {
+                text_fields = true;
+                let rest = text.get(i..)?;
+                i = memchr::memchr2(b',', b'\n', rest).map_or(text.len(), |at| i + at);
+                if let Role::Label = role {
+                    label = Some((field, i));
+                }
+            }
+        }
+        let is_last = col == last;
+        match text.get(i) {
+            Some(b',') if !is_last => i += 1,
+            Some(b'\n') if is_last => break,
+            None if is_last => break,
+            Some(b'\r') if is_last && matches!(text.get(i + 1), Some(b'\n') | None) => {
+                i += 1;
+                break;
+            }
+            _ => return None,
+        }
+    }
+    // Here `i` is at the line break or the end of the text; a text field ending the line holds
+    // the `\r` before the line break, which is not part of the line.
+    let next = i + 1;
+    let mut end = i;
+    if end > start && text.get(end - 1) == Some(&b'\r') {
+        end -= 1;
+    }
+    // No byte-order mark, blank or `#` at either end: the line is its own content.
+    let plain = |b: Option<&u8>| b.is_some_and(|&b| b.is_ascii() && !char::from(b).is_whitespace());
+    let first = text.get(start);
+    if end <= start || !plain(first) || first == Some(&b'#') || !plain(text.get(end - 1)) {
+        return None;
+    }
+    let label = label.map(|(from, to)| (from, to.min(end)));
+    Some(Scanned {
+        line: (start, end),
+        next,
+        label,
+        text_fields,
+    })
+}
+
+/// Where the values of a row read by [`scan_row`] go.
+struct Plan {
+    /// Column of `t_s`.
+    time: Option<usize>,
+    /// Column of `temp_c`.
+    temp: Option<usize>,
+    /// Column of each sensor value, in the order of a row's readings.
+    readings: Vec<usize>,
+}
+
+impl Plan {
+    fn new(layout: &Layout<'_>) -> Self {
+        let mut plan = Self {
+            time: None,
+            temp: None,
+            readings: vec![usize::MAX; 3 * layout.sensors],
+        };
+        for (col, role) in layout.roles.iter().enumerate() {
+            match *role {
+                Role::Time => plan.time = Some(col),
+                Role::Temp => plan.temp = Some(col),
+                Role::Reading(slot) => {
+                    if let Some(r) = plan.readings.get_mut(slot) {
+                        *r = col;
+                    }
+                }
+                Role::Label | Role::Ignored => {}
+            }
+        }
+        plan
+    }
+}
+
+/// Store a line read by [`scan_row`] (number `line_no` within its part, values in `values`).
+#[allow(clippy::too_many_arguments)]
+fn store_scanned(
+    layout: &Layout<'_>,
+    plan: &Plan,
+    text: &[u8],
+    offset: u64,
+    row: &Scanned,
+    values: &[f64],
+    line_no: usize,
+    part: &mut Part,
+) -> Result<(), RecordingError> {
+    let (from, to) = row.line;
+    // A line with text fields is checked as text first, as the general rules check it.
+    let line = if row.text_fields {
+        line_text(layout.path, &text[from..to], offset + from as u64)?
+    } else {
+        ""
+    };
+    let label = || {
+        row.label
+            .and_then(|(a, b)| line.get(a - from..b - from))
+            .unwrap_or_default()
+            .trim()
+    };
+    // The usual row first: no value refused, each pushed straight to its column.
+    let columns = &mut part.columns;
+    let time = plan.time.and_then(|c| values.get(c).copied());
+    let previous = columns.time.as_ref().and_then(|t| t.last()).copied();
+    let time_ok = !matches!((time, previous), (Some(t), Some(p)) if t < p);
+    let mut readings = [0.0; 9];
+    let mut in_range = true;
+    for (r, &col) in readings.iter_mut().zip(&plan.readings) {
+        let value = values.get(col).copied().unwrap_or_default();
+        in_range &= value.abs() <= MAX_SENSOR_MAGNITUDE;
+        *r = value;
+    }
+    if time_ok && in_range {
+        if let Some(t) = time {
+            let column = columns.time.get_or_insert_with(Vec::new);
+            if column.is_empty() {
+                part.first_time = Some((line_no, t));
+            }
+            column.push(t);
+        }
+        if let Some(t) = plan.temp.and_then(|c| values.get(c)) {
+            columns.temp.get_or_insert_with(Vec::new).push(*t);
+        }
+        if let (Some(l), Some(_)) = (columns.labels.as_mut(), row.label) {
+            l.push(label());
+        }
+        finish_row(&readings, part);
+        return Ok(());
+    }
+    // A value is refused: the column by column rules name the first one.
+    let mut readings = [0.0; 9];
+    for (col, (role, &value)) in layout.roles.iter().zip(values).enumerate() {
+        match *role {
+            Role::Label => {
+                if let Some(l) = part.columns.labels.as_mut() {
+                    l.push(label());
+                }
+            }
+            Role::Ignored => {}
+            role => store_value(layout, role, col, value, line_no, &mut readings, part)?,
+        }
+    }
+    finish_row(&readings, part);
+    Ok(())
 }
 
 /// A line as text, refused as [`super::lines::LineReader`] refuses it: a zero byte first, then
@@ -328,7 +520,6 @@ fn parse_row(
     if body.is_empty() || body.starts_with('#') {
         return Ok(());
     }
-    let columns = &mut part.columns;
     // One row's sensor values, in the order of the header's sensors (at most three sensors).
     let mut readings = [0.0; 9];
     let mut found = 0;
@@ -338,7 +529,7 @@ fn parse_row(
             continue;
         };
         if let Role::Label = role {
-            if let Some(l) = columns.labels.as_mut() {
+            if let Some(l) = part.columns.labels.as_mut() {
                 l.push(text.trim());
             }
             continue;
@@ -355,40 +546,7 @@ fn parse_row(
                 column: layout.names[col].clone(),
                 text: text.trim().to_string(),
             })?;
-        match *role {
-            Role::Time => {
-                let t = columns.time.get_or_insert_with(Vec::new);
-                match t.last() {
-                    Some(&previous) if value < previous => {
-                        return Err(RecordingError::TimeBackwards {
-                            path: layout.path.to_string(),
-                            line: line_no,
-                            time: value,
-                            previous,
-                        });
-                    }
-                    Some(_) => {}
-                    None => part.first_time = Some((line_no, value)),
-                }
-                t.push(value);
-            }
-            Role::Temp => columns.temp.get_or_insert_with(Vec::new).push(value),
-            Role::Reading(slot) => {
-                if value.abs() > MAX_SENSOR_MAGNITUDE {
-                    return Err(RecordingError::OutOfRange {
-                        path: layout.path.to_string(),
-                        line: line_no,
-                        column: layout.names[col].clone(),
-                        value,
-                        limit: MAX_SENSOR_MAGNITUDE,
-                    });
-                }
-                if let Some(r) = readings.get_mut(slot) {
-                    *r = value;
-                }
-            }
-            Role::Label | Role::Ignored => {}
-        }
+        store_value(layout, *role, col, value, line_no, &mut readings, part)?;
     }
     if found != layout.names.len() {
         return Err(RecordingError::FieldCount {
@@ -398,11 +556,69 @@ fn parse_row(
             found,
         });
     }
+    finish_row(&readings, part);
+    Ok(())
+}
+
+/// Keep `value`, read from column `col` (of role `role`) of line `line_no`: a time (checked
+/// against the time before it) or temperature into its column, a sensor value (checked against
+/// [`MAX_SENSOR_MAGNITUDE`]) into the row's `readings`.
+#[inline]
+fn store_value(
+    layout: &Layout<'_>,
+    role: Role,
+    col: usize,
+    value: f64,
+    line_no: usize,
+    readings: &mut [f64; 9],
+    part: &mut Part,
+) -> Result<(), RecordingError> {
+    let columns = &mut part.columns;
+    match role {
+        Role::Time => {
+            let t = columns.time.get_or_insert_with(Vec::new);
+            match t.last() {
+                Some(&previous) if value < previous => {
+                    return Err(RecordingError::TimeBackwards {
+                        path: layout.path.to_string(),
+                        line: line_no,
+                        time: value,
+                        previous,
+                    });
+                }
+                Some(_) => {}
+                None => part.first_time = Some((line_no, value)),
+            }
+            t.push(value);
+        }
+        Role::Temp => columns.temp.get_or_insert_with(Vec::new).push(value),
+        Role::Reading(slot) => {
+            if value.abs() > MAX_SENSOR_MAGNITUDE {
+                return Err(RecordingError::OutOfRange {
+                    path: layout.path.to_string(),
+                    line: line_no,
+                    column: layout.names[col].clone(),
+                    value,
+                    limit: MAX_SENSOR_MAGNITUDE,
+                });
+            }
+            if let Some(r) = readings.get_mut(slot) {
+                *r = value;
+            }
+        }
+        Role::Label | Role::Ignored => {}
+    }
+    Ok(())
+}
+
+/// End a row whose values are stored: its sensor readings into their columns.
+#[inline]
+fn finish_row(readings: &[f64; 9], part: &mut Part) {
+    let columns = &mut part.columns;
     for (out, r) in columns.sensors.iter_mut().zip(readings.chunks_exact(3)) {
         out.push(Vec3::new(r[0], r[1], r[2]));
     }
     columns.rows += 1;
-    Ok(())
 }
 
 /// Builds [`Labels`] row by row, storing each distinct text once.
@@ -575,6 +791,195 @@ mod tests {
         assert_eq!(labels.per_row[second + 3], Some(0));
         assert_eq!(out.rows, 8000);
         assert_eq!(out.time.expect("time")[second], second as f64);
+    }
+
+    /// The block's rows by the general rules alone, line by line (the text check, then
+    /// [`parse_row`]), with line numbers and offsets counted from the block's start.
+    fn line_by_line(layout: &Layout<'_>, text: &[u8]) -> Result<Columns, RecordingError> {
+        let mut part = Part::new(layout);
+        let mut offset = 0;
+        for (i, line) in text.split_inclusive(|&b| b == b'\n').enumerate() {
+            let mut body = line.strip_suffix(b"\n").unwrap_or(line);
+            if let [rest @ .., b'\r'] = body {
+                body = rest;
+            }
+            let body = line_text(layout.path, body, offset)?;
+            parse_row(layout, body, i + 1, &mut part)?;
+            offset += line.len() as u64;
+        }
+        Ok(part.columns)
+    }
+
+    /// Everything a block's parse gives, as comparable text (values as bits).
+    fn outcome(result: Result<Columns, RecordingError>) -> String {
+        match result {
+            Err(e) => format!("error: {e}"),
+            Ok(c) => {
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                let sensors: Vec<Vec<u64>> = c
+                    .sensors
+                    .iter()
+                    .map(|s| {
+                        s.iter()
+                            .flat_map(|v| [v.x, v.y, v.z])
+                            .map(f64::to_bits)
+                            .collect()
+                    })
+                    .collect();
+                let labels = c.labels.map(|l| {
+                    let l = l.finish();
+                    (l.names, l.per_row)
+                });
+                format!(
+                    "{} rows, time {:?}, temp {:?}, sensors {sensors:?}, labels {labels:?}",
+                    c.rows,
+                    c.time.as_deref().map(bits),
+                    c.temp.as_deref().map(bits),
+                )
+            }
+        }
+    }
+
+    #[test]
+    fn rows_read_in_one_pass_match_the_general_rules_value_for_value_and_error_for_error() {
+        let names: Vec<String> = ["t_s", "ax", "ay", "az", "pose", "note", "temp_c"]
+            .iter()
+            .map(|n| n.to_string())
+            .collect();
+        let with_text = Layout {
+            path: "test.csv",
+            names: &names,
+            roles: vec![
+                Role::Time,
+                Role::Reading(0),
+                Role::Reading(1),
+                Role::Reading(2),
+                Role::Label,
+                Role::Ignored,
+                Role::Temp,
+            ],
+            sensors: 1,
+            time: true,
+            temp: true,
+            label: Some(LabelKind::Pose),
+        };
+        let numbers = Layout {
+            path: "test.csv",
+            names: &names[..4],
+            roles: vec![
+                Role::Time,
+                Role::Reading(0),
+                Role::Reading(1),
+                Role::Reading(2),
+            ],
+            sensors: 1,
+            time: true,
+            temp: false,
+            label: None,
+        };
+        let odd_numbers = [
+            " 1.5",
+            "1.5 ",
+            "1e3",
+            "+2",
+            "1.",
+            ".5",
+            "-.5",
+            "-",
+            "",
+            "abc",
+            "1234567890123456.5",
+            "0000000000000000007",
+            "-0.0",
+            "2e10",
+            "-3e10",
+            "\u{a0}4.25",
+            "1.5\r",
+            "inf",
+            "1\u{0}",
+        ];
+        let odd_texts = ["", "-", " a ", "\u{e9}t\u{e9}", "b\r", "#", "x y"];
+        let odd_lines = ["", "# comment", "\u{feff}", "  ", "\r", "1,2,3"];
+        let mut state: u64 = 0x1234_5678_9ABC_DEF1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for round in 0..3000 {
+            let layout = if round % 2 == 0 { &with_text } else { &numbers };
+            // Mostly short blocks (an error early on hides nothing); some long enough to be
+            // parsed in two halves.
+            let lines = if round % 50 == 0 {
+                4000
+            } else {
+                1 + next() as usize % 30
+            };
+            let rare = if round % 50 == 0 { 20_000 } else { 60 };
+            let mut text = String::new();
+            let mut time = 0.0;
+            for _ in 0..lines {
+                if next() % rare == 0 {
+                    text += odd_lines[next() as usize % odd_lines.len()];
+                    text += "\n";
+                    continue;
+                }
+                let mut fields = Vec::new();
+                for role in &layout.roles {
+                    let r = next();
+                    let field = if r % rare == 0 {
+                        match role {
+                            Role::Label | Role::Ignored => {
+                                odd_texts[(r >> 20) as usize % odd_texts.len()].to_string()
+                            }
+                            _ => odd_numbers[(r >> 20) as usize % odd_numbers.len()].to_string(),
+                        }
+                    } else {
+                        match role {
+                            Role::Time => {
+                                time += if r % 997 == 1 { -0.5 } else { 0.01 };
+                                format!("{time:.2}")
+                            }
+                            Role::Label => {
+                                ["a", "b", "c\u{e9}", ""][(r >> 8) as usize % 4].to_string()
+                            }
+                            Role::Ignored => "n".to_string(),
+                            _ => {
+                                let digits = (r >> 8) % 9;
+                                let v = ((r >> 16) % 2_000_000) as f64 / 1000.0 - 1000.0;
+                                format!("{v:.*}", digits as usize)
+                            }
+                        }
+                    };
+                    fields.push(field);
+                }
+                if next() % rare == 1 {
+                    fields.pop();
+                }
+                if next() % rare == 2 {
+                    fields.push("1".into());
+                }
+                text += &fields.join(",");
+                text += if next() % 7 == 0 { "\r\n" } else { "\n" };
+            }
+            if next() % 3 == 0 {
+                text.pop();
+            }
+            let block = Block {
+                bytes: text.as_bytes(),
+                first_line: 1,
+                offset: 0,
+            };
+            let mut parts = [Part::new(layout), Part::new(layout)];
+            let mut out = Columns::new(layout);
+            let fast = parse_block(layout, &block, &mut parts, &mut out).map(|_| out);
+            assert_eq!(
+                outcome(fast),
+                outcome(line_by_line(layout, text.as_bytes())),
+                "{text:?}"
+            );
+        }
     }
 
     #[test]
