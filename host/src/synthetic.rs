@@ -231,6 +231,23 @@ pub fn mag_samples<R: Rng + ?Sized>(
         .collect()
 }
 
+/// `n` magnetometer samples over the whole sphere (field 50 µT, 0.5 µT noise per axis, i.e.
+/// 1 %) of a sensor with random hard- and soft-iron errors (20 % scale, 5 % cross-axis, an
+/// offset of twice the field), drawn from `seed`: the usual cloud of the sample-level tests.
+pub fn hard_and_soft_iron_cloud(n: usize, seed: u64) -> Vec<Vec3> {
+    let spec = TruthSpec {
+        scale_error: 0.2,
+        cross_axis: 0.05,
+        offset_ratio: 2.0,
+        reference: 50.0,
+        upper_triangular: false,
+    };
+    let truth = random_calibration(&mut rng(seed), &spec);
+    let mut r = rng(seed + 1);
+    let dirs = sphere_directions(&mut r, n);
+    mag_samples(&mut r, &truth, &dirs, 50.0, 0.5)
+}
+
 fn six_faces() -> Vec<Vec3> {
     face_directions().to_vec()
 }

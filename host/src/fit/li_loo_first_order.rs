@@ -258,25 +258,10 @@ mod tests {
     use super::*;
     use crate::fit::li::{fit_li, LiOptions};
     use crate::fit::li_loo::{li_leave_one_out_errors, li_leave_one_out_rms};
-    use crate::synthetic::{mag_samples, random_calibration, rng, sphere_directions, TruthSpec};
+    use crate::synthetic::hard_and_soft_iron_cloud as cloud;
 
     /// Unknowns of the general ellipsoid.
     const P: f64 = 9.0;
-
-    /// `n` magnetometer samples of a sensor with hard- and soft-iron errors, 1 % noise.
-    fn cloud(n: usize, seed: u64) -> Vec<Vec3> {
-        let spec = TruthSpec {
-            scale_error: 0.2,
-            cross_axis: 0.05,
-            offset_ratio: 2.0,
-            reference: 50.0,
-            upper_triangular: false,
-        };
-        let truth = random_calibration(&mut rng(seed), &spec);
-        let mut r = rng(seed + 1);
-        let dirs = sphere_directions(&mut r, n);
-        mag_samples(&mut r, &truth, &dirs, 50.0, 0.5)
-    }
 
     /// The magnetometer columns (`mx,my,mz`) of a recording under `data/real/`.
     fn real_mag(name: &str) -> Vec<Vec3> {

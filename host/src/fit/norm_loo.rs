@@ -92,22 +92,7 @@ fn held_out_sum_of_squares(
 mod tests {
     use crate::fit::norm_lm::fit_mag_lm;
     use crate::fit::Vec3;
-    use crate::synthetic::{mag_samples, random_calibration, rng, sphere_directions, TruthSpec};
-
-    /// `n` magnetometer samples of a sensor with hard- and soft-iron errors, 1 % noise.
-    fn cloud(n: usize, seed: u64) -> Vec<Vec3> {
-        let spec = TruthSpec {
-            scale_error: 0.2,
-            cross_axis: 0.05,
-            offset_ratio: 2.0,
-            reference: 50.0,
-            upper_triangular: false,
-        };
-        let truth = random_calibration(&mut rng(seed), &spec);
-        let mut r = rng(seed + 1);
-        let dirs = sphere_directions(&mut r, n);
-        mag_samples(&mut r, &truth, &dirs, 50.0, 0.5)
-    }
+    use crate::synthetic::hard_and_soft_iron_cloud as cloud;
 
     #[test]
     fn first_order_leave_one_out_matches_refitting_without_each_sample() {

@@ -209,21 +209,11 @@ pub fn thin_indices(len: usize, max: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synthetic::{mag_samples, random_calibration, rng, sphere_directions, TruthSpec};
+    use crate::synthetic::hard_and_soft_iron_cloud;
 
     #[test]
     fn li_on_magnetometer_samples_reports_a_held_out_rms_on_either_side_of_the_size_rule() {
-        let spec = TruthSpec {
-            scale_error: 0.2,
-            cross_axis: 0.05,
-            offset_ratio: 2.0,
-            reference: 50.0,
-            upper_triangular: false,
-        };
-        let truth = random_calibration(&mut rng(51), &spec);
-        let mut r = rng(52);
-        let dirs = sphere_directions(&mut r, LI_EXACT_LOO_MAX_SAMPLES + 1);
-        let points = mag_samples(&mut r, &truth, &dirs, 50.0, 0.5);
+        let points = hard_and_soft_iron_cloud(LI_EXACT_LOO_MAX_SAMPLES + 1, 51);
         let small = &points[..LI_EXACT_LOO_MAX_SAMPLES];
         for set in [small, &points[..]] {
             let fit = fit_mag(Method::Li, set, 50.0).expect("a full sphere fits");
