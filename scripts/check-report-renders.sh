@@ -36,5 +36,8 @@ if [[ ! -s "$shot" ]]; then
   echo "error: chromium wrote no screenshot of $report" >&2
   exit 1
 fi
-cargo run -q --release -p imucal --example png_stats -- "$shot"
+# Built with the workspace's test feature set (as `cargo test --workspace --release` builds the
+# examples), so after the tests nothing is rebuilt; `-p imucal` alone would rebuild the library.
+cargo build -q --release --workspace --examples
+"${CARGO_TARGET_DIR:-target}/release/examples/png_stats" "$shot"
 echo "report renders: $shot"
