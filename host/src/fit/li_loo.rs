@@ -28,12 +28,7 @@ pub fn li_leave_one_out_errors(points: &[Vec3], reference: f64) -> Option<Vec<Op
     if points.len() < 11 {
         return None;
     }
-    let centre = points.iter().sum::<Vec3>() / points.len() as f64;
-    let moments = Moments::about(points, &centre);
-    let scale = moments.rms_radius();
-    if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
+    let (moments, centre, scale) = Moments::about_mean(points)?;
     let as_poses: Vec<Pose> = points.iter().map(|p| Pose::single(*p)).collect();
     held_out_errors(&as_poses, reference, |i| {
         let without = moments.without(&points[i], &centre);

@@ -68,12 +68,7 @@ impl Influence {
         if points.len() < 11 || !points.iter().all(|p| p.iter().all(|x| x.is_finite())) {
             return None;
         }
-        let centre = points.iter().sum::<Vec3>() / points.len() as f64;
-        let moments = Moments::about(points, &centre);
-        let scale = moments.rms_radius();
-        if scale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-            return None;
-        }
+        let (moments, centre, scale) = Moments::about_mean(points)?;
         let s = moments.scatter(scale);
         let mut v = constrained_quadric(&s).ok()?;
         // Sign as the fit takes it (M positive definite), length so that vᵀCv = 1.

@@ -131,6 +131,19 @@ impl Moments {
         Self { sums }
     }
 
+    /// Moments about the points' mean, with the mean and the RMS radius about it (the scale
+    /// of Li's fit about the mean); `None` for no points or all of them at their mean.
+    pub fn about_mean(points: &[Vec3]) -> Option<(Self, Vec3, f64)> {
+        if points.is_empty() {
+            return None;
+        }
+        let centre = points.iter().sum::<Vec3>() / points.len() as f64;
+        let moments = Self::about(points, &centre);
+        let scale = moments.rms_radius();
+        (scale.partial_cmp(&0.0) == Some(std::cmp::Ordering::Greater))
+            .then_some((moments, centre, scale))
+    }
+
     /// The moments without the point `p − centre` (for leave-one-out).
     pub fn without(&self, p: &Vec3, centre: &Vec3) -> Self {
         let m = monomials(p.x - centre.x, p.y - centre.y, p.z - centre.z);
