@@ -98,16 +98,7 @@ fn bench_fits(c: &mut Criterion) {
 /// Li's fit on magnetometer samples with its leave-one-out: the fit alone and with the
 /// first-order leave-one-out on 10⁶ samples, and the exact downdate against first order on 2000.
 fn bench_li_loo(c: &mut Criterion, million: &[imucal::fit::Vec3]) {
-    let li = |points: &[imucal::fit::Vec3]| {
-        fit_li(
-            points,
-            50.0,
-            LiOptions {
-                subtract_mean: true,
-            },
-        )
-        .map(|f| f.cal)
-    };
+    let li = li_about_mean;
     let li_with_loo =
         |points: &[imucal::fit::Vec3]| (li(points), li_first_order_loo_rms(points, 50.0));
     let first2000 = &million[..2000];
@@ -145,6 +136,20 @@ fn bench_li_loo(c: &mut Criterion, million: &[imucal::fit::Vec3]) {
 }
 
 /// CPU seconds per call of `f`, over `runs` calls; `None` without `/proc`.
+/// Li's fit about the sample mean of magnetometer samples (field 50).
+fn li_about_mean(
+    points: &[imucal::fit::Vec3],
+) -> Result<imucal::fit::Calibration, imucal::fit::FitError> {
+    fit_li(
+        points,
+        50.0,
+        LiOptions {
+            subtract_mean: true,
+        },
+    )
+    .map(|f| f.cal)
+}
+
 fn cpu_per_call<T>(runs: usize, mut f: impl FnMut() -> T) -> Option<f64> {
     let before = common::cpu_seconds()?;
     for _ in 0..runs {
@@ -161,16 +166,7 @@ fn print_lm_cpu(points: &[imucal::fit::Vec3]) {
         println!("fit/lm_1e6_mag_samples: the fit failed");
         return;
     };
-    let li = cpu_per_call(RUNS, || {
-        fit_li(
-            points,
-            50.0,
-            LiOptions {
-                subtract_mean: true,
-            },
-        )
-        .map(|f| f.cal)
-    });
+    let li = cpu_per_call(RUNS, || li_about_mean(points));
     let lm = cpu_per_call(RUNS, || fit_mag_lm(points, 50.0).map(|f| f.cal));
     if let (Some(li), Some(lm)) = (li, lm) {
         println!(

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use imucal::fit::li::{fit_li, LiOptions};
 use imucal::fit::Vec3;
-use imucal::synthetic::{mag_samples, random_calibration, rng, sphere_directions, TruthSpec};
+use imucal::synthetic::hard_and_soft_iron_cloud;
 
 fn points() -> Vec<Vec3> {
     if let Ok(path) = std::env::var("IMUCAL_LI_POINTS") {
@@ -26,17 +26,7 @@ fn points() -> Vec<Vec3> {
             .map(|c| Vec3::new(c[0], c[1], c[2]))
             .collect();
     }
-    let spec = TruthSpec {
-        scale_error: 0.2,
-        cross_axis: 0.05,
-        offset_ratio: 2.0,
-        reference: 50.0,
-        upper_triangular: false,
-    };
-    let truth = random_calibration(&mut rng(1), &spec);
-    let mut r = rng(2);
-    let dirs = sphere_directions(&mut r, 1_000_000);
-    mag_samples(&mut r, &truth, &dirs, 50.0, 0.5)
+    hard_and_soft_iron_cloud(1_000_000, 1)
 }
 
 fn main() {
