@@ -250,23 +250,29 @@ pub(super) fn calibration_from_scatter(
     Ok(cal)
 }
 
-/// Centre, `C` and `A = (ref/√C)·M^½` from the quadric coefficients (eq. 19–29).
-fn calibration_from_quadric(v: &DVector<f64>, reference: f64) -> Result<Calibration, FitError> {
-    let sign = if v[0] + v[1] + v[2] < 0.0 { -1.0 } else { 1.0 };
-    let w: Vec<f64> = v.iter().map(|x| x * sign).collect();
-    let m = Mat3::new(w[0], w[5], w[4], w[5], w[1], w[3], w[4], w[3], w[2]);
-    let n = Vec3::new(w[6], w[7], w[8]);
-    let d = w[9];
+/// `M`, the centre `c = −M⁻¹n` and `C = cᵀMc − d` of the quadric `v` (eq. 19–23, sign as
+/// given); an error when `M` is singular or the quadric encloses no volume (`C ≤ 0`).
+pub(super) fn quadric_centre(v: &[f64]) -> Result<(Mat3, Vec3, f64), FitError> {
+    let m = Mat3::new(v[0], v[5], v[4], v[5], v[1], v[3], v[4], v[3], v[2]);
+    let n = Vec3::new(v[6], v[7], v[8]);
     let m_inv = m
         .try_inverse()
         .ok_or_else(|| no_ellipsoid("the quadric matrix M is singular"))?;
     let centre = -(m_inv * n);
-    let c = centre.dot(&(m * centre)) - d;
+    let c = centre.dot(&(m * centre)) - v[9];
     if c.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return Err(no_ellipsoid(
             "the fitted quadric encloses no volume (C ≤ 0)",
         ));
     }
+    Ok((m, centre, c))
+}
+
+/// Centre, `C` and `A = (ref/√C)·M^½` from the quadric coefficients (eq. 19–29).
+fn calibration_from_quadric(v: &DVector<f64>, reference: f64) -> Result<Calibration, FitError> {
+    let sign = if v[0] + v[1] + v[2] < 0.0 { -1.0 } else { 1.0 };
+    let w: Vec<f64> = v.iter().map(|x| x * sign).collect();
+    let (m, centre, c) = quadric_centre(&w)?;
     let root =
         sqrt_spd(&m).ok_or_else(|| no_ellipsoid("the fitted quadric is not an ellipsoid"))?;
     Ok(Calibration {

@@ -44,10 +44,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::li::{constrained_quadric, constraint_matrix};
+use super::li::{constrained_quadric, constraint_matrix, quadric_centre};
 use super::li_moments::{linear_form, quadratic_form, scaled_monomials, Moments, LINEAR_TERMS};
 use super::norm_jacobian::in_two_halves;
-use super::{Mat3, Vec3};
+use super::Vec3;
 
 /// The per-sample coefficients of the first-order leave-one-out of one Li fit (module comment).
 struct Influence {
@@ -94,14 +94,7 @@ impl Influence {
         let p = k_inv.view((0, 0), (10, 10)).into_owned();
         let p = (&p + p.transpose()) * 0.5;
 
-        let m = Mat3::new(v[0], v[5], v[4], v[5], v[1], v[3], v[4], v[3], v[2]);
-        let n = Vec3::new(v[6], v[7], v[8]);
-        let quadric_centre = -(m.try_inverse()? * n);
-        let c0 = quadric_centre.dot(&(m * quadric_centre)) - v[9];
-        if c0.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-            return None;
-        }
-        let q = quadric_centre;
+        let (_, q, c0) = quadric_centre(v.as_slice()).ok()?;
         let phi_c = DVector::from_row_slice(&[
             q.x * q.x,
             q.y * q.y,
