@@ -209,7 +209,17 @@ pub fn fit_alignment(accel: &[Vec3], mag: &[Vec3]) -> Result<Alignment, FitError
     let rotation = (Rotation3::new(Vec3::new(p[0], p[1], p[2])) * base).into_inner();
     // Wrap the dip into [−90°, 90°]: sin is what the data determine.
     let dip = p[3].sin().clamp(-1.0, 1.0).asin();
-    let unit_covariance = normal_covariance(&sol.jtj);
+    // The covariance of the rotation itself, `exp([δ]×)·R` about the accelerometer's axes: the
+    // normal matrix again at the solution with `R` as the base (`w = 0`, where the left Jacobian
+    // is the identity). The solver's own matrix is that of `w` about the winning start, which
+    // differs by `J_l(w)` and so would depend on which start won.
+    let at_solution = DipProblem {
+        gravity,
+        field,
+        base: Rotation3::from_matrix_unchecked(rotation),
+    };
+    let jacobian = at_solution.jacobian(&DVector::from_vec(vec![0.0, 0.0, 0.0, p[3]]));
+    let unit_covariance = normal_covariance(&(jacobian.transpose() * &jacobian));
     if unit_covariance.is_none() {
         return Err(FitError::Underdetermined(
             "the poses do not determine the rotation about every axis; add poses with each face of the board up".into(),
