@@ -355,6 +355,52 @@ fn dip_poses(
 }
 
 #[test]
+fn iterations_steered_by_a_sample_of_the_data_reach_the_full_solution() {
+    // 300 000 samples: above twice the default 2¹⁶ iteration samples, so by default the first
+    // (weighting) pass is fitted on every 4th block of samples and the second pass's
+    // iterations sum `JᵀJ` over them. The first pass's solution is then about √(N/m) ≈ 2
+    // standard errors off the full one, which moves the second pass's weights by ~10⁻⁴
+    // relative and its solution by a small fraction of a standard error (measured 1.5·10⁻³ σ;
+    // the noise scale comes from every sample in both): a fiftieth of σ is the bound. The
+    // covariance (a full sum at the solution in both) agrees to 10⁻³ relative.
+    let points = imucal::synthetic::hard_and_soft_iron_cloud(300_000, 31);
+    let start = fit_mag_lm(&points[..2000], FIELD).unwrap().cal;
+    let obs = NormObservations::uniform(points, 1.0);
+    let sampled = NormLmOptions {
+        noise_known: false,
+        ..NormLmOptions::default()
+    };
+    let full = NormLmOptions {
+        iteration_samples: None,
+        ..sampled
+    };
+    let a = refine_lm(&obs, &start, FIELD, &sampled).unwrap();
+    let b = refine_lm(&obs, &start, FIELD, &full).unwrap();
+    let (std_a, std_b) = (a.std.unwrap(), b.std.unwrap());
+    for (k, (pa, pb)) in upper_params(&a.cal)
+        .iter()
+        .zip(upper_params(&b.cal))
+        .enumerate()
+    {
+        let se = b.covariance.as_ref().unwrap()[(k, k)].sqrt();
+        assert!(
+            (pa - pb).abs() <= 0.02 * se,
+            "parameter {k}: {pa} against {pb} ({:.2e} σ)",
+            (pa - pb) / se
+        );
+    }
+    for (sa, sb) in std_a
+        .a
+        .iter()
+        .chain(std_a.b.iter())
+        .zip(std_b.a.iter().chain(std_b.b.iter()))
+    {
+        assert!((sa - sb).abs() <= 1e-3 * sb, "σ {sa:.6e} against {sb:.6e}");
+    }
+    assert!((a.condition_number / b.condition_number - 1.0).abs() < 1e-3);
+}
+
+#[test]
 fn alignment_recovers_a_small_rotation_and_the_dip() {
     let truth = Rotation3::new(Vec3::new(0.03, -0.02, 0.05)).into_inner();
     let dip = 64f64.to_radians();
@@ -392,6 +438,61 @@ fn alignment_recovers_a_swapped_and_inverted_magnetometer_mounting() {
     let angle = Rotation3::from_matrix(&(fit.rotation * truth.transpose())).angle();
     // σ per axis ≈ 1 mrad (2 mrad noise, 16 poses); 4σ·√3 ≈ 7 mrad.
     assert!(angle < 0.007, "rotation error {angle:.2e} rad");
+}
+
+#[test]
+fn alignment_uncertainty_is_the_same_whichever_mounting_the_fit_starts_from() {
+    // The same poses, the magnetometer's axes once as they are and once permuted and flipped:
+    // the rotation differs by that permutation, its uncertainty about the accelerometer's axes
+    // (the same geometry in the accelerometer frame) must not. With a rotation of 100° the
+    // winning start is far from the solution, where the rotation vector's own covariance and
+    // the rotation's differ by the SO(3) left Jacobian (≈ 30 % at 100°).
+    let truth = Rotation3::new(Vec3::new(1.2, -0.8, 0.9)).into_inner();
+    let (accel, mag) = dip_poses(23, &truth, 60f64.to_radians(), 0.003, 40);
+    let swap = Mat3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
+    let swapped: Vec<Vec3> = mag.iter().map(|m| swap * m).collect();
+    let plain = fit_alignment(&accel, &mag).unwrap();
+    let permuted = fit_alignment(&accel, &swapped).unwrap();
+    let rotation_gap =
+        Rotation3::from_matrix(&(permuted.rotation * swap * plain.rotation.transpose())).angle();
+    assert!(
+        rotation_gap < 1e-9,
+        "rotations differ by {rotation_gap:.2e} rad"
+    );
+    for k in 0..3 {
+        // Same data, same minimum: equal up to the solver's tolerance, not statistically.
+        let (a, b) = (plain.rotation_std[k], permuted.rotation_std[k]);
+        assert!(
+            (a - b).abs() <= 1e-6 * a,
+            "axis {k}: σ {a:.6e} against {b:.6e}"
+        );
+    }
+    // Both are the σ of the left perturbation `exp([δ]×)·R` at the solution: rows
+    // `((Rm̂ᵢ × ĝᵢ)ᵀ, cos δ)`, covariance `(JᵀJ)⁻¹·cost/(N − 4)`.
+    let unit = |v: &Vec3| v.normalize();
+    let rows: Vec<[f64; 4]> = accel
+        .iter()
+        .zip(&mag)
+        .map(|(g, m)| {
+            let d = (plain.rotation * unit(m)).cross(&unit(g));
+            [d.x, d.y, d.z, plain.dip.cos()]
+        })
+        .collect();
+    let jtj = nalgebra::Matrix4::from_fn(|i, j| rows.iter().map(|r| r[i] * r[j]).sum::<f64>());
+    let cost: f64 = accel
+        .iter()
+        .zip(&mag)
+        .map(|(g, m)| (unit(g).dot(&(plain.rotation * unit(m))) + plain.dip.sin()).powi(2))
+        .sum();
+    let covariance = jtj.try_inverse().unwrap() * (cost / (accel.len() - 4) as f64);
+    for k in 0..3 {
+        let expected = covariance[(k, k)].sqrt();
+        let s = plain.rotation_std[k];
+        assert!(
+            (s - expected).abs() <= 1e-6 * expected,
+            "axis {k}: σ {s:.6e} against {expected:.6e}"
+        );
+    }
 }
 
 #[test]

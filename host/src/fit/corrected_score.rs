@@ -81,12 +81,15 @@ const UPPER_ENTRIES: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 
 /// the poorly determined direction; the corrected root is not. The iteration keeps `jtj` (a
 /// chord method): the root lies O(σ²) from `start`, so `JᵀJ` changes by as little, and each
 /// step, like a Gauss–Newton one, gains a factor of order σ (the residual's curvature term).
-/// `None` when the iteration does not settle.
+/// The iteration stops once a step's length in the metric of `jtj`, `δᵀ(JᵀJ)δ`, is at most
+/// `negligible_step2` (the caller's square of a negligible fraction of a standard error), or
+/// relative to the parameters at rounding level. `None` when the iteration does not settle.
 pub(super) fn solve_corrected_score(
     samples: NormSamples<'_>,
     jtj: &DMatrix<f64>,
     start: &DVector<f64>,
     noise_var: &[f64],
+    negligible_step2: f64,
 ) -> Option<DVector<f64>> {
     let factor = jtj.clone().cholesky()?;
     let mut p = start.clone();
@@ -96,7 +99,8 @@ pub(super) fn solve_corrected_score(
             return None;
         }
         p += &step;
-        if step.norm() <= 1e-12 * (p.norm() + 1e-12) {
+        if step.dot(&(jtj * &step)) <= negligible_step2 || step.norm() <= 1e-12 * (p.norm() + 1e-12)
+        {
             return Some(p);
         }
     }

@@ -21,6 +21,13 @@
 //! The final pass solves the corrected score `Jᵀr − E[Jᵀr] = 0` instead (Stefanski 1989,
 //! Nakamura 1990), which removes it (see `examples/fit_montecarlo.rs`). The covariance follows
 //! [`super::uncertainty`].
+//!
+//! Passes over large data: the first pass only sets the weights, so it stops a tenth of a
+//! standard error from its optimum and, from twice [`NormLmOptions::iteration_samples`] on, is
+//! fitted on those samples alone (its noise scale is then taken over every sample); the
+//! second pass steers its steps with `JᵀJ` summed over the same samples but solves the full
+//! `Jᵀr = 0`; the corrected score stops at a thousandth of a standard error; the covariance and
+//! leverages are summed over every sample at the solution.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -36,7 +43,8 @@ use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::leave_one_out_rms;
 use super::norm_jacobian::{
-    jacobian_row, norm_residual, residuals_and_normal_equations, NormSamples,
+    hessian_stride, jacobian_row, norm_residual, residuals_and_normal_equations, NormSamples,
+    ITERATION_SAMPLES, LANES,
 };
 use super::norm_loo::first_order_loo_rms;
 use super::six_position::fit_six_position;
@@ -89,6 +97,13 @@ pub struct NormLmOptions {
     /// and solve the corrected score (second-order bias) instead of the least-squares one (with
     /// unknown noise, σ is first estimated from the residual).
     pub correct_norm_bias: bool,
+    /// On a problem of at least twice this many samples (`None`: never), about this many
+    /// spread evenly over the data steer the iterations: the first (weighting) pass is fitted
+    /// on them alone, and the second pass's iterations sum `JᵀJ` over them. The solution is
+    /// the root of the second pass's exact `Jᵀr` over every sample, and its covariance and
+    /// leverages are summed over every sample at the solution. See
+    /// [`super::norm_jacobian::hessian_stride`] and the module comment.
+    pub iteration_samples: Option<usize>,
 }
 
 impl Default for NormLmOptions {
@@ -97,6 +112,7 @@ impl Default for NormLmOptions {
             lm: LmOptions::default(),
             noise_known: true,
             correct_norm_bias: true,
+            iteration_samples: Some(ITERATION_SAMPLES),
         }
     }
 }
@@ -122,6 +138,8 @@ struct NormProblem {
     /// Half the tangential noise variance `½σ_t²` of each calibrated point (reference units):
     /// noise across the sphere lengthens a vector by `σ_t²/(2n)` on average, which is removed.
     tangential: Vec<f64>,
+    /// The stride of blocks over which `JᵀJ` is summed ([`hessian_stride`]; 1: all).
+    hessian_stride: usize,
 }
 
 impl NormProblem {
@@ -138,7 +156,8 @@ impl NormProblem {
         let r = upper_from_params(p);
         let b = Vec3::new(p[6], p[7], p[8]);
         let mut res = vec![0.0; self.points.len()];
-        let (upper, grad) = residuals_and_normal_equations(&r, &b, self.samples(), &mut res);
+        let (upper, grad) =
+            residuals_and_normal_equations(&r, &b, self.samples(), &mut res, self.hessian_stride);
         let mut jtj = DMatrix::zeros(9, 9);
         let mut at = 0;
         for i in 0..9 {
@@ -203,6 +222,68 @@ impl LeastSquaresProblem for NormProblem {
     ) -> Option<(DVector<f64>, DMatrix<f64>, DVector<f64>)> {
         Some(self.evaluate(p))
     }
+}
+
+/// The first pass's solution only sets the second pass's weights and norm corrections, which
+/// move by a fraction of the step still left; it stops once the Gauss–Newton step left is under
+/// this many standard errors (the second pass converges to full precision).
+const WEIGHTING_STEP_SE: f64 = 0.1;
+
+/// The corrected-score iteration stops once a step is under this many standard errors: each
+/// step gains a factor of order σ, so what is left is smaller still, and far below the
+/// uncertainty the fit states.
+const NEGLIGIBLE_SCORE_STEP_SE: f64 = 1e-3;
+
+/// `cost/(N − 9)`: the variance of a weighted residual, which is also the scale of `(JᵀJ)⁻¹`
+/// that gives the parameters' variance (a step `δ` is `√(δᵀJᵀJδ/that)` standard errors).
+fn standard_error2(cost: f64, n: usize) -> f64 {
+    cost / n.saturating_sub(9).max(1) as f64
+}
+
+/// The options of the first (weighting) pass: `ftol` raised to `WEIGHTING_STEP_SE²/(N − 9)`,
+/// since the Gauss–Newton step's predicted relative reduction `δᵀJᵀJδ/cost` is its squared
+/// length in standard errors over `N − 9`.
+fn weighting_pass_options(lm: &LmOptions, n: usize) -> LmOptions {
+    let ftol = WEIGHTING_STEP_SE.powi(2) / n.saturating_sub(9).max(1) as f64;
+    LmOptions {
+        cost_tolerance: lm.cost_tolerance.max(ftol),
+        ..*lm
+    }
+}
+
+/// The weight `1/σ'` of the norm of `x` through `R̃`, `b̃` (scaled units, per-axis noise
+/// `axis_sigma`): the radial part `σ̃|R̃ᵀv̂|` of the noise; also `|R̃ᵀv̂|²`.
+fn radial_weight(r: &Mat3, b: &Vec3, x: &Vec3, axis_sigma: f64) -> (f64, f64) {
+    let vh = (r * (x - b))
+        .try_normalize(0.0)
+        .unwrap_or_else(|| Vec3::repeat(1.0 / 3f64.sqrt()));
+    let radial2 = (r.transpose() * vh).norm_squared();
+    let weight = 1.0 / (axis_sigma * radial2.sqrt()).max(f64::MIN_POSITIVE);
+    (weight, radial2)
+}
+
+/// The first pass's cost over every sample: residuals at `at`, weighted as that pass weighted
+/// them (from `weights_from`), without norm corrections.
+fn weighted_cost(
+    points: &[Vec3],
+    sigma: &[f64],
+    s: f64,
+    weights_from: &DVector<f64>,
+    at: &DVector<f64>,
+) -> f64 {
+    let (r0, b0) = (
+        upper_from_params(weights_from),
+        Vec3::new(weights_from[6], weights_from[7], weights_from[8]),
+    );
+    let (r, b) = (upper_from_params(at), Vec3::new(at[6], at[7], at[8]));
+    points
+        .iter()
+        .zip(sigma)
+        .map(|(x, sigma)| {
+            let (weight, _) = radial_weight(&r0, &b0, x, sigma / s);
+            norm_residual((r * (x - b)).norm(), weight, 0.0).powi(2)
+        })
+        .sum()
 }
 
 fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> {
@@ -301,36 +382,55 @@ pub fn refine_lm_detailed(
     ]);
 
     // Two passes: the noise of each norm (σ propagated through A) is taken from the start, then
-    // from the first solution, where also the noise-induced lengthening is corrected.
+    // from the first solution, where also the noise-induced lengthening is corrected. On a
+    // large problem the first pass runs on the iteration samples alone (see
+    // `NormLmOptions::iteration_samples`).
+    let stride = hessian_stride(n, opts.iteration_samples);
+    let every = stride * LANES;
+    let sub_sigma: Vec<f64> = if stride > 1 {
+        obs.sigma.iter().step_by(every).copied().collect()
+    } else {
+        Vec::new()
+    };
+    let start_params = params.clone();
     let mut iterations = 0;
     let mut solution: Option<LmSolution> = None;
     // The problem of the last pass (its points move from pass to pass, never copied).
     let mut last_problem: Option<NormProblem> = None;
     for pass in 0..2 {
-        let points = match last_problem.take() {
-            Some(problem) => problem.points,
-            None => std::mem::take(&mut scaled),
+        let subsampled = pass == 0 && stride > 1;
+        let (points, sigma): (Vec<Vec3>, &[f64]) = if subsampled {
+            (scaled.iter().step_by(every).copied().collect(), &sub_sigma)
+        } else {
+            let points = match last_problem.take() {
+                Some(problem) if problem.points.len() == n => problem.points,
+                _ => std::mem::take(&mut scaled),
+            };
+            (points, &obs.sigma)
         };
         let r = upper_from_params(&params);
         let b = Vec3::new(params[6], params[7], params[8]);
-        // With unknown noise `sigma` is relative; its scale comes from the first pass's residual.
+        // With unknown noise `sigma` is relative; its scale comes from the first pass's residual,
+        // over every sample (also when that pass ran on the iteration samples).
         let noise_scale = match (&solution, opts.noise_known) {
-            (Some(prev), false) => reduced_chi_square(prev.cost, n, 9).unwrap_or(0.0).sqrt(),
+            (Some(prev), false) => {
+                let cost = if stride > 1 {
+                    weighted_cost(&points, &obs.sigma, s, &start_params, &prev.params)
+                } else {
+                    prev.cost
+                };
+                reduced_chi_square(cost, n, 9).unwrap_or(0.0).sqrt()
+            }
             _ => 1.0,
         };
         let frobenius2 = r.norm_squared();
         let (weights, tangential) = points
             .iter()
-            .zip(&obs.sigma)
+            .zip(sigma)
             .map(|(x, sigma)| {
-                let v = r * (x - b);
-                let vh = v
-                    .try_normalize(0.0)
-                    .unwrap_or_else(|| Vec3::repeat(1.0 / 3f64.sqrt()));
                 // Per-axis noise σ̃ in scaled units; its radial part is σ̃|R̃ᵀv̂|, the rest tangential.
                 let axis_sigma = sigma / s;
-                let radial2 = (r.transpose() * vh).norm_squared();
-                let weight = 1.0 / (axis_sigma * radial2.sqrt()).max(f64::MIN_POSITIVE);
+                let (weight, radial2) = radial_weight(&r, &b, x, axis_sigma);
                 let k = if pass == 1 && opts.correct_norm_bias {
                     0.5 * (axis_sigma * noise_scale).powi(2) * (frobenius2 - radial2).max(0.0)
                 } else {
@@ -339,12 +439,19 @@ pub fn refine_lm_detailed(
                 (weight, k)
             })
             .unzip();
-        let problem = NormProblem {
+        let count = points.len();
+        let mut problem = NormProblem {
             points,
             weights,
             tangential,
+            hessian_stride: if subsampled { 1 } else { stride },
         };
-        let mut sol = levenberg_marquardt(&problem, params.clone(), &opts.lm)
+        let lm = if pass == 0 {
+            weighting_pass_options(&opts.lm, count)
+        } else {
+            opts.lm
+        };
+        let mut sol = levenberg_marquardt(&problem, params.clone(), &lm)
             .map_err(|e| e.into_fit_error(Method::Lm.name()))?;
         iterations += sol.iterations;
         if pass == 1 && opts.correct_norm_bias {
@@ -353,11 +460,23 @@ pub fn refine_lm_detailed(
                 .iter()
                 .map(|sigma| (sigma / s * noise_scale).powi(2))
                 .collect();
-            if let Some(corrected) =
-                solve_corrected_score(problem.samples(), &sol.jtj, &sol.params, &noise_var)
-            {
+            let negligible_step2 = NEGLIGIBLE_SCORE_STEP_SE.powi(2) * standard_error2(sol.cost, n);
+            if let Some(corrected) = solve_corrected_score(
+                problem.samples(),
+                &sol.jtj,
+                &sol.params,
+                &noise_var,
+                negligible_step2,
+            ) {
+                problem.hessian_stride = 1;
                 sol = re_evaluate(&problem, sol, corrected);
             }
+        }
+        // The covariance, leverages and condition number need the full `JᵀJ` at the solution.
+        if pass == 1 && problem.hessian_stride > 1 {
+            problem.hessian_stride = 1;
+            let at = sol.params.clone();
+            sol = re_evaluate(&problem, sol, at);
         }
         params = sol.params.clone();
         solution = Some(sol);
