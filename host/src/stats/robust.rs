@@ -140,6 +140,9 @@ pub fn screen_vectors(samples: &[Vec3]) -> Screening {
 /// board's smooth path, and a spike of up to two samples cannot move their median far.
 const STREAM_HALF_WINDOW: usize = 3;
 
+// `screen_stream`'s interior takes the six neighbours of a window of seven by position.
+const _: () = assert!(STREAM_HALF_WINDOW == 3);
+
 /// Screen a stream of 3-vector samples taken while the board turns (the magnetometer's
 /// tumble), where no single value is expected: each sample's deviation from the median of the
 /// six around it (Hampel's identifier; Pearson, "Outliers in process modeling and
@@ -151,25 +154,31 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
     if n < MIN_SCREENED.max(2 * STREAM_HALF_WINDOW + 1) {
         return Screening::keep_all(n);
     }
+    let h = STREAM_HALF_WINDOW;
     let axes: Vec<Vec<f64>> = (0..3)
         .map(|k| {
-            (0..n)
-                .map(|i| {
-                    let lo = i.saturating_sub(STREAM_HALF_WINDOW);
-                    let hi = (i + STREAM_HALF_WINDOW + 1).min(n);
-                    // The neighbours without the sample itself: on a steady turn the sample
-                    // would be its own window's median, and the deviations would collapse to 0.
-                    // They live on the stack: one heap vector per sample and axis cost more
-                    // than the median itself on a long stream.
-                    let mut neighbours = [0.0; 2 * STREAM_HALF_WINDOW];
-                    let mut len = 0;
-                    for j in (lo..hi).filter(|&j| j != i) {
-                        neighbours[len] = samples[j][k];
-                        len += 1;
-                    }
-                    samples[i][k] - small_median(&mut neighbours[..len])
-                })
-                .collect()
+            let axis: Vec<f64> = samples.iter().map(|s| s[k]).collect();
+            // The neighbours without the sample itself: on a steady turn the sample would be
+            // its own window's median, and the deviations would collapse to 0. They live on
+            // the stack: one heap vector per sample and axis cost more than the median itself
+            // on a long stream.
+            let at_edge = |i: usize| {
+                let mut neighbours = [0.0; 2 * STREAM_HALF_WINDOW];
+                let mut len = 0;
+                for j in (i.saturating_sub(h)..(i + h + 1).min(n)).filter(|&j| j != i) {
+                    neighbours[len] = axis[j];
+                    len += 1;
+                }
+                axis[i] - small_median(&mut neighbours[..len])
+            };
+            let mut deviations: Vec<f64> = (0..h).map(at_edge).collect();
+            // The interior: the same six neighbours in the same order, from one window.
+            deviations.extend(axis.windows(2 * h + 1).map(|w| {
+                let mut six = [w[0], w[1], w[2], w[4], w[5], w[6]];
+                w[h] - small_median(&mut six)
+            }));
+            deviations.extend((n - h..n).map(at_edge));
+            deviations
         })
         .collect();
     let step = quantisation_step(samples);
