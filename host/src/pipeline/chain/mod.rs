@@ -62,7 +62,7 @@ pub mod pair;
 use crate::fit::axis_aligned::{fit_axis_aligned, fit_axis_aligned_poses};
 use crate::fit::loo::{self, rms_of_all};
 use crate::fit::minmax::{fit_minmax, minmax_calibration};
-use crate::fit::norm_lm::fit_accel_lm_detailed;
+use crate::fit::norm_lm::{fit_accel_lm_detailed, refit_accel_lm_from};
 use crate::fit::six_position::{fit_six_position, nearest_axes, six_position_calibration};
 use crate::fit::{Calibration, Fit, FitError, Method, Pose, Vec3};
 use mean::{mean_calibration, mean_fit};
@@ -147,8 +147,9 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
         match fit_full(method, poses, reference) {
             Err(e) => outcomes.push((method, Some(CandidateOutcome::Refused(e.to_string())))),
             Ok(mut fit) => {
+                let all = fit.cal;
                 let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
-                    refit(method, rest, rest_faces, reference)
+                    refit(method, rest, rest_faces, reference, Some(&all))
                 });
                 if method == Method::Lm {
                     // The same held-out residuals `fit_accel_lm` would compute for itself.
@@ -193,7 +194,7 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
             let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
                 let members = TIED_PAIR
                     .iter()
-                    .map(|&m| refit(m, rest, rest_faces, reference))
+                    .map(|&m| refit(m, rest, rest_faces, reference, None))
                     .collect::<Result<Vec<Calibration>, FitError>>()?;
                 mean_calibration(&members)
             });
@@ -302,12 +303,14 @@ fn fit_full(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, FitEr
 }
 
 /// A refit of one candidate on the poses without one (the solver and its refusals, without the
-/// fit's own leave-one-out statistics).
+/// fit's own leave-one-out statistics); `all` is its fit on every pose, where the iterative
+/// fit starts when given.
 fn refit(
     method: Method,
     rest: &[Pose],
     rest_faces: &[Vec3],
     reference: f64,
+    all: Option<&Calibration>,
 ) -> Result<Calibration, FitError> {
     match method {
         Method::MinMax => minmax_calibration(rest, reference),
@@ -315,7 +318,11 @@ fn refit(
             let means: Vec<Vec3> = rest.iter().map(|p| p.mean).collect();
             fit_axis_aligned(&means, reference).map(|f| f.cal)
         }
-        Method::Lm => fit_accel_lm_detailed(rest, reference).map(|o| o.fit.cal),
+        Method::Lm => match all {
+            Some(all) => refit_accel_lm_from(rest, reference, all),
+            None => fit_accel_lm_detailed(rest, reference),
+        }
+        .map(|o| o.fit.cal),
         _ => six_position_calibration(rest, rest_faces, reference),
     }
 }
