@@ -98,6 +98,12 @@ pub struct BoardConfig {
     pub earth_field: EarthField,
     /// Optional local field disturbance.
     pub disturbance: Option<LocalDisturbance>,
+    /// A local field, world frame µT, present while the person goes through the positions (the
+    /// holds, corners included, and the turns between them) and gone from the tumble on: a
+    /// magnetised tool left next to the board during the positions and taken away before the
+    /// tumble. The holds and the moves between them then see another field than the one the
+    /// magnetometer is calibrated on; `None` by default.
+    pub positions_field_ut: Option<[f64; 3]>,
     /// Die temperature over time; `None` keeps the person's ambient temperature.
     pub temperature: Option<TemperatureProfile>,
     /// Configuration the firmware's LSM9DS1 driver applies (its rate is the sample rate).
@@ -129,6 +135,7 @@ impl BoardConfig {
             gravity_mps2: STANDARD_GRAVITY_MPS2,
             earth_field: EarthField::default(),
             disturbance: None,
+            positions_field_ut: None,
             temperature: None,
             chip: lsm9ds1::Config::default(),
             sensor: SensorChip::Lsm9ds1,
@@ -208,6 +215,9 @@ impl SimBoard {
             temperature,
         };
         world.validate()?;
+        for v in config.positions_field_ut.into_iter().flatten() {
+            crate::error::require_finite("field during the positions (µT)", v)?;
+        }
         // Bias steps are placed within the session a person would take: positions and tumble.
         let tumble = build_schedule(
             ScheduleKind::Tumble,
@@ -408,6 +418,17 @@ impl SimBoard {
         self.expected_duration_s
     }
 
+    /// The field of [`BoardConfig::positions_field_ut`] now, world frame µT (zero once the
+    /// person has left the positions).
+    fn positions_field(&self) -> Vector3<f64> {
+        match (self.config.positions_field_ut, self.person.phase()) {
+            (Some(field), PersonPhase::Hold { .. } | PersonPhase::TurnToHold { .. }) => {
+                Vector3::from(field)
+            }
+            _ => Vector3::zeros(),
+        }
+    }
+
     /// The true state of the world at `t_s` with the person's current motion.
     fn world_state(&self, t_s: f64) -> WorldState {
         let motion = self.person.motion_at(t_s);
@@ -417,7 +438,7 @@ impl SimBoard {
             q_body_to_world: motion.q_body_to_world,
             omega_body: motion.omega_body,
             specific_force_body: to_body * (-self.world.gravity_world()),
-            field_body: to_body * self.world.field_world_at(t_s),
+            field_body: to_body * (self.world.field_world_at(t_s) + self.positions_field()),
             temp_c: self.world.temperature.at(t_s),
         }
     }
