@@ -43,8 +43,8 @@ use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::leave_one_out_rms;
 use super::norm_jacobian::{
-    hessian_stride, jacobian_row, norm_residual, residuals_and_normal_equations, NormSamples,
-    ITERATION_SAMPLES, LANES,
+    hessian_stride, in_two_halves, jacobian_row, norm_residual, residuals_and_normal_equations,
+    NormSamples, ITERATION_SAMPLES, LANES,
 };
 use super::norm_loo::first_order_loo_rms;
 use super::six_position::fit_six_position;
@@ -389,16 +389,31 @@ pub fn refine_lm_detailed(
         // Per-axis noise σ̃ in scaled units; its radial part σ̃|R̃ᵀv̂| sets the weight, the rest
         // (tangential) the norm correction `k`, which needs the noise scale: `radial` holds
         // `|R̃ᵀv̂|²` until then. The residual at this pass's start is summed along.
-        let mut start_cost = 0.0;
-        let (weights, mut radial): (Vec<f64>, Vec<f64>) = points
-            .iter()
-            .zip(sigma)
-            .map(|(x, sigma)| {
-                let (weight, radial2, norm) = radial_weight(&r, &b, x, sigma / s);
-                start_cost += norm_residual(norm, weight, 0.0).powi(2);
-                (weight, radial2)
-            })
-            .unzip();
+        // On two threads for large problems, like the passes of the iterations.
+        let mut weights = vec![0.0; points.len()];
+        let (mut radial, start_cost) = in_two_halves(
+            points.len(),
+            &mut weights,
+            |range, weights| {
+                let mut cost = 0.0;
+                let radial: Vec<f64> = points[range.clone()]
+                    .iter()
+                    .zip(&sigma[range])
+                    .zip(weights.iter_mut())
+                    .map(|((x, sigma), w)| {
+                        let (weight, radial2, norm) = radial_weight(&r, &b, x, sigma / s);
+                        cost += norm_residual(norm, weight, 0.0).powi(2);
+                        *w = weight;
+                        radial2
+                    })
+                    .collect();
+                (radial, cost)
+            },
+            |(mut first, first_cost), (second, second_cost)| {
+                first.extend(second);
+                (first, first_cost + second_cost)
+            },
+        );
         // With unknown noise `sigma` is relative; its scale comes from the first pass's
         // residual. When that pass ran on the iteration samples, from the residual of every
         // sample at its solution instead, weighted as this pass weights them (from that
