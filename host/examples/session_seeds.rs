@@ -16,6 +16,7 @@
 //! (default 10 seeds from 1).
 
 use imucal::device::DeviceClient;
+use imucal::fit::linalg::orthogonal_factor;
 use imucal::fit::{Calibration, Mat3, Vec3};
 use imucal::session::gyro_fit::full_turn_error_deg;
 use imucal::session::{run_session, SessionEvent, SessionObserver, SessionOptions};
@@ -60,20 +61,6 @@ impl SessionObserver for Log {
 
 fn matrix(rows: &[[f64; 3]; 3]) -> Mat3 {
     Mat3::from_fn(|r, c| rows[r][c])
-}
-
-/// The orthogonal factor `Q` of `A = Q·R` with `R`'s diagonal positive.
-fn orthogonal_factor(a: &Mat3) -> Mat3 {
-    let qr = a.qr();
-    let (mut q, r) = (qr.q(), qr.r());
-    for i in 0..3 {
-        if r[(i, i)] < 0.0 {
-            for c in 0..3 {
-                q[(c, i)] = -q[(c, i)];
-            }
-        }
-    }
-    q
 }
 
 /// Largest off-diagonal entry of `error`, degrees (a misalignment angle).

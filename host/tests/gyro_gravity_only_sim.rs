@@ -9,6 +9,7 @@
 //! that the field was not used.
 
 use imucal::device::DeviceClient;
+use imucal::fit::linalg::orthogonal_factor;
 use imucal::fit::{Calibration, Mat3, Vec3};
 use imucal::session::gyro_fit::full_turn_error_deg;
 use imucal::session::{run_session, SessionOptions, Unattended};
@@ -29,21 +30,6 @@ const K_SIGMA: f64 = 5.0;
 
 fn matrix(rows: &[[f64; 3]; 3]) -> Mat3 {
     Mat3::from_fn(|r, c| rows[r][c])
-}
-
-/// The orthogonal factor `Q` of `A = Q·R` with `R`'s diagonal positive: the accelerometer fit's
-/// output frame is `Qᵀ·body`, and the gyroscope's `A` maps into it.
-fn orthogonal_factor(a: &Mat3) -> Mat3 {
-    let qr = a.qr();
-    let (mut q, r) = (qr.q(), qr.r());
-    for i in 0..3 {
-        if r[(i, i)] < 0.0 {
-            for c in 0..3 {
-                q[(c, i)] = -q[(c, i)];
-            }
-        }
-    }
-    q
 }
 
 #[test]

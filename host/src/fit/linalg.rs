@@ -115,6 +115,22 @@ pub fn upper_triangular_gauge(a: &Mat3) -> Mat3 {
     r
 }
 
+/// The orthogonal `Q` of the same factorisation `A = Q·R` (`R` with positive diagonal, as in
+/// [`upper_triangular_gauge`]): the rotation (or reflection) the norm-model gauge leaves out, so
+/// a norm fit's output frame is `Qᵀ` times the sensor's.
+pub fn orthogonal_factor(a: &Mat3) -> Mat3 {
+    let qr = a.qr();
+    let (mut q, r) = (qr.q(), qr.r());
+    for i in 0..3 {
+        if r[(i, i)] < 0.0 {
+            for c in 0..3 {
+                q[(c, i)] = -q[(c, i)];
+            }
+        }
+    }
+    q
+}
+
 /// Square root of a symmetric positive-definite matrix, `V·Λ^½·Vᵀ`; `None` if not positive definite.
 pub fn sqrt_spd(m: &Mat3) -> Option<Mat3> {
     let sym = (m + m.transpose()) * 0.5;
