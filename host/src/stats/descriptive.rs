@@ -41,6 +41,18 @@ pub fn percentile(values: &mut [f64], p: f64) -> f64 {
     *values.select_nth_unstable_by(rank, f64::total_cmp).1
 }
 
+/// [`percentile`] of values that are all greater than zero, given as their bit patterns
+/// ([`f64::to_bits`]). For such values the bit patterns, read as unsigned integers, are in the
+/// order of [`f64::total_cmp`], so selecting on the integers gives the same order statistic, bit
+/// for bit, with a plain integer comparison instead of the float's total-order key at every step.
+pub fn percentile_of_positive_bits(bits: &mut [u64], p: f64) -> f64 {
+    if bits.is_empty() {
+        return 0.0;
+    }
+    let rank = (((bits.len() - 1) as f64 * p).round() as usize).min(bits.len() - 1);
+    f64::from_bits(*bits.select_nth_unstable(rank).1)
+}
+
 /// Median of a list: the middle value, or the mean of the two middle values for an even count
 /// (0 when empty).
 pub fn median(values: &mut [f64]) -> f64 {
@@ -74,17 +86,29 @@ pub fn mad_sigma(values: &[f64]) -> f64 {
 /// cancelling digits). Only the last `w + 1` prefix sums are kept (a ring), not all `n + 1`:
 /// the same sums in the same order, without two more arrays the length of the recording.
 pub fn window_variances(x: &[Vec3], w: usize) -> Vec<Vec3> {
+    let mut out = Vec::new();
+    window_variances_into(x, w, &mut out);
+    out
+}
+
+/// [`window_variances`] written into `out` (cleared first), so that one buffer can serve stream
+/// after stream of a long recording instead of a fresh allocation each.
+pub fn window_variances_into(x: &[Vec3], w: usize, out: &mut Vec<Vec3>) {
+    out.clear();
     let n = x.len();
     if n < w || w < 2 {
-        return Vec::new();
+        return;
     }
     let mean = x.iter().sum::<Vec3>() / n as f64;
     let wf = w as f64;
-    // Slot `i % (w + 1)` holds the prefix sums of the first `i` values.
+    // Slot `i % (w + 1)` holds the prefix sums of the first `i` values. The slot is counted
+    // along rather than divided out: two integer divisions per row cost more than the sums.
     let mut s1 = vec![Vec3::zeros(); w + 1];
     let mut s2 = vec![Vec3::zeros(); w + 1];
     let (mut p1, mut p2) = (Vec3::zeros(), Vec3::zeros());
-    let mut out = Vec::with_capacity(n - w + 1);
+    let next_slot = |slot: usize| if slot == w { 0 } else { slot + 1 };
+    let mut slot = 0;
+    out.reserve(n - w + 1);
     for i in 0..=n {
         if i > 0 {
             let d = x[i - 1] - mean;
@@ -92,17 +116,17 @@ pub fn window_variances(x: &[Vec3], w: usize) -> Vec<Vec3> {
             p2 += d.component_mul(&d);
         }
         if i >= w {
-            // Read the window's start before slot `i % (w + 1)` is overwritten (it is another
-            // slot: `w` is not a multiple of `w + 1`).
-            let start = (i - w) % (w + 1);
+            // The window starts at row `i − w`, whose slot `(i − w) % (w + 1)` is the one after
+            // `i`'s; it is read before slot `i % (w + 1)` is overwritten.
+            let start = next_slot(slot);
             let sum = p1 - s1[start];
             let sq = p2 - s2[start];
             out.push((sq - sum.component_mul(&sum) / wf).map(|v| (v / (wf - 1.0)).max(0.0)));
         }
-        s1[i % (w + 1)] = p1;
-        s2[i % (w + 1)] = p2;
+        s1[slot] = p1;
+        s2[slot] = p2;
+        slot = next_slot(slot);
     }
-    out
 }
 
 /// Smallest positive step between consecutive samples on each axis (the quantisation step
@@ -167,8 +191,16 @@ mod tests {
         let x: Vec<Vec3> = (0..2000)
             .map(|i| Vec3::new(9.8 + next(), 1e4 * (i as f64 * 0.01).sin(), next() - 0.5))
             .collect();
-        for w in [2, 5, 50, 1999, 2000] {
+        // One buffer reused from window length to window length, starting dirty.
+        let mut reused = vec![Vec3::repeat(7.0); 3];
+        for w in [2, 5, 50, 1999, 2000, 2001] {
             let got = window_variances(&x, w);
+            window_variances_into(&x, w, &mut reused);
+            assert_eq!(reused, got, "w = {w}");
+            if w > x.len() {
+                assert!(got.is_empty());
+                continue;
+            }
             let want = reference(&x, w);
             assert_eq!(got.len(), want.len());
             for (g, e) in got.iter().zip(&want) {
@@ -218,6 +250,46 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn percentile_on_positive_bits_equals_the_float_percentile_bit_for_bit() {
+        let mut state: u64 = 0x0123_4567_89AB_CDEF;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        // Ties, subnormals, huge values and infinity among ordinary positive numbers.
+        let pool = [
+            f64::MIN_POSITIVE,
+            5e-324,
+            1e-300,
+            1.0,
+            2.5,
+            1e300,
+            f64::INFINITY,
+        ];
+        for n in (1..80).chain([1000, 4097]) {
+            let values: Vec<f64> = (0..n)
+                .map(|_| {
+                    let r = next();
+                    if r % 3 == 0 {
+                        pool[(r >> 8) as usize % pool.len()]
+                    } else {
+                        ((r >> 11) as f64 / (1u64 << 53) as f64 + 1e-9) * 10f64.powi((r % 7) as i32)
+                    }
+                })
+                .collect();
+            for p in [0.0, 0.001, 0.1, 0.5, 0.9, 0.999, 1.0] {
+                let want = percentile(&mut values.clone(), p);
+                let mut bits: Vec<u64> = values.iter().map(|v| v.to_bits()).collect();
+                let got = percentile_of_positive_bits(&mut bits, p);
+                assert_eq!(got.to_bits(), want.to_bits(), "n = {n}, p = {p}");
+            }
+        }
+        assert_eq!(percentile_of_positive_bits(&mut [], 0.5), 0.0);
     }
 
     #[test]

@@ -18,7 +18,7 @@
 //! quantised sensor whose readings mostly repeat has `σ̂ = 0`, so `σ` is at least the data's
 //! resolution (one step: a reading a few steps from the median is noise, not a spike).
 
-use super::descriptive::{median, quantisation_step};
+use super::descriptive::quantisation_step;
 use super::distributions::normal_quantile;
 use super::Vec3;
 
@@ -72,32 +72,55 @@ pub fn bonferroni_bound(tests: usize) -> f64 {
     normal_quantile(1.0 - FAMILY_FALSE_DROP / (2.0 * tests.max(1) as f64))
 }
 
-/// Centre and guarded scale (see the module comment) of `values`, with `resolution` as the
-/// scale's floor.
-fn centre_and_scale(values: &[f64], resolution: f64) -> (f64, f64) {
-    let mut sorted = values.to_vec();
-    let centre = median(&mut sorted);
-    let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
-    let mad = 1.482_6 * median(&mut deviations);
-    let shrink = (1.0 - 2.0 * MAD_STANDARD_ERROR / (values.len() as f64).sqrt()).max(0.5);
+/// Centre and guarded scale (see the module comment) of the `n` values `value(0..n)`, with
+/// `resolution` as the scale's floor. The medians are selected in `scratch` (filled in the
+/// values' order, its old contents dropped), one buffer for both and for every axis instead of
+/// two copies of the values per axis.
+fn centre_and_scale(
+    n: usize,
+    value: impl Fn(usize) -> f64,
+    resolution: f64,
+    scratch: &mut Vec<i64>,
+) -> (f64, f64) {
+    let key = |v: f64| total_order_key(v.to_bits() as i64);
+    scratch.clear();
+    scratch.extend((0..n).map(|i| key(value(i))));
+    let centre = median_of_keys(scratch);
+    scratch.clear();
+    scratch.extend((0..n).map(|i| key((value(i) - centre).abs())));
+    let mad = 1.482_6 * median_of_keys(scratch);
+    let shrink = (1.0 - 2.0 * MAD_STANDARD_ERROR / (n as f64).sqrt()).max(0.5);
     (centre, (mad / shrink).max(resolution))
 }
 
-/// Screen each of `axes` (equal lengths) with one Bonferroni bound over all their values; a
-/// sample is dropped when any axis is beyond it.
+/// [`screen_axes_by`] of axes given as vectors of equal lengths.
+#[cfg(test)]
 fn screen_axes(axes: &[Vec<f64>], resolution: &[f64]) -> Screening {
     let n = axes.first().map_or(0, Vec::len);
+    screen_axes_by(axes.len(), n, |k, i| axes[k][i], resolution)
+}
+
+/// Screen `axes` axes of `n` samples each, the value of axis `k` at sample `i` being
+/// `value(k, i)`, with one Bonferroni bound over all their values; a sample is dropped when any
+/// axis is beyond it. The values are read where they are, not copied into a vector per axis.
+fn screen_axes_by(
+    axes: usize,
+    n: usize,
+    value: impl Fn(usize, usize) -> f64,
+    resolution: &[f64],
+) -> Screening {
     if n < MIN_SCREENED {
         return Screening::keep_all(n);
     }
-    let bound = bonferroni_bound(n * axes.len());
+    let bound = bonferroni_bound(n * axes);
     let mut worst = vec![0.0_f64; n];
-    for (values, &floor) in axes.iter().zip(resolution) {
-        let (centre, sigma) = centre_and_scale(values, floor);
+    let mut scratch = Vec::with_capacity(n);
+    for (k, &floor) in (0..axes).zip(resolution) {
+        let (centre, sigma) = centre_and_scale(n, |i| value(k, i), floor, &mut scratch);
         if !(sigma > 0.0 && sigma.is_finite()) {
             continue;
         }
-        for (w, v) in worst.iter_mut().zip(values) {
+        for (w, v) in worst.iter_mut().zip((0..n).map(|i| value(k, i))) {
             // A non-finite reading is dropped: it would poison every statistic.
             let z = if v.is_finite() {
                 (v - centre).abs() / sigma
@@ -123,17 +146,19 @@ fn screen_axes(axes: &[Vec<f64>], resolution: &[f64]) -> Screening {
 
 /// Screen scalar values; `resolution` is the smallest meaningful difference (0 when unknown).
 pub fn screen_scalars(values: &[f64], resolution: f64) -> Screening {
-    screen_axes(&[values.to_vec()], &[resolution])
+    screen_axes_by(1, values.len(), |_, i| values[i], &[resolution])
 }
 
 /// Screen 3-vector samples axis by axis (one bound over the `3n` tests), each axis's scale
 /// floored at its quantisation step.
 pub fn screen_vectors(samples: &[Vec3]) -> Screening {
     let step = quantisation_step(samples);
-    let axes: Vec<Vec<f64>> = (0..3)
-        .map(|k| samples.iter().map(|s| s[k]).collect())
-        .collect();
-    screen_axes(&axes, &[step.x, step.y, step.z])
+    screen_axes_by(
+        3,
+        samples.len(),
+        |k, i| samples[i][k],
+        &[step.x, step.y, step.z],
+    )
 }
 
 /// Half-width of the running median of [`screen_stream`]: six neighbours follow a turning
@@ -182,12 +207,40 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
         })
         .collect();
     let step = quantisation_step(samples);
-    screen_axes(&axes, &[step.x, step.y, step.z])
+    screen_axes_by(3, n, |k, i| axes[k][i], &[step.x, step.y, step.z])
+}
+
+/// [`median`] of the values whose [`total_order_key`]s are `keys`, bit for bit: the keys are
+/// in [`f64::total_cmp`]'s order, so selection on them finds the same upper middle value (an
+/// order statistic of a total order is one bit pattern), and the lower middle is taken as
+/// `median` takes it, by [`f64::max`] over the same values below it. Integer comparisons
+/// instead of the float's total-order key at every step of the selection.
+///
+/// [`median`]: super::descriptive::median
+fn median_of_keys(keys: &mut [i64]) -> f64 {
+    let n = keys.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let value = |k: i64| f64::from_bits(total_order_key(k) as u64);
+    let (below, upper, _) = keys.select_nth_unstable(n / 2);
+    let upper = value(*upper);
+    if n % 2 == 1 {
+        upper
+    } else {
+        let lower = below
+            .iter()
+            .map(|k| value(*k))
+            .fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (lower + upper)
+    }
 }
 
 /// [`median`] of a handful of values, bit for bit: a sort in the same total order
 /// ([`f64::total_cmp`]) puts the same value at the upper middle as selection does, and the lower
 /// middle is taken as [`median`] takes it (the largest by [`f64::max`] of the values below).
+///
+/// [`median`]: super::descriptive::median
 fn small_median(values: &mut [f64]) -> f64 {
     let n = values.len();
     if n == 0 {
@@ -259,6 +312,7 @@ fn insertion_sort(values: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stats::descriptive::median;
 
     /// Standard normal numbers from a seeded generator.
     fn gaussian(seed: u64, n: usize) -> Vec<f64> {
@@ -304,6 +358,46 @@ mod tests {
                 .collect();
             let expected = median(&mut values.clone());
             let got = small_median(&mut values.clone());
+            assert_eq!(got.to_bits(), expected.to_bits(), "{values:?}");
+        }
+    }
+
+    #[test]
+    fn median_of_keys_equals_median_by_selection_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(29);
+        // Ties, signed zeros, infinities, NaNs of both signs and wide magnitudes.
+        let pool = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            2.5,
+            1e300,
+            -3e-300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+        ];
+        for _ in 0..5_000 {
+            let len = rng.gen_range(0..=300);
+            let rare = rng.gen_bool(0.2);
+            let values: Vec<f64> = (0..len)
+                .map(|_| {
+                    if rng.gen_bool(if rare { 0.02 } else { 0.6 }) {
+                        pool[rng.gen_range(0..pool.len())]
+                    } else {
+                        rng.gen_range(-10.0..10.0)
+                    }
+                })
+                .collect();
+            let expected = median(&mut values.clone());
+            let mut keys: Vec<i64> = values
+                .iter()
+                .map(|v| total_order_key(v.to_bits() as i64))
+                .collect();
+            let got = median_of_keys(&mut keys);
             assert_eq!(got.to_bits(), expected.to_bits(), "{values:?}");
         }
     }
@@ -358,6 +452,85 @@ mod tests {
         let got = screen_stream(&samples);
         assert_eq!(got, reference(&samples));
         assert!(!got.keep[1234]);
+    }
+
+    #[test]
+    fn vector_screen_equals_the_screen_of_copied_axes_bit_for_bit() {
+        // The screen as it was written first: a vector per axis, and a sorted copy and a vector
+        // of deviations per axis for the two medians.
+        fn reference(samples: &[Vec3]) -> Screening {
+            fn centre_and_scale(values: &[f64], resolution: f64) -> (f64, f64) {
+                let mut sorted = values.to_vec();
+                let centre = median(&mut sorted);
+                let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
+                let mad = 1.482_6 * median(&mut deviations);
+                let shrink =
+                    (1.0 - 2.0 * MAD_STANDARD_ERROR / (values.len() as f64).sqrt()).max(0.5);
+                (centre, (mad / shrink).max(resolution))
+            }
+            let step = quantisation_step(samples);
+            let axes: Vec<Vec<f64>> = (0..3)
+                .map(|k| samples.iter().map(|s| s[k]).collect())
+                .collect();
+            let resolution = [step.x, step.y, step.z];
+            let n = samples.len();
+            if n < MIN_SCREENED {
+                return Screening::keep_all(n);
+            }
+            let bound = bonferroni_bound(n * axes.len());
+            let mut worst = vec![0.0_f64; n];
+            for (values, &floor) in axes.iter().zip(&resolution) {
+                let (centre, sigma) = centre_and_scale(values, floor);
+                if !(sigma > 0.0 && sigma.is_finite()) {
+                    continue;
+                }
+                for (w, v) in worst.iter_mut().zip(values) {
+                    let z = if v.is_finite() {
+                        (v - centre).abs() / sigma
+                    } else {
+                        f64::INFINITY
+                    };
+                    *w = w.max(z);
+                }
+            }
+            let keep: Vec<bool> = worst.iter().map(|z| *z <= bound).collect();
+            let dropped = keep.iter().filter(|k| !**k).count();
+            let worst_sigmas = worst
+                .iter()
+                .filter(|z| **z > bound)
+                .fold(0.0_f64, |a, z| a.max(*z));
+            Screening {
+                keep,
+                dropped,
+                bound_sigmas: bound,
+                worst_sigmas,
+            }
+        }
+        fn same(a: &Screening, b: &Screening) -> bool {
+            a.keep == b.keep
+                && a.dropped == b.dropped
+                && a.bound_sigmas.to_bits() == b.bound_sigmas.to_bits()
+                && a.worst_sigmas.to_bits() == b.worst_sigmas.to_bits()
+        }
+        for (seed, n) in [(1, 0), (2, 9), (3, 10), (4, 11), (5, 400), (6, 1501)] {
+            let mut samples = noisy_vectors(seed, n, 0.2);
+            if n > 100 {
+                // Spikes, a non-finite read and a stretch of repeated (quantised) readings.
+                samples[n / 3].x = 1e4;
+                samples[n / 2].z = -7e2;
+                samples[n / 5].y = f64::NAN;
+                for s in &mut samples[n - 60..n - 10] {
+                    *s = Vec3::new(20.0, -5.0, 40.0);
+                }
+            }
+            let got = screen_vectors(&samples);
+            assert!(same(&got, &reference(&samples)), "n = {n}");
+            let quantised: Vec<Vec3> = samples.iter().map(|s| s.map(|v| v.round())).collect();
+            assert!(
+                same(&screen_vectors(&quantised), &reference(&quantised)),
+                "n = {n}"
+            );
+        }
     }
 
     #[test]

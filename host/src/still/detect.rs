@@ -19,7 +19,9 @@ use super::intervals::{NoiseFloor, StillReport};
 use super::options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
 use crate::fit::Vec3;
 use crate::recording::{LabelKind, Recording, Sensor};
-use crate::stats::descriptive::{mean, percentile, quantisation_step, window_variances};
+use crate::stats::descriptive::{
+    mean, percentile_of_positive_bits, quantisation_step, window_variances_into,
+};
 use crate::stats::distributions::chi2_quantile_per_dof;
 use crate::stats::threshold::otsu;
 
@@ -137,25 +139,33 @@ pub(super) fn detect(
         .units
         .to_si(Sensor::Gyro)
         .map(|to_rad_s| MAX_STILL_GYRO_STD_DPS.to_radians() / to_rad_s);
+    // Buffers the length of the recording, filled again for every stream and axis rather than
+    // allocated (and faulted in) afresh each time: the windowed variances per section, and one
+    // axis of them (as bit patterns, for the selection) or the logarithms of the ratios.
+    let windows: usize = ratio.iter().map(Vec::len).sum();
+    let mut per_section: Vec<Vec<Vec3>> = sections.iter().map(|_| Vec::new()).collect();
+    let mut scratch: Vec<u64> = Vec::with_capacity(windows);
     for (sensor, x) in &streams {
-        let per_section: Vec<Vec<Vec3>> = sections
-            .iter()
-            .map(|&(a, b)| window_variances(&x[a..b], w))
-            .collect();
+        for (&(a, b), vars) in sections.iter().zip(per_section.iter_mut()) {
+            window_variances_into(&x[a..b], w, vars);
+        }
         let step = quantisation_step(x);
         let mut sigma = Vec3::zeros();
         for k in 0..3 {
             // Windows with exactly zero variance are an axis pinned at a rail (saturation) or
             // below one quantisation step; the quantisation floor below covers the latter, and
             // counting them would set the noise to zero and call every other hold moving.
-            let mut axis: Vec<f64> = per_section
-                .iter()
-                .flatten()
-                .map(|v| v[k])
-                .filter(|v| *v > 0.0)
-                .collect();
-            let quiet =
-                percentile(&mut axis, options.noise_percentile) / percentile_factor.max(1e-12);
+            scratch.clear();
+            scratch.extend(
+                per_section
+                    .iter()
+                    .flatten()
+                    .map(|v| v[k])
+                    .filter(|v| *v > 0.0)
+                    .map(f64::to_bits),
+            );
+            let quiet = percentile_of_positive_bits(&mut scratch, options.noise_percentile)
+                / percentile_factor.max(1e-12);
             // Uniform quantisation error has variance step²/12: no real sensor is quieter.
             let floor = step[k] * step[k] / 12.0;
             sigma[k] = quiet.max(floor).max(f64::MIN_POSITIVE).sqrt();
@@ -179,12 +189,10 @@ pub(super) fn detect(
     let margin = match options.margin {
         Some(m) => m,
         None => {
-            let logs: Vec<f64> = ratio
-                .iter()
-                .flatten()
-                .filter(|r| **r > 0.0)
-                .map(|r| r.ln())
-                .collect();
+            // The emptied scratch buffer's allocation is taken over (same size and alignment).
+            scratch.clear();
+            let mut logs: Vec<f64> = scratch.into_iter().map(f64::from_bits).collect();
+            logs.extend(ratio.iter().flatten().filter(|r| **r > 0.0).map(|r| r.ln()));
             otsu(&logs)
                 .map_or(MIN_MARGIN, f64::exp)
                 .clamp(MIN_MARGIN, MAX_MARGIN)
@@ -262,15 +270,24 @@ pub(super) fn detect(
     }
 
     let labels = recording.labels.as_ref();
-    // Rest by the relative test only where the rest bound failed, nowhere where both passed.
-    let passes = |accept_turning: bool| {
-        ratio
-            .iter()
-            .flatten()
-            .zip(turning.iter().flatten())
-            .any(|(r, t)| *r <= margin && *t == accept_turning)
-    };
-    let relative_found_rest = passes(true) && !passes(false);
+    // Rest by the relative test only where the rest bound failed, nowhere where both passed:
+    // both kinds of passing window looked for in one scan, which stops once both are found.
+    let (mut passes_turning, mut passes_resting) = (false, false);
+    'scan: for (rs, ts) in ratio.iter().zip(&turning) {
+        for (r, t) in rs.iter().zip(ts) {
+            if *r <= margin {
+                if *t {
+                    passes_turning = true;
+                } else {
+                    passes_resting = true;
+                }
+                if passes_turning && passes_resting {
+                    break 'scan;
+                }
+            }
+        }
+    }
+    let relative_found_rest = passes_turning && !passes_resting;
     let intervals: Vec<_> = merged
         .into_iter()
         .filter(|&(a, b)| recording.time[b - 1] - recording.time[a] >= options.min_hold_s)

@@ -75,8 +75,11 @@ pub fn hold_samples(
         worst_sigmas: screening.worst_sigmas,
         bound_sigmas: screening.bound_sigmas,
     });
-    Some(HoldSamples {
-        kept: screening.kept(&raw),
-        dropped,
-    })
+    // Nothing dropped: the samples themselves are what was kept, without a copy.
+    let kept = if dropped.is_some() {
+        screening.kept(&raw)
+    } else {
+        raw
+    };
+    Some(HoldSamples { kept, dropped })
 }
