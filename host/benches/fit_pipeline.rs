@@ -46,7 +46,7 @@ fn bench_pipeline(c: &mut Criterion) {
             || recording.clone(),
             |r| {
                 check_input(r, &sensors, &input_options, None)
-                    .mag_points
+                    .mag_points()
                     .len()
             },
             BatchSize::LargeInput,

@@ -338,7 +338,7 @@ pub fn check_mag_coverage(points: &[Vec3]) -> Result<(), InputError> {
             needed: MIN_MAG_SAMPLES,
         });
     }
-    validate::check_spread(&directions_from_median(points), MIN_SPREAD_DEG).map_err(|e| {
+    validate::check_spread_of(directions_from_median(points), MIN_SPREAD_DEG).map_err(|e| {
         InputError::Degenerate {
             sensor: Sensor::Mag,
             detail: format!(
@@ -349,12 +349,12 @@ pub fn check_mag_coverage(points: &[Vec3]) -> Result<(), InputError> {
     })
 }
 
-fn directions_from_median(points: &[Vec3]) -> Vec<Vec3> {
+/// Unit directions of `points` from their median centre, computed as they are read.
+fn directions_from_median(points: &[Vec3]) -> impl Iterator<Item = Vec3> + '_ {
     let centre = validate::median_centre(points);
     points
         .iter()
-        .filter_map(|p| (p - centre).try_normalize(1e-300))
-        .collect()
+        .filter_map(move |p| (p - centre).try_normalize(1e-300))
 }
 
 fn strip_fit_prefix(message: &str) -> String {

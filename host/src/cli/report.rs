@@ -59,7 +59,7 @@ fn from_recording(
             input.unit_refusal_sentences().join("; ")
         );
     }
-    if input.still.is_none() && input.mag_points.is_empty() {
+    if input.still.is_none() && input.mag_points().is_empty() {
         // Nothing left to report on: say why the holds were refused.
         if let Some(why) = [
             imucal::recording::Sensor::Accel,

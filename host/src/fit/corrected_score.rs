@@ -21,21 +21,27 @@ pub(super) fn upper_from_params(p: &DVector<f64>) -> Mat3 {
 }
 
 /// The corrected score `Jᵀr − Σᵢ E[rᵢ·∇rᵢ]` at `p`, the expectation to second order in the noise
-/// (per-axis variance `noise_var[i]` of point `i`, scaled units): the residual and its gradient
+/// (per-axis variance `noise_var(i)` of point `i`, scaled units): the residual and its gradient
 /// share the noise of `xᵢ`, so the least-squares score `Jᵀr` does not vanish in expectation at
 /// the truth. With `u = x − b`, `v = Ru`, `v̂ = v/|v|`, `P_t = I − v̂v̂ᵀ` and `n` the noise:
 /// `r ≈ w·v̂ᵀRn`, `∂r/∂R_jk = w·v̂_j(n)·u_k(n)`, `∂r/∂b = −w·Rᵀv̂(n)` with
 /// `v̂(n) ≈ v̂ + P_tRn/|v|`, so `E[r ∂r/∂R_jk] = w²σ²(v̂_j (Rᵀv̂)_k + u_k (P_tRRᵀv̂)_j/|v|)` and
 /// `E[r ∂r/∂b] = −w²σ² RᵀP_tRRᵀv̂/|v|`. One pass, in blocks of lanes, on two threads for large
 /// problems.
-fn corrected_score(samples: NormSamples<'_>, p: &DVector<f64>, noise_var: &[f64]) -> DVector<f64> {
+fn corrected_score(
+    samples: NormSamples<'_>,
+    p: &DVector<f64>,
+    noise_var: &(impl Fn(usize) -> f64 + Sync),
+) -> DVector<f64> {
     let r = upper_from_params(p);
     let b = Vec3::new(p[6], p[7], p[8]);
-    let n = samples.len().min(noise_var.len());
     let total = in_two_halves(
-        n,
+        samples.len(),
         &mut [],
-        |range, _| score_sums(&r, &b, samples.range(range.clone()), &noise_var[range]),
+        |range, _| {
+            let from = range.start;
+            score_sums(&r, &b, samples.range(range), |i| noise_var(from + i))
+        },
         |mut first, second| {
             first.iter_mut().zip(second).for_each(|(a, b)| *a += b);
             first
@@ -44,13 +50,19 @@ fn corrected_score(samples: NormSamples<'_>, p: &DVector<f64>, noise_var: &[f64]
     DVector::from_row_slice(&total)
 }
 
-/// The corrected score of [`corrected_score`] over the given samples.
-fn score_sums(r: &Mat3, b: &Vec3, samples: NormSamples<'_>, noise_var: &[f64]) -> [f64; 9] {
+/// The corrected score of [`corrected_score`] over the given samples (`noise_var(i)` of
+/// their sample `i`).
+fn score_sums(
+    r: &Mat3,
+    b: &Vec3,
+    samples: NormSamples<'_>,
+    noise_var: impl Fn(usize) -> f64,
+) -> [f64; 9] {
     let mut acc = [[0.0; LANES]; 9];
     for_each_block(r, b, samples, |start, valid, block| {
         let mut c = [0.0; LANES];
-        for (lane, var) in noise_var[start..start + valid].iter().enumerate() {
-            c[lane] = block.weight[lane] * block.weight[lane] * var;
+        for (lane, c) in c.iter_mut().enumerate().take(valid) {
+            *c = block.weight[lane] * block.weight[lane] * noise_var(start + lane);
         }
         for lane in 0..LANES {
             let vh = Vec3::from_fn(|i, _| block.direction[i][lane]);
@@ -88,7 +100,7 @@ pub(super) fn solve_corrected_score(
     samples: NormSamples<'_>,
     jtj: &DMatrix<f64>,
     start: &DVector<f64>,
-    noise_var: &[f64],
+    noise_var: &(impl Fn(usize) -> f64 + Sync),
     negligible_step2: f64,
 ) -> Option<DVector<f64>> {
     let factor = jtj.clone().cholesky()?;

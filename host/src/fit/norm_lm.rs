@@ -29,6 +29,8 @@
 //! `Jᵀr = 0`; the corrected score stops at a thousandth of a standard error; the covariance and
 //! leverages are summed over every sample at the solution.
 
+use std::borrow::Cow;
+
 use nalgebra::{DMatrix, DVector};
 
 use super::chen::fit_chen;
@@ -54,14 +56,34 @@ use super::{Calibration, Fit, FitError, Mat3, Method, Pose, Vec3};
 
 /// Points on the (distorted) sphere and the noise of each point's norm.
 #[derive(Debug, Clone, PartialEq)]
-pub struct NormObservations {
-    /// Readings (pose means or samples), in data units.
-    pub points: Vec<Vec3>,
-    /// One-sigma noise of each point along its radial direction, in data units.
-    pub sigma: Vec<f64>,
+pub struct NormObservations<'a> {
+    /// Readings (pose means or samples), in data units: borrowed when the caller keeps them
+    /// (a million magnetometer samples need not be copied to be fitted).
+    pub points: Cow<'a, [Vec3]>,
+    /// One-sigma noise of the points along their radial direction, in data units.
+    pub sigma: NormNoise,
 }
 
-impl NormObservations {
+/// One-sigma noise of the points' norms along their radial direction, in data units.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NormNoise {
+    /// The same noise for every point, held once rather than once per point.
+    Uniform(f64),
+    /// The noise of each point, in the order of the points.
+    PerPoint(Vec<f64>),
+}
+
+impl NormNoise {
+    /// The noise of point `i` (which must exist for [`NormNoise::PerPoint`]).
+    pub fn at(&self, i: usize) -> f64 {
+        match self {
+            Self::Uniform(sigma) => *sigma,
+            Self::PerPoint(sigma) => sigma[i],
+        }
+    }
+}
+
+impl<'a> NormObservations<'a> {
     /// Pose means, each with the noise of its mean (`var/n`) projected on its direction from `centre`.
     pub fn from_poses(poses: &[Pose], centre: &Vec3) -> Self {
         let points: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
@@ -74,13 +96,23 @@ impl NormObservations {
                 d.component_mul(&d).dot(&p.var_of_mean()).max(0.0).sqrt()
             })
             .collect();
-        Self { points, sigma }
+        Self {
+            points: points.into(),
+            sigma: NormNoise::PerPoint(sigma),
+        }
     }
 
     /// Samples with one common (possibly unknown, then use 1) noise level.
-    pub fn uniform(points: Vec<Vec3>, sigma: f64) -> Self {
-        let sigma = vec![sigma; points.len()];
-        Self { points, sigma }
+    pub fn uniform(points: impl Into<Cow<'a, [Vec3]>>, sigma: f64) -> Self {
+        Self {
+            points: points.into(),
+            sigma: NormNoise::Uniform(sigma),
+        }
+    }
+
+    /// The noise of each point, in the order of the points.
+    pub fn sigmas(&self) -> impl Iterator<Item = f64> + '_ {
+        (0..self.points.len()).map(|i| self.sigma.at(i))
     }
 }
 
@@ -263,18 +295,20 @@ fn radial_weight(r: &Mat3, b: &Vec3, x: &Vec3, axis_sigma: f64) -> (f64, f64, f6
     (weight, radial2, v.norm())
 }
 
-fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> {
+fn check_inputs(obs: &NormObservations<'_>, reference: f64) -> Result<(), FitError> {
     if !(reference.is_finite() && reference > 0.0) {
         return Err(FitError::Underdetermined(format!(
             "the reference magnitude must be a positive number, got {reference}; pass g or the field strength, or 1"
         )));
     }
-    if obs.points.len() != obs.sigma.len() {
-        return Err(FitError::Underdetermined(format!(
-            "{} points but {} noise values were given; give one σ per point",
-            obs.points.len(),
-            obs.sigma.len()
-        )));
+    if let NormNoise::PerPoint(sigma) = &obs.sigma {
+        if obs.points.len() != sigma.len() {
+            return Err(FitError::Underdetermined(format!(
+                "{} points but {} noise values were given; give one σ per point",
+                obs.points.len(),
+                sigma.len()
+            )));
+        }
     }
     if let Some(i) = obs
         .points
@@ -283,10 +317,10 @@ fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> 
     {
         return Err(FitError::NonFinite(format!("reading {i}")));
     }
-    if let Some(i) = obs.sigma.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+    if let Some(i) = obs.sigmas().position(|s| !(s.is_finite() && s > 0.0)) {
         return Err(FitError::Underdetermined(format!(
             "the noise of reading {i} is {}, not a positive number; record more than one sample per pose",
-            obs.sigma[i]
+            obs.sigma.at(i)
         )));
     }
     if obs.points.len() < 9 {
@@ -303,7 +337,7 @@ fn check_inputs(obs: &NormObservations, reference: f64) -> Result<(), FitError> 
 /// The covariance is in the order `A11 A12 A13 A22 A23 A33 b1 b2 b3`; the condition number is
 /// that of the weighted Jacobian in the centred, scaled parameters (so independent of units).
 pub fn refine_lm(
-    obs: &NormObservations,
+    obs: &NormObservations<'_>,
     start: &Calibration,
     reference: f64,
     opts: &NormLmOptions,
@@ -313,7 +347,7 @@ pub fn refine_lm(
 
 /// As [`refine_lm`], also returning the reduced chi-square.
 pub fn refine_lm_detailed(
-    obs: &NormObservations,
+    obs: &NormObservations<'_>,
     start: &Calibration,
     reference: f64,
     opts: &NormLmOptions,
@@ -364,26 +398,23 @@ pub fn refine_lm_detailed(
     // `NormLmOptions::iteration_samples`).
     let stride = hessian_stride(n, opts.iteration_samples);
     let every = stride * LANES;
-    let sub_sigma: Vec<f64> = if stride > 1 {
-        obs.sigma.iter().step_by(every).copied().collect()
-    } else {
-        Vec::new()
-    };
     let mut iterations = 0;
     let mut solution: Option<LmSolution> = None;
     // The problem of the last pass (its points move from pass to pass, never copied).
     let mut last_problem: Option<NormProblem> = None;
     for pass in 0..2 {
         let subsampled = pass == 0 && stride > 1;
-        let (points, sigma): (Vec<Vec3>, &[f64]) = if subsampled {
-            (scaled.iter().step_by(every).copied().collect(), &sub_sigma)
+        // Point `i` of this pass is point `i·sigma_step` of the observations.
+        let (points, sigma_step): (Vec<Vec3>, usize) = if subsampled {
+            (scaled.iter().step_by(every).copied().collect(), every)
         } else {
             let points = match last_problem.take() {
                 Some(problem) if problem.points.len() == n => problem.points,
                 _ => std::mem::take(&mut scaled),
             };
-            (points, &obs.sigma)
+            (points, 1)
         };
+        let sigma = |i: usize| obs.sigma.at(i * sigma_step);
         let r = upper_from_params(&params);
         let b = Vec3::new(params[6], params[7], params[8]);
         // Per-axis noise σ̃ in scaled units; its radial part σ̃|R̃ᵀv̂| sets the weight, the rest
@@ -398,10 +429,10 @@ pub fn refine_lm_detailed(
                 let mut cost = 0.0;
                 let radial: Vec<f64> = points[range.clone()]
                     .iter()
-                    .zip(&sigma[range])
+                    .zip(range)
                     .zip(weights.iter_mut())
-                    .map(|((x, sigma), w)| {
-                        let (weight, radial2, norm) = radial_weight(&r, &b, x, sigma / s);
+                    .map(|((x, i), w)| {
+                        let (weight, radial2, norm) = radial_weight(&r, &b, x, sigma(i) / s);
                         cost += norm_residual(norm, weight, 0.0).powi(2);
                         *w = weight;
                         radial2
@@ -428,9 +459,9 @@ pub fn refine_lm_detailed(
         };
         let frobenius2 = r.norm_squared();
         let correct = pass == 1 && opts.correct_norm_bias;
-        for (k, sigma) in radial.iter_mut().zip(sigma) {
+        for (i, k) in radial.iter_mut().enumerate() {
             *k = if correct {
-                0.5 * (sigma / s * noise_scale).powi(2) * (frobenius2 - *k).max(0.0)
+                0.5 * (sigma(i) / s * noise_scale).powi(2) * (frobenius2 - *k).max(0.0)
             } else {
                 0.0
             };
@@ -452,11 +483,8 @@ pub fn refine_lm_detailed(
             .map_err(|e| e.into_fit_error(Method::Lm.name()))?;
         iterations += sol.iterations;
         if pass == 1 && opts.correct_norm_bias {
-            let noise_var: Vec<f64> = obs
-                .sigma
-                .iter()
-                .map(|sigma| (sigma / s * noise_scale).powi(2))
-                .collect();
+            // Computed where it is used: a vector of it would be one more value per sample.
+            let noise_var = |i: usize| (obs.sigma.at(i) / s * noise_scale).powi(2);
             let negligible_step2 = NEGLIGIBLE_SCORE_STEP_SE.powi(2) * standard_error2(sol.cost, n);
             if let Some(corrected) = solve_corrected_score(
                 problem.samples(),
@@ -667,7 +695,7 @@ fn accel_lm_from_start(
     let obs = NormObservations::from_poses(poses, &start.b);
     // Poses without a usable variance (single samples, or a variance of exactly zero) leave the
     // noise unknown: weight uniformly and take the noise from the residual.
-    let noise_known = obs.sigma.iter().all(|s| s.is_finite() && *s > 0.0);
+    let noise_known = obs.sigmas().all(|s| s.is_finite() && s > 0.0);
     let obs = if noise_known {
         obs
     } else {
@@ -724,7 +752,7 @@ pub fn fit_mag_lm_detailed(points: &[Vec3], reference: f64) -> Result<NormLmOutc
     // through the sphere it was started from.
     let judge_by = start;
     let start = start.unwrap_or_else(|| sphere_start(points, reference));
-    let obs = NormObservations::uniform(points.to_vec(), 1.0);
+    let obs = NormObservations::uniform(points, 1.0);
     let outcome = refine_lm_detailed(
         &obs,
         &start,

@@ -142,13 +142,22 @@ pub fn directions_from_mean(points: &[Vec3]) -> Vec<Vec3> {
 /// of the `N×3` matrix of unit directions, divided by `√N`, is the RMS sine of the angle out of
 /// the worst plane. Below `sin(min_angle_deg)` the fit cannot separate the axis normal to it.
 pub fn check_spread(directions: &[Vec3], min_angle_deg: f64) -> Result<(), FitError> {
-    if directions.len() < 3 {
+    check_spread_of(directions.iter().copied(), min_angle_deg)
+}
+
+/// [`check_spread`] of directions taken one at a time: one pass, so directions computed on
+/// the way (one per magnetometer sample) need not be stored.
+pub fn check_spread_of(
+    directions: impl IntoIterator<Item = Vec3>,
+    min_angle_deg: f64,
+) -> Result<(), FitError> {
+    let (count, scatter) = scatter(directions);
+    if count < 3 {
         return Err(FitError::Underdetermined(format!(
-            "only {} distinct directions; at least three not in one plane are needed",
-            directions.len()
+            "only {count} distinct directions; at least three not in one plane are needed"
         )));
     }
-    let (rms_sine, normal) = out_of_plane(directions);
+    let (rms_sine, normal) = out_of_plane(count, scatter);
     if rms_sine < min_angle_deg.to_radians().sin() {
         let axis = ["X", "Y", "Z"][normal.iamax()];
         return Err(FitError::Underdetermined(format!(
@@ -160,19 +169,25 @@ pub fn check_spread(directions: &[Vec3], min_angle_deg: f64) -> Result<(), FitEr
     Ok(())
 }
 
-/// The RMS sine of the directions' angles out of their best plane through the origin, and that
-/// plane's normal: the smallest singular value of the N×3 matrix of directions over `√N`, and
-/// its right singular vector. Taken from the 3×3 scatter `Σ dᵢdᵢᵀ` (whose eigenvalues are the
-/// squared singular values): one pass, where an SVD of the N×3 matrix copies and sweeps a
-/// million rows several times. Squaring costs precision only for planes within ~10⁻⁸ rad, far
+/// The number of directions and their 3×3 scatter `Σ dᵢdᵢᵀ`, in one pass.
+fn scatter(directions: impl IntoIterator<Item = Vec3>) -> (usize, Mat3) {
+    directions
+        .into_iter()
+        .fold((0, Mat3::zeros()), |(n, sum), d| {
+            (n + 1, sum + d * d.transpose())
+        })
+}
+
+/// The RMS sine of the angles of `count` directions out of their best plane through the
+/// origin, and that plane's normal: the smallest singular value of the N×3 matrix of directions
+/// over `√N`, and its right singular vector. Taken from their 3×3 `scatter` (whose eigenvalues
+/// are the squared singular values): one pass, where an SVD of the N×3 matrix copies and sweeps
+/// a million rows several times. Squaring costs precision only for planes within ~10⁻⁸ rad, far
 /// below any threshold this is compared with.
-fn out_of_plane(directions: &[Vec3]) -> (f64, Vec3) {
-    let scatter = directions
-        .iter()
-        .fold(Mat3::zeros(), |sum, d| sum + d * d.transpose());
+fn out_of_plane(count: usize, scatter: Mat3) -> (f64, Vec3) {
     let eigen = scatter.symmetric_eigen();
     let k = eigen.eigenvalues.imin();
-    let rms_sine = (eigen.eigenvalues[k].max(0.0) / directions.len().max(1) as f64).sqrt();
+    let rms_sine = (eigen.eigenvalues[k].max(0.0) / count.max(1) as f64).sqrt();
     (rms_sine, eigen.eigenvectors.column(k).into_owned())
 }
 
@@ -231,7 +246,8 @@ mod tests {
                 .into_iter()
                 .map(|d| tilt * Vec3::new(d.x, d.y, d.z * squeeze).normalize())
                 .collect();
-            let (rms_sine, normal) = out_of_plane(&directions);
+            let (count, sum) = scatter(directions.iter().copied());
+            let (rms_sine, normal) = out_of_plane(count, sum);
             let by_svd = out_of_plane_by_svd(&directions);
             // Squaring in the scatter loses about ε/(rms sine)² relative: 10⁻⁸ at 10⁻⁴.
             assert!(

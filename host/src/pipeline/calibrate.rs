@@ -187,7 +187,7 @@ impl SensorContext<'_> {
     }
 
     fn fit_mag(&self, outcome: &mut SensorOutcome) {
-        let points = &self.input.mag_points;
+        let points = self.input.mag_points();
         outcome.n_samples = points.len();
         outcome.output_unit = match self.field_ut {
             Some(_) => "µT".to_string(),

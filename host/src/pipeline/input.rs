@@ -34,8 +34,8 @@ pub struct CheckedInput {
     /// Still intervals (holds that cannot be used left out), when an inertial sensor was asked
     /// for and any were found.
     pub still: Option<StillReport>,
-    /// Magnetometer samples for its fit, evenly thinned.
-    pub mag_points: Vec<Vec3>,
+    /// Magnetometer samples for its fit ([`CheckedInput::mag_points`]).
+    mag_points: MagPoints,
     /// Sensors refused before fitting, with the sentence saying why and how to fix it.
     pub refusals: Vec<(Sensor, String)>,
     /// The refusals that say the declared units (or a stated reference) contradict the data:
@@ -46,6 +46,13 @@ pub struct CheckedInput {
 }
 
 impl CheckedInput {
+    /// Magnetometer samples for its fit, screened and evenly thinned (none when the
+    /// magnetometer was not asked for).
+    pub fn mag_points(&self) -> &[Vec3] {
+        self.mag_points
+            .as_slice(self.recording.samples(Sensor::Mag).unwrap_or(&[]))
+    }
+
     /// Why `sensor` was refused, if it was.
     pub fn refusal(&self, sensor: Sensor) -> Option<&str> {
         self.refusals
@@ -98,7 +105,7 @@ pub fn check_input(
         });
         (mag, still)
     });
-    let mut mag_points = Vec::new();
+    let mut mag_points = MagPoints::Selected(Vec::new());
     if let Some(mag) = mag {
         mag_points = mag.points;
         warnings.extend(mag.warnings);
@@ -147,9 +154,28 @@ pub fn check_input(
     }
 }
 
+/// Which magnetometer samples its fit uses.
+#[derive(Debug)]
+enum MagPoints {
+    /// Every sample recorded (none dropped, none thinned): read from the recording, not copied.
+    Recorded,
+    /// The samples kept by the screen or thinning.
+    Selected(Vec<Vec3>),
+}
+
+impl MagPoints {
+    /// The samples, `recorded` being the recording's.
+    fn as_slice<'a>(&'a self, recorded: &'a [Vec3]) -> &'a [Vec3] {
+        match self {
+            Self::Recorded => recorded,
+            Self::Selected(points) => points,
+        }
+    }
+}
+
 /// The magnetometer samples for its fit with the verdict of its checks.
 struct CheckedMag {
-    points: Vec<Vec3>,
+    points: MagPoints,
     verdict: MagVerdict,
     warnings: Vec<String>,
 }
@@ -175,17 +201,23 @@ fn checked_mag_points(
     if screening.dropped > 0 {
         warnings.push(stream_outliers_sentence(&screening, all.len()));
     }
-    let kept = screening.kept(all);
-    // Every sample kept (the default): the screened vector itself, not a copy of it.
-    let points = if options.max_mag_samples == 0 || kept.len() <= options.max_mag_samples {
-        kept
+    let kept = (screening.dropped > 0).then(|| screening.kept(all));
+    let kept_len = kept.as_ref().map_or(all.len(), Vec::len);
+    // Every sample kept (the default): the screened vector, or the recording's own samples
+    // when none was dropped, not a copy of either.
+    let points = if options.max_mag_samples == 0 || kept_len <= options.max_mag_samples {
+        kept.map_or(MagPoints::Recorded, MagPoints::Selected)
     } else {
-        thin(&kept, options.max_mag_samples)
+        MagPoints::Selected(thin(
+            kept.as_deref().unwrap_or(all),
+            options.max_mag_samples,
+        ))
     };
-    let verdict = match input_checks::check_mag_coverage(&points) {
+    let selected = points.as_slice(all);
+    let verdict = match input_checks::check_mag_coverage(selected) {
         Err(e) => MagVerdict::Refused(e.to_string()),
         Ok(()) => {
-            match input_checks::check_mag_field(&points, recording.units.mag, stated_field_ut) {
+            match input_checks::check_mag_field(selected, recording.units.mag, stated_field_ut) {
                 Ok(w) => {
                     warnings.extend(w);
                     MagVerdict::Usable

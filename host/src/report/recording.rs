@@ -182,7 +182,7 @@ fn mag_samples(
     let Some(mag) = &input.recording.mag else {
         return;
     };
-    let points = &input.mag_points;
+    let points = input.mag_points();
     let index = thin_indices(mag.samples.len(), options.max_mag_samples);
     let temps = input
         .recording
@@ -190,7 +190,7 @@ fn mag_samples(
         .as_ref()
         .filter(|t| t.len() == mag.samples.len());
     data.mag = Some(MagSamples {
-        raw: points.clone(),
+        raw: points.to_vec(),
         calibrated: points.iter().map(|p| fit.cal.apply(p)).collect(),
         time_s: index
             .iter()
@@ -201,7 +201,7 @@ fn mag_samples(
         raw_unit: outcome.input_unit.to_string(),
         calibrated_unit: outcome.output_unit.clone(),
         ellipsoid: ellipsoid_shape(&fit.cal.a, fit.reference).map(|s| (fit.cal.b, s)),
-        counted: points.clone(),
+        counted: points.to_vec(),
     });
     data.verdict.push(format!(
         "magnetometer: residual RMS {:.2e} of the field over {} samples",

@@ -112,15 +112,42 @@ fn screen_axes_by(
     if n < MIN_SCREENED {
         return Screening::keep_all(n);
     }
-    let bound = bonferroni_bound(n * axes);
-    let mut worst = vec![0.0_f64; n];
-    let mut scratch = Vec::with_capacity(n);
+    let mut screen = AxisScreen::new(axes, n);
     for (k, &floor) in (0..axes).zip(resolution) {
-        let (centre, sigma) = centre_and_scale(n, |i| value(k, i), floor, &mut scratch);
-        if !(sigma > 0.0 && sigma.is_finite()) {
-            continue;
+        screen.add_axis(|i| value(k, i), floor);
+    }
+    screen.finish()
+}
+
+/// The screen of [`screen_axes_by`] fed one axis at a time, so that values computed per axis
+/// (a stream's deviations) need only one axis in memory at once.
+struct AxisScreen {
+    /// The Bonferroni bound over every value of every axis.
+    bound: f64,
+    /// Per sample, its largest deviation so far in standard deviations.
+    worst: Vec<f64>,
+    /// Selection buffer of [`centre_and_scale`], shared by the axes.
+    scratch: Vec<i64>,
+}
+
+impl AxisScreen {
+    /// A screen of `axes` axes of `n` samples each (at least [`MIN_SCREENED`]).
+    fn new(axes: usize, n: usize) -> Self {
+        Self {
+            bound: bonferroni_bound(n * axes),
+            worst: vec![0.0; n],
+            scratch: Vec::with_capacity(n),
         }
-        for (w, v) in worst.iter_mut().zip((0..n).map(|i| value(k, i))) {
+    }
+
+    /// Screen the axis whose value at sample `i` is `value(i)`, its scale floored at `floor`.
+    fn add_axis(&mut self, value: impl Fn(usize) -> f64, floor: f64) {
+        let n = self.worst.len();
+        let (centre, sigma) = centre_and_scale(n, &value, floor, &mut self.scratch);
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            return;
+        }
+        for (w, v) in self.worst.iter_mut().zip((0..n).map(value)) {
             // A non-finite reading is dropped: it would poison every statistic.
             let z = if v.is_finite() {
                 (v - centre).abs() / sigma
@@ -130,17 +157,23 @@ fn screen_axes_by(
             *w = w.max(z);
         }
     }
-    let keep: Vec<bool> = worst.iter().map(|z| *z <= bound).collect();
-    let dropped = keep.iter().filter(|k| !**k).count();
-    let worst_sigmas = worst
-        .iter()
-        .filter(|z| **z > bound)
-        .fold(0.0_f64, |a, z| a.max(*z));
-    Screening {
-        keep,
-        dropped,
-        bound_sigmas: bound,
-        worst_sigmas,
+
+    /// What the screen decided over the axes added.
+    fn finish(self) -> Screening {
+        let bound = self.bound;
+        let keep: Vec<bool> = self.worst.iter().map(|z| *z <= bound).collect();
+        let dropped = keep.iter().filter(|k| !**k).count();
+        let worst_sigmas = self
+            .worst
+            .iter()
+            .filter(|z| **z > bound)
+            .fold(0.0_f64, |a, z| a.max(*z));
+        Screening {
+            keep,
+            dropped,
+            bound_sigmas: bound,
+            worst_sigmas,
+        }
     }
 }
 
@@ -179,35 +212,43 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
     if n < MIN_SCREENED.max(2 * STREAM_HALF_WINDOW + 1) {
         return Screening::keep_all(n);
     }
-    let h = STREAM_HALF_WINDOW;
-    let axes: Vec<Vec<f64>> = (0..3)
-        .map(|k| {
-            let axis: Vec<f64> = samples.iter().map(|s| s[k]).collect();
-            // The neighbours without the sample itself: on a steady turn the sample would be
-            // its own window's median, and the deviations would collapse to 0. They live on
-            // the stack: one heap vector per sample and axis cost more than the median itself
-            // on a long stream.
-            let at_edge = |i: usize| {
-                let mut neighbours = [0.0; 2 * STREAM_HALF_WINDOW];
-                let mut len = 0;
-                for j in (i.saturating_sub(h)..(i + h + 1).min(n)).filter(|&j| j != i) {
-                    neighbours[len] = axis[j];
-                    len += 1;
-                }
-                axis[i] - small_median(&mut neighbours[..len])
-            };
-            let mut deviations: Vec<f64> = (0..h).map(at_edge).collect();
-            // The interior: the same six neighbours in the same order, from one window.
-            deviations.extend(axis.windows(2 * h + 1).map(|w| {
-                let mut six = [w[0], w[1], w[2], w[4], w[5], w[6]];
-                w[h] - small_median(&mut six)
-            }));
-            deviations.extend((n - h..n).map(at_edge));
-            deviations
-        })
-        .collect();
     let step = quantisation_step(samples);
-    screen_axes_by(3, n, |k, i| axes[k][i], &[step.x, step.y, step.z])
+    // One axis's deviations at a time, in one buffer: the axes are screened independently
+    // under the common bound.
+    let mut screen = AxisScreen::new(3, n);
+    let mut deviations = Vec::with_capacity(n);
+    for (k, floor) in [step.x, step.y, step.z].into_iter().enumerate() {
+        stream_deviations(samples, k, &mut deviations);
+        screen.add_axis(|i| deviations[i], floor);
+    }
+    screen.finish()
+}
+
+/// Each sample's deviation on axis `k` from the median of its neighbours (see
+/// [`screen_stream`]), into `out` (its old contents dropped). The axis is read in place.
+fn stream_deviations(samples: &[Vec3], k: usize, out: &mut Vec<f64>) {
+    let n = samples.len();
+    let h = STREAM_HALF_WINDOW;
+    // The neighbours without the sample itself: on a steady turn the sample would be its own
+    // window's median, and the deviations would collapse to 0. They live on the stack: one
+    // heap vector per sample and axis cost more than the median itself on a long stream.
+    let at_edge = |i: usize| {
+        let mut neighbours = [0.0; 2 * STREAM_HALF_WINDOW];
+        let mut len = 0;
+        for j in (i.saturating_sub(h)..(i + h + 1).min(n)).filter(|&j| j != i) {
+            neighbours[len] = samples[j][k];
+            len += 1;
+        }
+        samples[i][k] - small_median(&mut neighbours[..len])
+    };
+    out.clear();
+    out.extend((0..h).map(at_edge));
+    // The interior: the same six neighbours in the same order, from one window.
+    out.extend(samples.windows(2 * h + 1).map(|w| {
+        let mut six = [w[0][k], w[1][k], w[2][k], w[4][k], w[5][k], w[6][k]];
+        w[h][k] - small_median(&mut six)
+    }));
+    out.extend((n - h..n).map(at_edge));
 }
 
 /// [`median`] of the values whose [`total_order_key`]s are `keys`, bit for bit: the keys are
