@@ -72,22 +72,22 @@ pub fn bonferroni_bound(tests: usize) -> f64 {
     normal_quantile(1.0 - FAMILY_FALSE_DROP / (2.0 * tests.max(1) as f64))
 }
 
-/// Centre and guarded scale (see the module comment) of the `n` values `value(0..n)`, with
+/// Centre and guarded scale (see the module comment) of the values `values()` yields, with
 /// `resolution` as the scale's floor. The medians are selected in `scratch` (filled in the
 /// values' order, its old contents dropped), one buffer for both and for every axis instead of
 /// two copies of the values per axis.
-fn centre_and_scale(
-    n: usize,
-    value: impl Fn(usize) -> f64,
+fn centre_and_scale<I: Iterator<Item = f64>>(
+    values: impl Fn() -> I,
     resolution: f64,
     scratch: &mut Vec<i64>,
 ) -> (f64, f64) {
     let key = |v: f64| total_order_key(v.to_bits() as i64);
     scratch.clear();
-    scratch.extend((0..n).map(|i| key(value(i))));
+    scratch.extend(values().map(key));
+    let n = scratch.len();
     let centre = median_of_keys(scratch);
     scratch.clear();
-    scratch.extend((0..n).map(|i| key((value(i) - centre).abs())));
+    scratch.extend(values().map(|v| key((v - centre).abs())));
     let mad = 1.482_6 * median_of_keys(scratch);
     let shrink = (1.0 - 2.0 * MAD_STANDARD_ERROR / (n as f64).sqrt()).max(0.5);
     (centre, (mad / shrink).max(resolution))
@@ -97,16 +97,17 @@ fn centre_and_scale(
 #[cfg(test)]
 fn screen_axes(axes: &[Vec<f64>], resolution: &[f64]) -> Screening {
     let n = axes.first().map_or(0, Vec::len);
-    screen_axes_by(axes.len(), n, |k, i| axes[k][i], resolution)
+    screen_axes_by(axes.len(), n, |k| axes[k].iter().copied(), resolution)
 }
 
-/// Screen `axes` axes of `n` samples each, the value of axis `k` at sample `i` being
-/// `value(k, i)`, with one Bonferroni bound over all their values; a sample is dropped when any
-/// axis is beyond it. The values are read where they are, not copied into a vector per axis.
-fn screen_axes_by(
+/// Screen `axes` axes of `n` samples each, the values of axis `k` in sample order being
+/// `values(k)`, with one Bonferroni bound over all their values; a sample is dropped when any
+/// axis is beyond it. The values are read where they are, not copied into a vector per axis,
+/// and as iterators rather than by index, so that the passes over them need no bounds checks.
+fn screen_axes_by<I: Iterator<Item = f64>>(
     axes: usize,
     n: usize,
-    value: impl Fn(usize, usize) -> f64,
+    values: impl Fn(usize) -> I,
     resolution: &[f64],
 ) -> Screening {
     if n < MIN_SCREENED {
@@ -114,7 +115,7 @@ fn screen_axes_by(
     }
     let mut screen = AxisScreen::new(axes, n);
     for (k, &floor) in (0..axes).zip(resolution) {
-        screen.add_axis(|i| value(k, i), floor);
+        screen.add_axis(|| values(k), floor);
     }
     screen.finish()
 }
@@ -140,14 +141,14 @@ impl AxisScreen {
         }
     }
 
-    /// Screen the axis whose value at sample `i` is `value(i)`, its scale floored at `floor`.
-    fn add_axis(&mut self, value: impl Fn(usize) -> f64, floor: f64) {
-        let n = self.worst.len();
-        let (centre, sigma) = centre_and_scale(n, &value, floor, &mut self.scratch);
+    /// Screen the axis whose values in sample order are `values()` (one per sample), its
+    /// scale floored at `floor`.
+    fn add_axis<I: Iterator<Item = f64>>(&mut self, values: impl Fn() -> I, floor: f64) {
+        let (centre, sigma) = centre_and_scale(&values, floor, &mut self.scratch);
         if !(sigma > 0.0 && sigma.is_finite()) {
             return;
         }
-        for (w, v) in self.worst.iter_mut().zip((0..n).map(value)) {
+        for (w, v) in self.worst.iter_mut().zip(values()) {
             // A non-finite reading is dropped: it would poison every statistic.
             let z = if v.is_finite() {
                 (v - centre).abs() / sigma
@@ -179,7 +180,7 @@ impl AxisScreen {
 
 /// Screen scalar values; `resolution` is the smallest meaningful difference (0 when unknown).
 pub fn screen_scalars(values: &[f64], resolution: f64) -> Screening {
-    screen_axes_by(1, values.len(), |_, i| values[i], &[resolution])
+    screen_axes_by(1, values.len(), |_| values.iter().copied(), &[resolution])
 }
 
 /// Screen 3-vector samples axis by axis (one bound over the `3n` tests), each axis's scale
@@ -189,7 +190,7 @@ pub fn screen_vectors(samples: &[Vec3]) -> Screening {
     screen_axes_by(
         3,
         samples.len(),
-        |k, i| samples[i][k],
+        |k| samples.iter().map(move |v| v[k]),
         &[step.x, step.y, step.z],
     )
 }
@@ -219,7 +220,7 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
     let mut deviations = Vec::with_capacity(n);
     for (k, floor) in [step.x, step.y, step.z].into_iter().enumerate() {
         stream_deviations(samples, k, &mut deviations);
-        screen.add_axis(|i| deviations[i], floor);
+        screen.add_axis(|| deviations.iter().copied(), floor);
     }
     screen.finish()
 }
