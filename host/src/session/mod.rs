@@ -56,6 +56,8 @@ pub mod rest;
 mod rest_phase;
 mod runner;
 pub mod save;
+#[cfg(feature = "sim")]
+pub mod sim_screen;
 pub mod solve;
 pub mod targets;
 
@@ -74,7 +76,7 @@ use runner::{unix_now, Runner};
 
 pub use coverage::{Coverage, REGIONS};
 pub use error::SessionError;
-pub use events::{MagSample, Phase, SessionEvent, SessionObserver, Unattended};
+pub use events::{MagSample, Phase, SessionEvent, SessionObserver, Tapped, Unattended};
 pub use extend::{analyse_poses, extend_set, ExtendedSet};
 pub use gyro_fit::{GyroBudgets, GyroScale};
 pub use journal::{load_progress, Progress};
