@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 use serialport::{SerialPort, TTYPort};
 use thiserror::Error;
 
-use crate::board::{BoardConfig, BoardError, PersonSchedule, SensorChip, SimBoard};
+use crate::board::{BoardConfig, BoardError, PersonSchedule, Screen, SensorChip, SimBoard};
 use crate::effects::EffectRequest;
 use crate::error::SimError;
 use crate::link_faults::{FaultStats, FaultyLink, LinkFaults, ParamTamper};
@@ -148,6 +148,7 @@ struct Shared {
     stats: Mutex<ServeStats>,
     faults: Mutex<FaultStats>,
     notes: Mutex<Vec<String>>,
+    screen: Mutex<Screen>,
 }
 
 /// Starts simulated boards.
@@ -176,6 +177,7 @@ impl SimServer {
             stats: Mutex::new(ServeStats::default()),
             faults: Mutex::new(FaultStats::default()),
             notes: Mutex::new(Vec::new()),
+            screen: Mutex::new(Screen::Unknown),
         });
         let (commands, receiver) = mpsc::channel();
         let thread_shared = Arc::clone(&shared);
@@ -283,6 +285,16 @@ impl SimHandle {
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner),
         )
+    }
+
+    /// Show the simulated person what the host's screen asks for: a person who reads it takes
+    /// the corner named and turns the board when asked to (see [`Screen`]).
+    pub fn show(&self, screen: Screen) {
+        *self
+            .shared
+            .screen
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = screen;
     }
 
     /// Close the pseudo-terminal now, as when the board is unplugged: the host's reads and
@@ -471,6 +483,7 @@ fn serve(
         let wall_s = start.elapsed().as_secs_f64();
         let target_us = sim_start_us.saturating_add((wall_s * speed * 1e6) as u64);
         let step_to = target_us.min(board.time_us().saturating_add(MAX_STEP_US));
+        board.show(*shared.screen.lock().unwrap_or_else(PoisonError::into_inner));
         board.advance_to(step_to)?;
         let lag_s = target_us.saturating_sub(step_to) as f64 * 1e-6;
 

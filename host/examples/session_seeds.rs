@@ -19,7 +19,8 @@ use imucal::device::DeviceClient;
 use imucal::fit::linalg::orthogonal_factor;
 use imucal::fit::{Calibration, Mat3, Vec3};
 use imucal::session::gyro_fit::full_turn_error_deg;
-use imucal::session::{run_session, SessionEvent, SessionObserver, SessionOptions};
+use imucal::session::sim_screen::shown_on;
+use imucal::session::{run_session, SessionEvent, SessionObserver, SessionOptions, Tapped};
 use imucal_hil_sim::serve::{SimOptions, SimServer};
 
 /// Simulated seconds per wall second. The simulated board runs on while the host computes, so
@@ -108,14 +109,16 @@ fn main() {
             field_ut: Some(Vec3::from(truth.world.field_world_ut).norm()),
             ..SessionOptions::default()
         };
-        let outcome = match run_session(
-            &mut client,
-            &options,
-            &mut Log {
-                verbose,
-                start: std::time::Instant::now(),
-            },
-        ) {
+        let mut log = Log {
+            verbose,
+            start: std::time::Instant::now(),
+        };
+        // The simulated person reads the prompts off the screen, as with `imucal calibrate --sim`.
+        let mut shown = Tapped {
+            observer: &mut log,
+            tap: shown_on(&sim),
+        };
+        let outcome = match run_session(&mut client, &options, &mut shown) {
             Ok(outcome) => outcome,
             Err(e) => {
                 println!("{seed} | session failed: {e}");

@@ -9,7 +9,8 @@ use imucal::device::DeviceClient;
 use imucal::fit::Calibration;
 use imucal::fit::{Mat3, Vec3};
 use imucal::session::gyro_fit::full_turn_error_deg;
-use imucal::session::{run_session, SessionOptions, SessionOutcome, Unattended};
+use imucal::session::sim_screen::shown_on;
+use imucal::session::{run_session, SessionOptions, SessionOutcome, Tapped, Unattended};
 use imucal_hil_sim::board::SensorChip;
 use imucal_hil_sim::physics::SensorTruth;
 use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
@@ -155,8 +156,16 @@ fn run_calibration(seed: u64, chip: SensorChip) -> (SimHandle, DeviceClient, Ses
         field_ut: Some(Vec3::from(truth.world.field_world_ut).norm()),
         ..SessionOptions::default()
     };
-    let outcome =
-        run_session(&mut client, &options, &mut Unattended).expect("the session completes");
+    // The simulated person reads the prompts off the screen, as with `imucal calibrate --sim`.
+    let outcome = run_session(
+        &mut client,
+        &options,
+        &mut Tapped {
+            observer: &mut Unattended,
+            tap: shown_on(&sim),
+        },
+    )
+    .expect("the session completes");
     (sim, client, outcome)
 }
 

@@ -36,7 +36,7 @@ pub use link::{link_pair, DeviceLink, LinkEnd, LinkObservations, TX_BUFFER_LIMIT
 pub use parts::{
     BoardFlash, SharedChip, SharedFlash, SimClock, FLASH_SECTOR, FLASH_SIZE, FLASH_WORD,
 };
-pub use person::{Person, PersonPhase, PersonSchedule, Prompts, CORNER_PATIENCE_S};
+pub use person::{Person, PersonPhase, PersonSchedule, Prompts, Screen, CORNER_PATIENCE_S};
 
 /// Size of each of the two parameter slots: one flash sector.
 pub const SLOT_SIZE: u32 = FLASH_SECTOR as u32;
@@ -173,6 +173,8 @@ pub struct SimBoard {
     last_sample: Option<ImuSample>,
     last_state: Option<WorldState>,
     expected_duration_s: f64,
+    /// What the host's screen shows the person.
+    screen: Screen,
 }
 
 impl std::fmt::Debug for SimBoard {
@@ -254,6 +256,7 @@ impl SimBoard {
             last_sample: None,
             last_state: None,
             expected_duration_s,
+            screen: Screen::Unknown,
             config,
         };
         board.boot(device_link)?;
@@ -362,6 +365,12 @@ impl SimBoard {
     /// The person holding the board.
     pub fn person(&self) -> &Person {
         &self.person
+    }
+
+    /// Show the person what the host's screen asks for (see [`Screen`]); they react from the
+    /// next sample on.
+    pub fn show(&mut self, screen: Screen) {
+        self.screen = screen;
     }
 
     /// The configuration the board was built from.
@@ -476,6 +485,7 @@ impl SimBoard {
                 stream_starts: observed.stream_starts,
                 stream_stops: observed.stream_stops,
                 streaming: observed.streaming,
+                screen: self.screen,
             },
         )?;
         let state = self.world_state(t_s);

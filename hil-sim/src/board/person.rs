@@ -15,8 +15,10 @@
 //!    board (the twelve differ in their up direction), which the gyroscope's scale fit needs.
 //! 2. The eight corner positions (the board balanced on a corner, [`crate::poser::corner_holds`]),
 //!    which a host may ask for after the twelve: each is held like the twelve while the host
-//!    captures it; a corner the host has not asked to capture within [`CORNER_PATIENCE_S`] means it
-//!    wants something else, and the person goes on to the tumble from there.
+//!    captures it. A person who can read the host's screen ([`Screen`]) takes the corner it
+//!    names, and goes on to the tumble as soon as it asks for turning. Without the screen the
+//!    corners are held in a fixed order, and a corner the host has not asked to capture within
+//!    [`CORNER_PATIENCE_S`] means it wants something else: the person goes on to the tumble.
 //! 3. A tumble for the magnetometer that fills in what the turns between the positions have not
 //!    shown yet: the waypoints of the `tumble` schedule whose body-frame field direction is more
 //!    than [`crate::poser::SEEN_ANGLE_DEG`] from every direction shown so far, nearest first
@@ -62,6 +64,10 @@ pub const REACTION_S: f64 = 0.25;
 /// the host wants something else, s: the host's stillness window (0.5 s) and settle time
 /// (0.15 s) after the hold's tremor ramp (0.3 s), plus a look at the screen.
 pub const CORNER_PATIENCE_S: f64 = 2.5;
+
+/// A screen's up direction names the corner within this angle of it, degrees (corners are at
+/// least 70.5° apart, and a corner is held within a few degrees of its direction).
+const NAMED_CORNER_DEG: f64 = 25.0;
 
 /// Body-frame field directions are remembered when they differ by more than this from the last
 /// one remembered, degrees (a tenth of the angle that counts as seen).
@@ -130,7 +136,7 @@ pub enum PersonPhase {
 }
 
 /// What the person sees of the firmware.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Prompts {
     /// `CapturePose` requests seen so far.
     pub capture_requests: u64,
@@ -142,6 +148,29 @@ pub struct Prompts {
     pub stream_stops: u64,
     /// Whether the host's last stream request started a stream.
     pub streaming: bool,
+    /// What the host's screen asks for, when the person can read it.
+    pub screen: Screen,
+}
+
+/// What the host's screen asks of the person holding the board. A person who can read it takes
+/// the corner it names and goes on to the tumble as soon as it asks for turning; without it
+/// ([`Screen::Unknown`]) the person guesses from the firmware's traffic, holding each corner in
+/// turn until [`CORNER_PATIENCE_S`] passes without a capture request. The twelve positions are
+/// held in the person's own order either way (the host accepts them in any order).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Screen {
+    /// Nothing the person can read.
+    #[default]
+    Unknown,
+    /// Hold the board with this body-frame direction up (need not be unit length).
+    Pose {
+        /// The direction, body frame.
+        up: [f64; 3],
+    },
+    /// Turn the board slowly through many directions (the magnetometer's phase).
+    Turn,
+    /// Put the board down and leave it.
+    Rest,
 }
 
 /// The person and the motion they produce.
@@ -185,6 +214,8 @@ pub struct Person {
     /// When the person starts to move after seeing the next prompt, s.
     moving_at_s: Option<f64>,
     first_prompt_s: Option<f64>,
+    /// What the host's screen shows, and since when, s.
+    screen: (Screen, f64),
 }
 
 /// Minimum-jerk turn length for a peak rate: the peak of `ṡ` is 1.875 times the mean.
@@ -259,6 +290,7 @@ impl Person {
             captured: None,
             moving_at_s: None,
             first_prompt_s: None,
+            screen: (Screen::Unknown, 0.0),
         };
         if hold_count > 0 {
             person.begin_hold(0, 0.0, Prompts::default())?;
@@ -282,6 +314,9 @@ impl Person {
             self.first_prompt_s = Some(t_s);
         }
         self.trace_field(t_s);
+        if prompts.screen != self.screen.0 {
+            self.screen = (prompts.screen, t_s);
+        }
         if let (PersonPhase::Hold { .. }, Some(at_start)) =
             (self.phase, self.hold_captures_at_start)
         {
@@ -298,15 +333,29 @@ impl Person {
             let timed_out = self
                 .first_prompt_s
                 .is_some_and(|first| t_s - first.max(self.segment_start_s) >= self.max_hold_s);
-            let unwanted_corner = self.is_corner()
-                && prompts.capture_requests == self.hold_requests_at_start
-                && t_s - self.segment_start_s >= CORNER_PATIENCE_S;
-            if unwanted_corner {
+            let unwanted_corner = if self.screen.0 == Screen::Unknown {
+                self.is_corner()
+                    && prompts.capture_requests == self.hold_requests_at_start
+                    && t_s - self.segment_start_s >= CORNER_PATIENCE_S
+            } else {
+                self.captured.is_none()
+                    && t_s - self.screen.1 >= REACTION_S
+                    && self.screen_asks_for_another_corner_or_none()
+            };
+            if unwanted_corner && self.screen.0 == Screen::Unknown {
                 self.corners_done = true;
             }
             if prompted_on || timed_out || unwanted_corner {
                 self.end_hold(t_s)?;
             }
+        }
+        let told_to_rest = self.screen.0 == Screen::Rest && t_s - self.screen.1 >= REACTION_S;
+        if let (PersonPhase::Tumble { .. }, true) = (self.phase, told_to_rest) {
+            // The screen asks to put the board down, however short the turning was.
+            let here = self.motion_at(t_s).q_body_to_world;
+            self.turn(here, self.rest, t_s)?;
+            self.phase = PersonPhase::Rest;
+            self.tumble_watched_since_s = None;
         }
         if let PersonPhase::Tumble { .. } = self.phase {
             match self.tumble_watched_since_s {
@@ -371,6 +420,56 @@ impl Person {
         matches!(self.phase, PersonPhase::Hold { index } if index >= self.hold_count)
     }
 
+    /// The hold index of the corner the screen names, if it names one.
+    fn named_corner(&self) -> Option<usize> {
+        let Screen::Pose { up } = self.screen.0 else {
+            return None;
+        };
+        let up = Vector3::from(up).try_normalize(0.0)?;
+        let cos_limit = NAMED_CORNER_DEG.to_radians().cos();
+        self.corners
+            .iter()
+            .position(|c| (c.orientation.inverse() * Vector3::z()).dot(&up) >= cos_limit)
+            .map(|j| self.hold_count + j)
+    }
+
+    /// Whether the person, holding a corner, reads on the screen that the host wants another
+    /// corner, or no corner at all.
+    fn screen_asks_for_another_corner_or_none(&self) -> bool {
+        let PersonPhase::Hold { index } = self.phase else {
+            return false;
+        };
+        if index < self.hold_count {
+            return false;
+        }
+        match self.screen.0 {
+            Screen::Unknown => false,
+            Screen::Turn | Screen::Rest => true,
+            Screen::Pose { .. } => self.named_corner().is_some_and(|named| named != index),
+        }
+    }
+
+    /// Where the person goes after hold `index`: the next hold, or `None` for the tumble. After
+    /// the twelve the screen, when it can be read, decides: the corner it names, or the tumble
+    /// when it asks for turning.
+    fn after_hold(&self, index: usize) -> Option<usize> {
+        let next = index + 1;
+        if next < self.hold_count {
+            return Some(next);
+        }
+        if self.corners_done {
+            return None;
+        }
+        match self.screen.0 {
+            Screen::Turn | Screen::Rest => None,
+            Screen::Pose { .. } => match self.named_corner() {
+                Some(named) if named != index => Some(named),
+                _ => self.hold_plan(next).map(|_| next),
+            },
+            Screen::Unknown => self.hold_plan(next).map(|_| next),
+        }
+    }
+
     fn begin_hold(&mut self, index: usize, start_s: f64, prompts: Prompts) -> Result<(), SimError> {
         let captures = prompts.poses_captured;
         self.hold_requests_at_start = prompts.capture_requests;
@@ -414,15 +513,13 @@ impl Person {
         match self.phase {
             PersonPhase::Hold { index } => {
                 let from = self.hold_plan(index).map_or(self.rest, |h| h.orientation);
-                // After a corner the host did not want, the tumble.
-                let next = (!self.corners_done)
-                    .then(|| self.hold_plan(index + 1))
-                    .flatten();
+                let next = self
+                    .after_hold(index)
+                    .and_then(|i| self.hold_plan(i).map(|h| (i, h.orientation)));
                 match next {
-                    Some(next) => {
-                        let to = next.orientation;
+                    Some((next, to)) => {
                         self.turn(from, to, start)?;
-                        self.phase = PersonPhase::TurnToHold { index: index + 1 };
+                        self.phase = PersonPhase::TurnToHold { index: next };
                     }
                     None => {
                         self.plan_tumble(&from);
@@ -502,6 +599,147 @@ impl Person {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Sample period of the drive below, s.
+    const STEP_S: f64 = 0.01;
+
+    fn guided_person() -> Person {
+        Person::new(
+            PersonSchedule::Guided,
+            &PoserOptions::default(),
+            30.0,
+            &EarthField::default(),
+            3,
+        )
+        .expect("a guided person")
+    }
+
+    /// A host that captures every hold 0.8 s after it begins and then starts its next stream,
+    /// showing `screen` from the last of the twelve on. Runs until `done` or 120 s; returns
+    /// the time.
+    fn drive(person: &mut Person, screen: Screen, done: impl Fn(&Person) -> bool) -> Option<f64> {
+        let mut prompts = Prompts {
+            streaming: true,
+            ..Prompts::default()
+        };
+        let mut hold_began: Option<(usize, f64)> = None;
+        let mut t_s = 0.0;
+        while t_s < 120.0 {
+            person.observe(t_s, prompts).ok()?;
+            if done(person) {
+                return Some(t_s);
+            }
+            match person.phase() {
+                PersonPhase::Hold { index } => {
+                    if index >= 11 {
+                        prompts.screen = screen;
+                    }
+                    // The corners are captured only when the screen names them.
+                    let wanted = index < 12 || person.named_corner() == Some(index);
+                    if hold_began.is_none_or(|(i, _)| i != index) {
+                        hold_began = Some((index, t_s));
+                        if wanted {
+                            prompts.capture_requests += 1;
+                        }
+                    }
+                    let began = hold_began.map_or(t_s, |(_, at)| at);
+                    let captured_here = prompts.poses_captured >= prompts.capture_requests;
+                    if wanted && !captured_here && t_s - began >= 0.8 {
+                        prompts.poses_captured += 1;
+                        prompts.stream_starts += 1;
+                    }
+                }
+                _ => hold_began = None,
+            }
+            t_s += STEP_S;
+        }
+        None
+    }
+
+    #[test]
+    fn a_person_who_reads_the_screen_takes_the_corner_it_names() {
+        let mut person = guided_person();
+        // Corner 5 of the person's own order, named by its up direction.
+        let up = crate::poser::corner_up_directions()[5];
+        let screen = Screen::Pose {
+            up: [up.x, up.y, up.z],
+        };
+        let reached = drive(
+            &mut person,
+            screen,
+            |p| matches!(p.phase(), PersonPhase::Hold { index } if index >= 12),
+        );
+        assert!(reached.is_some(), "no corner was reached");
+        assert_eq!(person.phase(), PersonPhase::Hold { index: 12 + 5 });
+    }
+
+    #[test]
+    fn a_person_who_reads_the_screen_turns_the_board_when_asked_without_holding_a_corner() {
+        let mut with_screen = guided_person();
+        let tumbling = |p: &Person| matches!(p.phase(), PersonPhase::Tumble { .. });
+        let read = drive(&mut with_screen, Screen::Turn, tumbling).expect("the tumble begins");
+        // Without the screen the person holds the first corner until their patience runs out.
+        let mut guessing = guided_person();
+        let guessed = drive(&mut guessing, Screen::Unknown, tumbling).expect("the tumble begins");
+        assert!(
+            guessed - read >= CORNER_PATIENCE_S,
+            "tumble at {read:.2} s reading the screen, {guessed:.2} s guessing"
+        );
+    }
+
+    #[test]
+    fn a_person_who_reads_the_screen_puts_the_board_down_when_asked_however_short_the_turning() {
+        let mut person = guided_person();
+        drive(&mut person, Screen::Turn, |p| {
+            matches!(p.phase(), PersonPhase::Tumble { .. })
+        })
+        .expect("the tumble begins");
+        // The host needed no turning: it shows the rest prompt at once, and never streamed.
+        let start = person.segment_start_s;
+        let prompts = Prompts {
+            screen: Screen::Rest,
+            ..Prompts::default()
+        };
+        let mut t_s = start;
+        while t_s < start + 1.0 && person.phase() != PersonPhase::Rest {
+            person.observe(t_s, prompts).expect("the person moves");
+            t_s += STEP_S;
+        }
+        assert_eq!(person.phase(), PersonPhase::Rest);
+    }
+
+    #[test]
+    fn a_person_holding_a_corner_the_screen_does_not_name_moves_to_the_named_one() {
+        let mut person = guided_person();
+        let corners = crate::poser::corner_up_directions();
+        // The screen names the third corner only once the person holds the first one.
+        let up = corners[2];
+        let named = Screen::Pose {
+            up: [up.x, up.y, up.z],
+        };
+        drive(&mut person, Screen::Unknown, |p| {
+            p.phase() == PersonPhase::Hold { index: 12 }
+        })
+        .expect("the first corner is held");
+        let at_first = person.segment_start_s;
+        let prompts = Prompts {
+            streaming: true,
+            capture_requests: 12,
+            poses_captured: 12,
+            stream_starts: 12,
+            screen: named,
+            ..Prompts::default()
+        };
+        let mut t_s = at_first;
+        while t_s < at_first + 10.0 {
+            person.observe(t_s, prompts).expect("the person moves");
+            if person.phase() == (PersonPhase::Hold { index: 14 }) {
+                break;
+            }
+            t_s += STEP_S;
+        }
+        assert_eq!(person.phase(), PersonPhase::Hold { index: 14 });
+    }
 
     #[test]
     fn a_rounds_schedule_is_read_from_its_name_and_counts_its_rounds() {

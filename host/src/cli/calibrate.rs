@@ -20,7 +20,7 @@ use anyhow::Context;
 use imucal::device::{DeviceClient, ParamsFile};
 use imucal::session::{
     load_poses, load_progress, run_session_with, save_session, summary, CapturedPose,
-    SessionControl, SessionOptions,
+    SessionControl, SessionEvent, SessionOptions, Tapped,
 };
 use imucal_protocol::Welcome;
 
@@ -204,7 +204,17 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         accept_poor: args.accept_poor,
     };
     let mut terminal = Terminal::new(plain, policy, port.clone()).with_json_events(args.json);
-    let result = run_session_with(&mut client, &options, &mut terminal, &control);
+    let result = match &simulated {
+        // The simulated person reads the prompts off the screen, as a person would.
+        Some(sim) => {
+            let mut shown = Tapped {
+                observer: &mut terminal,
+                tap: |event: &SessionEvent<'_>| sim.show(event),
+            };
+            run_session_with(&mut client, &options, &mut shown, &control)
+        }
+        None => run_session_with(&mut client, &options, &mut terminal, &control),
+    };
     terminal.bar.finish_and_clear();
     let outcome = result.map_err(|error| {
         anyhow::anyhow!(

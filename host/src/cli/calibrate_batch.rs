@@ -10,6 +10,7 @@ use imucal::device::{list_ports, BoardMatch};
 use imucal::history::FleetOptions;
 use imucal::session::batch::{run_batch, BatchOptions, BatchReport, BoardStatus};
 use imucal::session::batch_gate::GateOptions;
+use imucal::session::SessionEvent;
 use serde::Serialize;
 
 use super::args::CalibrateArgs;
@@ -129,7 +130,13 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     let log = |port: &str, line: &str| eprintln!("[{port}] {line}");
-    let report = run_batch(&ports, &options, &log);
+    // Each simulated person reads their board's prompts off the screen.
+    let show = |port: &str, event: &SessionEvent<'_>| {
+        if let Some(sim) = simulated.iter().find(|s| s.port() == port) {
+            sim.show(event);
+        }
+    };
+    let report = run_batch(&ports, &options, &log, &show);
     for (sim, board) in simulated.iter().zip(&report.boards) {
         if let Some(dir) = &board.session_dir {
             sim.save_truth(&dir.join("truth.json"))?;

@@ -97,6 +97,14 @@ impl Simulated {
         self.handle.port_path().to_string()
     }
 
+    /// Show the simulated person what the screen asks for after `event` (see
+    /// [`imucal::session::sim_screen`]).
+    pub(super) fn show(&self, event: &imucal::session::SessionEvent<'_>) {
+        if let Some(screen) = imucal::session::sim_screen::screen_of(event) {
+            self.handle.show(screen);
+        }
+    }
+
     /// The simulated site's field, µT: it stands for a value looked up for the location.
     pub(super) fn field_ut(&self) -> f64 {
         let field = self.handle.truth().world.field_world_ut;
@@ -135,6 +143,10 @@ impl Simulated {
     }
 
     pub(super) fn port(&self) -> String {
+        match *self {}
+    }
+
+    pub(super) fn show(&self, _event: &imucal::session::SessionEvent<'_>) {
         match *self {}
     }
 

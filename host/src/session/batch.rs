@@ -120,12 +120,14 @@ struct BoardObserver<'a> {
     gate: &'a WriteGate,
     options: &'a BatchOptions,
     log: &'a (dyn Fn(&str, &str) + Sync),
+    show: &'a (dyn Fn(&str, &SessionEvent<'_>) + Sync),
     /// The test's result and the decision, once the fit reached the gate.
     decision: Option<(OutlierCheck, BoardStatus)>,
 }
 
 impl SessionObserver for BoardObserver<'_> {
     fn event(&mut self, event: &SessionEvent<'_>) {
+        (self.show)(self.port, event);
         let line = match event {
             SessionEvent::Captured {
                 target,
@@ -176,11 +178,13 @@ impl SessionObserver for BoardObserver<'_> {
 }
 
 /// Calibrate the boards on `ports` together (see the module documentation); `log(port, line)`
-/// receives each board's progress.
+/// receives each board's progress, `show(port, event)` every event of its session (what its
+/// screen would show).
 pub fn run_batch(
     ports: &[String],
     options: &BatchOptions,
     log: &(dyn Fn(&str, &str) + Sync),
+    show: &(dyn Fn(&str, &SessionEvent<'_>) + Sync),
 ) -> BatchReport {
     let start = Instant::now();
     let gate = Arc::new(WriteGate::new(ports.len(), options.gate.clone()));
@@ -191,7 +195,7 @@ pub fn run_batch(
             .map(|(index, port)| {
                 let gate = Arc::clone(&gate);
                 scope.spawn(move || {
-                    let result = run_board(index, port, &gate, options, log);
+                    let result = run_board(index, port, &gate, options, log, show);
                     // Boards that never reached the gate must not hold the others.
                     gate.depart(index);
                     result
@@ -242,6 +246,7 @@ fn run_board(
     gate: &WriteGate,
     options: &BatchOptions,
     log: &(dyn Fn(&str, &str) + Sync),
+    show: &(dyn Fn(&str, &SessionEvent<'_>) + Sync),
 ) -> BoardResult {
     let start = Instant::now();
     let cpu_start = thread_cpu_seconds();
@@ -258,6 +263,7 @@ fn run_board(
         gate,
         options,
         log,
+        show,
         decision: None,
     };
     let dir = options.out_dir.join(&device_id);

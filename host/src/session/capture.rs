@@ -21,19 +21,40 @@ use crate::device::{DeviceError, PoseRequest};
 use crate::fit::norm_lm::fit_accel_lm;
 use crate::fit::{Pose, Vec3};
 
+/// When a capture phase is done, and what it prompts for.
+pub(super) struct CaptureGoal<'e> {
+    /// Most targets captured.
+    pub most: usize,
+    /// Whether the poses captured so far suffice (asked after each capture).
+    pub enough: &'e dyn Fn(&[CapturedPose]) -> bool,
+    /// Index of the target prompted for while it is needed; otherwise the prompt names the
+    /// one that helps the accelerometer fit most ([`plan`]). Any needed target counts.
+    pub prompt_first: Option<usize>,
+}
+
+impl CaptureGoal<'_> {
+    /// Up to `most` targets, the accelerometer's choice prompted, never enough before.
+    pub(super) fn up_to(most: usize) -> Self {
+        CaptureGoal {
+            most,
+            enough: &|_| false,
+            prompt_first: None,
+        }
+    }
+}
+
 impl<L: Read + Write> Runner<'_, L> {
-    /// Capture the targets of `targets` not yet in `captured`, at most `most` of them, fewer
-    /// once `enough` says the poses captured so far suffice (it is asked after each capture).
-    /// Returns `false` when `timeout` passed without progress and `give_up_quietly` is set.
+    /// Capture the targets of `targets` not yet in `captured` as `goal` says. Returns `false`
+    /// when `timeout` passed without progress and `give_up_quietly` is set.
     pub(super) fn capture_targets(
         &mut self,
         targets: &[Target],
         captured: &mut Vec<CapturedPose>,
         timeout: Duration,
         give_up_quietly: bool,
-        most: usize,
-        enough: &dyn Fn(&[CapturedPose]) -> bool,
+        goal: &CaptureGoal<'_>,
     ) -> Result<bool, SessionError> {
+        let (most, enough) = (goal.most, goal.enough);
         let start = captured.len();
         let total = start
             + most.min(
@@ -58,8 +79,15 @@ impl<L: Read + Write> Runner<'_, L> {
                 return Ok(true);
             }
             if choice.is_none_or(|(count, _)| count != captured.len()) {
-                choice = plan::most_informative(captured, &needed, self.options.gravity_mps2)
-                    .map(|t| (captured.len(), t.index));
+                let first = goal
+                    .prompt_first
+                    .filter(|index| needed.iter().any(|t| t.index == *index));
+                choice = first
+                    .or_else(|| {
+                        plan::most_informative(captured, &needed, self.options.gravity_mps2)
+                            .map(|t| t.index)
+                    })
+                    .map(|index| (captured.len(), index));
             }
             let Some(next) = choice
                 .and_then(|(_, index)| needed.iter().find(|t| t.index == index))
@@ -236,8 +264,11 @@ impl<L: Read + Write> Runner<'_, L> {
             captured,
             self.options.extra_pose_timeout,
             true,
-            most,
-            &enough,
+            &CaptureGoal {
+                most,
+                enough: &enough,
+                prompt_first: None,
+            },
         )?;
         if complete {
             self.client.stop_stream()?;

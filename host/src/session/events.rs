@@ -153,3 +153,25 @@ pub struct Unattended;
 impl SessionObserver for Unattended {
     fn event(&mut self, _event: &SessionEvent<'_>) {}
 }
+
+/// An observer that also hands every event to `tap`: e.g. what the screen shows, passed on to
+/// a simulated person who reads it.
+pub struct Tapped<'a, O: ?Sized, F> {
+    /// The observer that handles the events and decides the write.
+    pub observer: &'a mut O,
+    /// Sees every event first.
+    pub tap: F,
+}
+
+impl<O: SessionObserver + ?Sized, F: FnMut(&SessionEvent<'_>)> SessionObserver
+    for Tapped<'_, O, F>
+{
+    fn event(&mut self, event: &SessionEvent<'_>) {
+        (self.tap)(event);
+        self.observer.event(event);
+    }
+
+    fn confirm_write(&mut self, fit: &SessionFit) -> bool {
+        self.observer.confirm_write(fit)
+    }
+}

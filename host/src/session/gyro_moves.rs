@@ -36,7 +36,7 @@ const EDGE_MIN_SAMPLES: usize = 5;
 /// full turn integrates off. (This measure counts each move's whole rotation off the starting
 /// vertical, so it understates a lack: on the simulated sessions Z at 0.41–0.46 of the others
 /// had 3–4 times X's σ.)
-const LACKING_FRACTION: f64 = 0.5;
+pub const LACKING_FRACTION: f64 = 0.5;
 
 /// Time step of a stream (mean interval), `None` when samples are missing (a gap of more than
 /// 1.5 intervals) or the time stamps do not increase.

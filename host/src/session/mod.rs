@@ -13,7 +13,9 @@
 //!    [`SessionOptions::rounds`] above 1 the twelve are captured that many times over. Afterwards, if the
 //!    covariance of the accelerometer fit says the expected `|a|` error exceeds a quarter of the
 //!    budget, corner positions are asked for as well ([`targets::corner_positions`]), until it
-//!    meets that target or four are in.
+//!    meets that target or four are in. Then, if the moves have tilted the board about one axis
+//!    much less than about the others, up to two corners that tilt it about that axis
+//!    ([`gyro_phase`]).
 //! 2. Magnetometer ([`mag_phase`]): raw samples while the user turns the board, until every one
 //!    of 26 direction regions holds enough samples ([`coverage`]); the moves between the
 //!    positions count, so this only fills in what they left empty.
@@ -24,7 +26,6 @@
 //!    aligned magnetometer, the field direction, [`gyro_field`]), show the result with its
 //!    uncertainties and verdict, write the set, commit, read it back and compare (CRC and every
 //!    value), then stream calibrated samples at rest for the "after" errors.
-//!
 //!
 //! Afterwards [`extend`] can run the residual analysis on the poses and add the effects it
 //! accepts (temperature polynomial of the bias, …) to the set as the firmware's extended terms.
@@ -43,6 +44,7 @@ pub mod gyro_field;
 pub mod gyro_fit;
 pub mod gyro_moves;
 mod gyro_nuisance;
+mod gyro_phase;
 pub mod hold;
 pub mod journal;
 mod mag_alignment;
@@ -56,6 +58,8 @@ pub mod rest;
 mod rest_phase;
 mod runner;
 pub mod save;
+#[cfg(feature = "sim")]
+pub mod sim_screen;
 pub mod solve;
 pub mod targets;
 
@@ -69,12 +73,13 @@ use imucal_protocol::{ParamStatus, StreamKind};
 
 use crate::device::DeviceClient;
 use crate::fit::Vec3;
+use capture::CaptureGoal;
 use journal::Journal;
 use runner::{unix_now, Runner};
 
 pub use coverage::{Coverage, REGIONS};
 pub use error::SessionError;
-pub use events::{MagSample, Phase, SessionEvent, SessionObserver, Unattended};
+pub use events::{MagSample, Phase, SessionEvent, SessionObserver, Tapped, Unattended};
 pub use extend::{analyse_poses, extend_set, ExtendedSet};
 pub use gyro_fit::{GyroBudgets, GyroScale};
 pub use journal::{load_progress, Progress};
@@ -217,8 +222,7 @@ fn run_phases<L: Read + Write>(
             &mut this_round,
             options.pose_timeout,
             false,
-            twelve.len(),
-            &|_| false,
+            &CaptureGoal::up_to(twelve.len()),
         )?;
         runner.client.stop_stream()?;
         captured.append(&mut this_round);
@@ -227,6 +231,8 @@ fn run_phases<L: Read + Write>(
     runner
         .observer
         .event(&SessionEvent::Note(extra_positions_note.clone()));
+    let gyro_turns_note = runner.gyro_turns(&mut captured)?;
+    runner.observer.event(&SessionEvent::Note(gyro_turns_note));
 
     runner.journal.stage("magnetometer", &runner.mag)?;
     let coverage = runner.magnetometer()?;
