@@ -43,7 +43,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 ));
             };
             if added >= most {
-                return Ok(format!("{advice} ({added} extra turns were asked for)"));
+                return Ok(format!("{advice} ({added} extra turns were asked for)."));
             }
             let Some(from) = captured.last().map(up_of) else {
                 return Ok(advice);
@@ -63,7 +63,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 return Ok(format!("{advice}; no corner position is left to turn to"));
             };
             self.observer.event(&SessionEvent::Note(format!(
-                "{advice}: the turn to {} tilts the board about {}",
+                "{advice}. Next, {}: the turn there tilts the board about its {} axis",
                 target.name,
                 ['X', 'Y', 'Z'][axis]
             )));
