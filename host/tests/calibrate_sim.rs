@@ -243,7 +243,17 @@ fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
         "|m| error {:.3} %",
         after.mag_error_pct
     );
-    assert!(outcome.before.accel_error_mg > 10.0 * after.accel_error_mg);
+    // A clear improvement: the raw error exceeds the calibrated one by more than three times
+    // the fit's own expected |a| error. (A ratio fails on a board whose raw error at rest happens
+    // to be small: 4.3 mg on seed 2024, against a calibrated error of the order of the fit's
+    // 0.4 mg σ.)
+    let expected_mg = outcome.fit.uncertainties.accel_norm_mg;
+    assert!(
+        outcome.before.accel_error_mg - after.accel_error_mg > 3.0 * expected_mg,
+        "|a| at rest {:.3} mg before, {:.3} mg after, fit's expected error {expected_mg:.3} mg",
+        outcome.before.accel_error_mg,
+        after.accel_error_mg
+    );
     // Gyro at rest: the bias left after the fit, within K_SIGMA of its σ plus the standard
     // error of a 3 s mean of white noise (σ/√n with n ≈ 357 samples).
     let gyro_noise = truth.imu.gyro.noise_sigma / (after.samples as f64).sqrt();
