@@ -352,10 +352,7 @@ impl Person {
         let told_to_rest = self.screen.0 == Screen::Rest && t_s - self.screen.1 >= REACTION_S;
         if let (PersonPhase::Tumble { .. }, true) = (self.phase, told_to_rest) {
             // The screen asks to put the board down, however short the turning was.
-            let here = self.motion_at(t_s).q_body_to_world;
-            self.turn(here, self.rest, t_s)?;
-            self.phase = PersonPhase::Rest;
-            self.tumble_watched_since_s = None;
+            self.put_down(t_s)?;
         }
         if let PersonPhase::Tumble { .. } = self.phase {
             match self.tumble_watched_since_s {
@@ -365,10 +362,7 @@ impl Person {
                 Some((since, stops)) if prompts.stream_stops > stops => {
                     if t_s - since >= WATCHED_TUMBLE_S {
                         // The host has the directions it needs: put the board down from here.
-                        let here = self.motion_at(t_s).q_body_to_world;
-                        self.turn(here, self.rest, t_s)?;
-                        self.phase = PersonPhase::Rest;
-                        self.tumble_watched_since_s = None;
+                        self.put_down(t_s)?;
                     } else {
                         // A stream stopped at once (the end of the positions) does not count.
                         self.tumble_watched_since_s =
@@ -382,6 +376,15 @@ impl Person {
         while t_s >= self.segment_end_s {
             self.next_segment(prompts)?;
         }
+        Ok(())
+    }
+
+    /// Stop tumbling and turn from where the board is at `t_s` to the rest position.
+    fn put_down(&mut self, t_s: f64) -> Result<(), SimError> {
+        let here = self.motion_at(t_s).q_body_to_world;
+        self.turn(here, self.rest, t_s)?;
+        self.phase = PersonPhase::Rest;
+        self.tumble_watched_since_s = None;
         Ok(())
     }
 

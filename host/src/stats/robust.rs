@@ -56,6 +56,23 @@ impl Screening {
         }
     }
 
+    /// The verdict on samples whose largest deviations, in standard deviations, are `worst`:
+    /// those beyond `bound` are dropped.
+    fn from_worst(worst: &[f64], bound: f64) -> Self {
+        let keep: Vec<bool> = worst.iter().map(|z| *z <= bound).collect();
+        let dropped = keep.iter().filter(|k| !**k).count();
+        let worst_sigmas = worst
+            .iter()
+            .filter(|z| **z > bound)
+            .fold(0.0_f64, |a, z| a.max(*z));
+        Self {
+            keep,
+            dropped,
+            bound_sigmas: bound,
+            worst_sigmas,
+        }
+    }
+
     /// The kept values of `values` (the slice the screening was computed on).
     pub fn kept<T: Copy>(&self, values: &[T]) -> Vec<T> {
         values
@@ -161,20 +178,7 @@ impl AxisScreen {
 
     /// What the screen decided over the axes added.
     fn finish(self) -> Screening {
-        let bound = self.bound;
-        let keep: Vec<bool> = self.worst.iter().map(|z| *z <= bound).collect();
-        let dropped = keep.iter().filter(|k| !**k).count();
-        let worst_sigmas = self
-            .worst
-            .iter()
-            .filter(|z| **z > bound)
-            .fold(0.0_f64, |a, z| a.max(*z));
-        Screening {
-            keep,
-            dropped,
-            bound_sigmas: bound,
-            worst_sigmas,
-        }
+        Screening::from_worst(&self.worst, self.bound)
     }
 }
 
@@ -535,18 +539,7 @@ mod tests {
                     *w = w.max(z);
                 }
             }
-            let keep: Vec<bool> = worst.iter().map(|z| *z <= bound).collect();
-            let dropped = keep.iter().filter(|k| !**k).count();
-            let worst_sigmas = worst
-                .iter()
-                .filter(|z| **z > bound)
-                .fold(0.0_f64, |a, z| a.max(*z));
-            Screening {
-                keep,
-                dropped,
-                bound_sigmas: bound,
-                worst_sigmas,
-            }
+            Screening::from_worst(&worst, bound)
         }
         fn same(a: &Screening, b: &Screening) -> bool {
             a.keep == b.keep
