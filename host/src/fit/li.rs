@@ -32,7 +32,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
+use super::coverage::{check_coverage, guard_fit, CoverageHint, EllipsoidModel};
 use super::li_moments::Moments;
 use super::linalg::{singular_values, sqrt_spd, RANK_TOLERANCE};
 use super::validate::{check_finite_points, check_reference};
@@ -91,6 +91,43 @@ pub(crate) fn fit_li_unchecked(
     reference: f64,
     opts: LiOptions,
 ) -> Result<Fit, FitError> {
+    let (cal, condition_number) = li_calibration(points, reference, opts)?;
+    Ok(Fit::closed_form(
+        Method::Li,
+        cal,
+        points,
+        reference,
+        condition_number,
+    ))
+}
+
+/// The calibration of [`fit_li`] alone, when its coverage rule holds: a start for the iterative
+/// fits, which need neither the residual of every point nor the fit's statistics (on a long
+/// recording that would be one more pass over every sample). `None` when [`fit_li`] fails.
+pub(crate) fn fit_li_start(
+    points: &[Vec3],
+    reference: f64,
+    opts: LiOptions,
+) -> Option<Calibration> {
+    let (cal, _) = li_calibration(points, reference, opts).ok()?;
+    check_coverage(
+        points,
+        None,
+        &cal,
+        reference,
+        EllipsoidModel::General,
+        CoverageHint::Either,
+    )
+    .ok()?;
+    Some(cal)
+}
+
+/// The calibration of [`fit_li_unchecked`] with the design condition number.
+fn li_calibration(
+    points: &[Vec3],
+    reference: f64,
+    opts: LiOptions,
+) -> Result<(Calibration, f64), FitError> {
     check_reference(reference)?;
     check_finite_points(points)?;
     if points.len() < 10 {
@@ -120,13 +157,7 @@ pub(crate) fn fit_li_unchecked(
         )));
     }
     let cal = calibration_from_scatter(&scatter, &centre, scale, reference)?;
-    Ok(Fit::closed_form(
-        Method::Li,
-        cal,
-        points,
-        reference,
-        condition_number,
-    ))
+    Ok((cal, condition_number))
 }
 
 /// Li & Griffiths' constraint matrix `C₁` for `k = 4`.

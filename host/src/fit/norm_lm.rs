@@ -40,7 +40,7 @@ use super::covariance::{
 };
 use super::coverage::{guard_fit, sphere_start, CoverageHint, EllipsoidModel};
 use super::li::li_start;
-use super::li::{fit_li, LiOptions};
+use super::li::{fit_li_start, LiOptions};
 use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::leave_one_out_rms;
@@ -601,14 +601,14 @@ fn accel_start(poses: &[Pose], reference: f64) -> Calibration {
         return f.cal;
     }
     let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
-    if let Ok(f) = fit_li(
+    if let Some(cal) = fit_li_start(
         &means,
         reference,
         LiOptions {
             subtract_mean: true,
         },
     ) {
-        return f.cal;
+        return cal;
     }
     if let Ok(f) = fit_chen(poses, reference) {
         return f.cal;
@@ -739,15 +739,13 @@ pub fn fit_mag_lm(points: &[Vec3], reference: f64) -> Result<Fit, FitError> {
 /// the estimated noise variance in data units).
 pub fn fit_mag_lm_detailed(points: &[Vec3], reference: f64) -> Result<NormLmOutcome, FitError> {
     check_finite_points(points)?;
-    let start = fit_li(
+    let start = fit_li_start(
         points,
         reference,
         LiOptions {
             subtract_mean: true,
         },
-    )
-    .map(|f| f.cal)
-    .ok();
+    );
     // Without an algebraic start a failed fit is judged through the algebraic fit itself, not
     // through the sphere it was started from.
     let judge_by = start;
