@@ -354,14 +354,17 @@ pub fn refine_lm_detailed(
 ) -> Result<NormLmOutcome, FitError> {
     check_inputs(obs, reference)?;
     let n = obs.points.len();
-    let mean = obs.points.iter().sum::<Vec3>() / n as f64;
     let start_usable = start.a.iter().chain(start.b.iter()).all(|v| v.is_finite())
         && start.a.determinant().abs() > 0.0
         && upper_triangular_gauge(&start.a)
             .iter()
             .all(|v| v.is_finite());
     // An unusable start (singular or non-finite) is replaced by the sphere around the mean.
-    let centre = if start_usable { start.b } else { mean };
+    let centre = if start_usable {
+        start.b
+    } else {
+        obs.points.iter().sum::<Vec3>() / n as f64
+    };
     let s = (obs
         .points
         .iter()
@@ -560,11 +563,18 @@ pub fn refine_lm_detailed(
     let std = covariance
         .as_ref()
         .map(|c| calibration_std(c, &UPPER_TRIANGULAR_LAYOUT));
-    let residuals: Vec<f64> = obs
-        .points
-        .iter()
-        .map(|x| (cal.apply(x).norm() - reference) / reference)
-        .collect();
+    // Each residual on its own, on two threads for large problems; the RMS sums them in order.
+    let mut residuals = vec![0.0; n];
+    in_two_halves(
+        n,
+        &mut residuals,
+        |range, out| {
+            for (e, x) in out.iter_mut().zip(&obs.points[range]) {
+                *e = (cal.apply(x).norm() - reference) / reference;
+            }
+        },
+        |(), ()| (),
+    );
     let rms = (residuals.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
     let fit = Fit {
         method: Method::Lm,
