@@ -82,29 +82,36 @@ pub fn check_input(
     let mut refusals: Vec<(Sensor, String)> = Vec::new();
     let mut unit_refusals: Vec<(Sensor, String)> = Vec::new();
     let mut warnings = Vec::new();
-    if let (true, Some(accel)) = (sensors.contains(&Sensor::Accel), &recording.accel) {
-        if let Err(e) = input_checks::check_accel_unit(accel, recording.units.accel) {
-            unit_refusals.push((Sensor::Accel, e.to_string()));
-        }
-    }
     let inertial: Vec<Sensor> = sensors
         .iter()
         .copied()
         .filter(|s| *s != Sensor::Mag)
         .collect();
-    // The magnetometer's checks and the still-interval detection read disjoint parts of the
-    // recording: on a long one they run side by side.
-    let (mag, still) = std::thread::scope(|scope| {
-        let mag = sensors
-            .contains(&Sensor::Mag)
-            .then(|| scope.spawn(|| checked_mag_points(&recording, options, stated_field_ut)));
-        let still = (!inertial.is_empty()).then(|| still_intervals(&recording, &options.still));
-        let mag = mag.map(|m| {
-            m.join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    // The accelerometer's unit check, then the magnetometer's checks, and the still-interval
+    // detection read the recording independently: on a long one they run side by side (the
+    // detection takes longest).
+    let (mag, accel_unit, still) = std::thread::scope(|scope| {
+        let side = scope.spawn(|| {
+            let accel_unit = match (sensors.contains(&Sensor::Accel), &recording.accel) {
+                (true, Some(accel)) => {
+                    input_checks::check_accel_unit(accel, recording.units.accel).err()
+                }
+                _ => None,
+            };
+            let mag = sensors
+                .contains(&Sensor::Mag)
+                .then(|| checked_mag_points(&recording, options, stated_field_ut));
+            (mag, accel_unit)
         });
-        (mag, still)
+        let still = (!inertial.is_empty()).then(|| still_intervals(&recording, &options.still));
+        let (mag, accel_unit) = side
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (mag, accel_unit, still)
     });
+    if let Some(e) = accel_unit {
+        unit_refusals.push((Sensor::Accel, e.to_string()));
+    }
     let mut mag_points = MagPoints::Selected(Vec::new());
     if let Some(mag) = mag {
         mag_points = mag.points;
