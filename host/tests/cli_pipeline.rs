@@ -178,6 +178,81 @@ fn a_parameter_file_fitted_from_a_recording_flashes_to_the_simulated_board_and_v
 }
 
 #[test]
+fn fit_writes_no_parameter_file_and_fails_when_no_requested_sensor_can_go_into_it() {
+    // The magnetometer fits, but without a field reference its output is normalised to 1: a
+    // board would read the field as 1 µT. A file of identities would only overwrite a board.
+    let path = temp_file("nothing.json");
+    let recording = real("sf_mpu6050_hmc5883l_full_sphere.csv");
+    let out = imucal(&[
+        "fit",
+        &recording,
+        "--sensor",
+        "mag",
+        "--mag-unit",
+        "gauss",
+        "--params-out",
+        &path,
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(!std::path::Path::new(&path).exists(), "{stderr}");
+    assert!(
+        stderr.contains("was not written") && stderr.contains("--field-ut or --location"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn export_and_flash_refuse_a_parameter_file_that_calibrates_no_sensor() {
+    let (path, _) = fit_params("imucal_nilspod_ferraris.csv", &["--gyro-unit", "dps"]);
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("the file")).expect("JSON");
+    for sensor in ["accel", "gyro", "mag"] {
+        json["not_fitted"][sensor] = "not fitted in this test".into();
+    }
+    std::fs::write(&path, json.to_string()).expect("rewrite");
+    let exported = imucal(&["export", &path, "--format", "c-header"]);
+    // No port is opened: the refusal comes first.
+    let flashed = imucal(&["flash", &path, "--port", "/nonexistent/port"]);
+    let _ = std::fs::remove_file(&path);
+    for (command, out) in [("export", exported), ("flash", flashed)] {
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "{command}: {stderr}");
+        assert!(
+            stderr.contains("holds no calibration"),
+            "{command}: {stderr}"
+        );
+        assert!(
+            out.stdout.is_empty(),
+            "{command} wrote {}",
+            text(&out.stdout)
+        );
+    }
+}
+
+#[test]
+fn a_parameter_file_fitted_for_one_board_is_refused_by_another() {
+    let (path, file) = fit_params(
+        "imucal_nilspod_ferraris.csv",
+        &["--gyro-unit", "dps", "--device", "another-board"],
+    );
+    let provenance = file.provenance.as_ref().expect("provenance");
+    assert_eq!(provenance.device_id.as_deref(), Some("another-board"));
+    let mut options = SimOptions::new(22);
+    options.schedule = PersonSchedule::Rest;
+    let sim = SimServer::start(options).expect("the simulator starts");
+    let port = sim.port_path().to_string();
+    let out = imucal(&["flash", &path, "--port", &port]);
+    let _ = std::fs::remove_file(&path);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("not for this board") && stderr.contains("another-board"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn flash_refuses_a_parameter_file_fitted_from_raw_counts() {
     let (path, file) = fit_params(
         "tsi_mpu6050_multipos.csv",

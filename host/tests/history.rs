@@ -30,6 +30,24 @@ fn full_record() -> CalibrationRecord {
 }
 
 #[test]
+fn a_sensor_the_record_did_not_calibrate_has_no_parameters_to_compare() {
+    let mut record = board_record(7);
+    assert!(record.parameters().contains_key("accel.A.xx"));
+    record
+        .params
+        .not_fitted
+        .insert("accel".into(), "only one face up".into());
+    let parameters = record.parameters();
+    // Its placeholder identity is no measurement: no change against the previous record, no
+    // fleet statistic.
+    assert!(
+        !parameters.keys().any(|k| k.starts_with("accel.")),
+        "{parameters:?}"
+    );
+    assert!(parameters.contains_key("gyro.b.x") && parameters.contains_key("mag.A.zz"));
+}
+
+#[test]
 fn a_record_reads_back_with_every_field_and_increasing_ids() {
     for location in databases("roundtrip") {
         let mut store = HistoryStore::open(&location).expect("open");

@@ -233,9 +233,15 @@ pub struct FitArgs {
     /// replaced).
     #[arg(long)]
     pub force: bool,
-    /// With --params-out: the board the recording came from, as the history names it
-    /// (default: the device id in the recording's provenance, else the recording's file name).
-    #[arg(long, value_name = "ID", requires = "params_out")]
+    /// With --params-out: the board the recording came from, its device id as `imucal info`
+    /// prints it. It goes into the file's provenance, so `imucal flash` refuses the file on
+    /// another board, and names the board in the history (default: the recording's file name).
+    #[arg(
+        long,
+        visible_alias = "device-id",
+        value_name = "ID",
+        requires = "params_out"
+    )]
     pub device: Option<String>,
     /// With --params-out: where to record the fit.
     #[command(flatten)]

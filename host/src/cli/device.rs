@@ -24,7 +24,9 @@ pub enum DeviceCommand {
     /// Write a calibration parameter file to a board, commit it and verify it by reading back.
     #[command(
         after_help = "Example:\n  imucal flash board42.params.json --port /dev/ttyACM0\n\n\
-        The file is the JSON written by `imucal calibrate` (\"format\": 1)."
+        The file is the JSON written by `imucal calibrate` or `imucal fit --params-out` \
+        (docs/PARAMS_FORMAT.md; formats 1 and 2 are read). Sensors it does not calibrate keep \
+        the board's own calibration."
     )]
     Flash(FlashArgs),
     /// Print the board's samples as they arrive (raw counts in units, or calibrated).
@@ -207,6 +209,9 @@ fn info(args: &PortArgs) -> anyhow::Result<()> {
 fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     let shown = args.params.display().to_string();
     let file = ParamsFile::load(&args.params)?;
+    if let (Some(why), true) = (file.holds_nothing(), args.reset.is_empty()) {
+        anyhow::bail!("`{shown}` is not written: {why}");
+    }
     let counts = file.non_nominal_inputs();
     if !counts.is_empty() {
         anyhow::bail!(
@@ -259,7 +264,7 @@ fn check_binding(
     match file.device_id() {
         None => eprintln!(
             "imucal: note: `{shown}` names no board (it was fitted from a recording without \
-             --device-id); writing it to device {board}"
+             --device); writing it to device {board}"
         ),
         Some(id) if file.device.is_none() && id != board => mismatches.push(format!(
             "it was fitted for device {id}, but the board is device {board}"

@@ -27,7 +27,7 @@ pub enum ExportFormatArg {
     CHeader,
     /// Rust: `pub const` arrays and `pub fn` apply functions.
     Rust,
-    /// JSON, schema `imucal-calibration-export` version 1 (docs/PARAMS_FORMAT.md).
+    /// JSON, schema `imucal-calibration-export` version 2 (docs/PARAMS_FORMAT.md).
     Json,
     /// MotionCal's 68-byte calibration packet (binary, needs `-o`), as Adafruit's sketch
     /// receives it.
@@ -39,7 +39,7 @@ pub enum ExportFormatArg {
 /// Arguments of `imucal export`.
 #[derive(Debug, Args)]
 pub struct ExportArgs {
-    /// Parameter file (`params.json` written by `imucal calibrate`, format 1).
+    /// Parameter file (`params.json` written by `imucal calibrate` or `imucal fit --params-out`).
     pub params: PathBuf,
     /// What to generate.
     #[arg(long, value_enum, default_value = "c-header")]
@@ -63,6 +63,9 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
     }
     let params = ParamsFile::load(&args.params)?;
     let shown = args.params.display().to_string();
+    if let Some(why) = params.holds_nothing() {
+        anyhow::bail!("`{shown}` is not exported: {why}");
+    }
     let set = params.to_calibration_set(&shown)?;
     for sensor in params.non_nominal_inputs() {
         eprintln!("imucal: note: the {sensor} calibration takes raw readings in that unit, not the nominal unit the exported comment states");

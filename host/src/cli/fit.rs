@@ -285,26 +285,56 @@ fn chain_json(chain: &imucal::pipeline::ChainChoice) -> Value {
     })
 }
 
-/// Write the parameter file (checked as an output before the fit).
-fn write_params(calibration: &RecordingCalibration, path: &Path) -> anyhow::Result<ParamsFile> {
-    let file = params_file(calibration);
-    std::fs::write(path, file.to_json())
-        .with_context(|| format!("could not write the parameter file `{}`", path.display()))?;
+/// Write the parameter file (checked as an output before the fit), unless it would hold no
+/// sensor at all: a file of identities would only overwrite a board's calibration. Returns the
+/// file written.
+fn write_params(file: ParamsFile, path: &Path) -> anyhow::Result<Option<ParamsFile>> {
     let left_out: Vec<String> = file
         .not_fitted
         .iter()
         .map(|(sensor, why)| format!("{sensor} ({why})"))
         .collect();
+    if let Some(why) = file.holds_nothing() {
+        eprintln!("imucal: {} was not written: {why}", path.display());
+        return Ok(None);
+    }
+    std::fs::write(path, file.to_json())
+        .with_context(|| format!("could not write the parameter file `{}`", path.display()))?;
     eprintln!(
         "imucal: wrote {}{}; `imucal export {0} --format c-header` or `imucal flash {0}` use it",
         path.display(),
         if left_out.is_empty() {
             String::new()
         } else {
-            format!("; not in it (identity if flashed): {}", left_out.join("; "))
+            format!(
+                "; not in it (flashing keeps the board's own; export writes identity): {}",
+                left_out.join("; ")
+            )
         }
     );
-    Ok(file)
+    Ok(Some(file))
+}
+
+/// Sensors that were fitted but cannot go into the parameter file `file` (a gyroscope left in
+/// counts, a magnetometer normalised to 1), each with the reason.
+fn fitted_but_not_written(
+    calibration: &RecordingCalibration,
+    file: &ParamsFile,
+    path: &Path,
+) -> Vec<String> {
+    calibration
+        .sensors
+        .iter()
+        .filter(|outcome| outcome.fit.is_ok() && outcome.alignment_failure().is_none())
+        .filter_map(|outcome| {
+            let why = file.not_fitted.get(outcome.sensor.name())?;
+            Some(format!(
+                "{} fitted but not written to {}: {why}",
+                outcome.sensor.name(),
+                path.display()
+            ))
+        })
+        .collect()
 }
 
 /// Record the fit written by --params-out in the history.
@@ -359,7 +389,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         references: Some(references),
         location: args.reference.location,
         methods,
-        device_id: None,
+        device_id: args.device.clone(),
     };
     let calibration = calibrate(&input, &options)?;
     if args.json {
@@ -373,11 +403,22 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         print_table(&calibration);
     }
     // Recorded once the parameter file holds the fit; a failure is returned last.
+    let mut failed = calibration.failures();
     let recorded = match &args.params_out {
-        Some(path) => record_fit(args, write_params(&calibration, path)?),
+        Some(path) => {
+            let file = params_file(&calibration);
+            // A fit that cannot go into the file fails the command when nothing else does (a
+            // partial file says in its `not_fitted` what it leaves out).
+            if file.holds_nothing().is_some() {
+                failed.extend(fitted_but_not_written(&calibration, &file, path));
+            }
+            match write_params(file, path)? {
+                Some(file) => record_fit(args, file),
+                None => Ok(()),
+            }
+        }
         None => Ok(()),
     };
-    let failed = calibration.failures();
     if !failed.is_empty() {
         bail!("{}", failed.join("; "));
     }

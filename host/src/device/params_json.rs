@@ -488,7 +488,39 @@ impl ParamsFile {
         self
     }
 
-    /// The device id the file names: its board's, else the one `fit --device-id` recorded.
+    /// The sensors the file calibrates: those neither listed as not fitted nor absent from the
+    /// board.
+    pub fn fitted_sensors(&self) -> Vec<&'static str> {
+        ["accel", "gyro", "mag"]
+            .into_iter()
+            .filter(|s| !self.not_fitted.contains_key(*s))
+            .filter(|s| !self.absent_sensors.iter().any(|a| a == s))
+            .collect()
+    }
+
+    /// Why the file is of no use to a board, when it calibrates no sensor at all: writing or
+    /// exporting it would only put identities in place of a calibration.
+    pub fn holds_nothing(&self) -> Option<String> {
+        if !self.fitted_sensors().is_empty() {
+            return None;
+        }
+        let reasons: Vec<String> = self
+            .not_fitted
+            .iter()
+            .map(|(sensor, why)| format!("{sensor}: {why}"))
+            .collect();
+        Some(format!(
+            "it holds no calibration (no sensor could go into it{}); fit a recording that has the \
+             sensor's data, or calibrate the board with `imucal calibrate`",
+            if reasons.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", reasons.join("; "))
+            }
+        ))
+    }
+
+    /// The device id the file names: its board's, else the one `fit --device` recorded.
     pub fn device_id(&self) -> Option<&str> {
         self.device.as_ref().map(|d| d.id.as_str()).or(self
             .provenance

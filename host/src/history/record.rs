@@ -188,7 +188,9 @@ impl CalibrationRecord {
 
     /// Every named scalar parameter of the record: `SENSOR.b.AXIS` (offset), `SENSOR.A.ROWCOL`
     /// (correction matrix), the noise (`SENSOR.noise.AXIS`) and the residual RMS
-    /// (`SENSOR.residual`). Units are the sensor's (m/s², rad/s, µT); `A` is dimensionless.
+    /// (`SENSOR.residual`). Units are the sensor's (m/s², rad/s, µT); `A` is dimensionless. A
+    /// sensor the record did not calibrate (not fitted, or absent) has none of these: its
+    /// placeholder identity is no measurement.
     pub fn parameters(&self) -> BTreeMap<String, f64> {
         let mut out = BTreeMap::new();
         for (name, sensor) in [
@@ -205,6 +207,12 @@ impl CalibrationRecord {
                 .filter(|(_, v)| **v > 0.0)
                 .map(|(k, v)| (format!("{k}.residual"), *v)),
         );
+        let fitted = self.params.fitted_sensors();
+        out.retain(|name, _| {
+            name.split('.')
+                .next()
+                .is_some_and(|sensor| fitted.contains(&sensor))
+        });
         out
     }
 

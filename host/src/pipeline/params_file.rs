@@ -91,7 +91,7 @@ pub fn params_file(calibration: &RecordingCalibration) -> ParamsFile {
         },
         not_fitted,
         provenance: Some(calibration.provenance.clone()),
-        // A recording names no board; `fit --device-id` goes into the provenance.
+        // A recording names no board; `fit --device` goes into the provenance.
         device: None,
         absent_sensors: Vec::new(),
     }

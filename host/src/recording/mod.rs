@@ -358,6 +358,13 @@ impl Recording {
     }
 }
 
+/// A time step longer than this many median steps, and than [`PAUSE_MIN_S`], is a pause in the
+/// recording (a logger stopped, files joined), not its sampling.
+const PAUSE_STEPS: f64 = 10.0;
+
+/// Shortest time step that counts as a pause, s (still detection splits sections there too).
+const PAUSE_MIN_S: f64 = 1.0;
+
 /// Median rate in Hz of a time series (robust to the bursty host time stamps of some loggers).
 pub fn median_rate(time: &[f64]) -> Option<f64> {
     let mut dt: Vec<f64> = time
@@ -369,11 +376,22 @@ pub fn median_rate(time: &[f64]) -> Option<f64> {
         return None;
     }
     dt.sort_by(f64::total_cmp);
-    let span = time.last()? - time.first()?;
     let median = dt[dt.len() / 2];
     // Bursty loggers (many near-zero steps then a long gap) make the median step misleading;
-    // the mean rate over the whole span is the honest figure then.
-    let mean_rate = (time.len() - 1) as f64 / span;
+    // the mean rate is the honest figure then, over the sampling only: pauses are left out, or
+    // one long pause would read as a slow rate.
+    let pause = (PAUSE_STEPS * median).max(PAUSE_MIN_S);
+    let sampled: Vec<f64> = time
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d <= pause)
+        .collect();
+    let span: f64 = sampled.iter().sum();
+    let mean_rate = if span > 0.0 {
+        sampled.len() as f64 / span
+    } else {
+        (time.len() - 1) as f64 / (time.last()? - time.first()?)
+    };
     let median_rate = 1.0 / median;
     if median_rate > 2.0 * mean_rate {
         Some(mean_rate)
@@ -417,4 +435,29 @@ fn first_data_line(
 
 fn display(path: &Path) -> String {
     path.display().to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::median_rate;
+
+    #[test]
+    fn a_long_pause_does_not_change_the_sample_rate() {
+        // 100 Hz for 100 s, then a logger paused for 1000 s, then 100 Hz again.
+        let time: Vec<f64> = (0..20_000)
+            .map(|i| i as f64 * 0.01 + if i >= 10_000 { 1000.0 } else { 0.0 })
+            .collect();
+        let rate = median_rate(&time).expect("a rate");
+        assert!((rate - 100.0).abs() < 1e-6, "{rate}");
+    }
+
+    #[test]
+    fn bursty_time_stamps_give_the_mean_rate() {
+        // Ten samples stamped together every 0.1 s: 100 Hz on average, a median step of ~0.
+        let time: Vec<f64> = (0..1000)
+            .map(|i| (i / 10) as f64 * 0.1 + (i % 10) as f64 * 1e-6)
+            .collect();
+        let rate = median_rate(&time).expect("a rate");
+        assert!((rate - 100.0).abs() < 1.0, "{rate}");
+    }
 }
