@@ -98,6 +98,42 @@ fn sibling_magnetometer_file_is_found_with_its_own_clock() {
 }
 
 #[test]
+fn a_bad_sibling_magnetometer_file_is_named_as_such_with_the_option_that_leaves_it_out() {
+    let dir = scratch("bad-sibling");
+    let main = write(&dir, "rec.csv", "t_s,ax,ay,az\n0,0,0,9.8\n0.01,0,0,9.8\n");
+    write(&dir, "rec_mag.csv", "t_s,mx,my,mz\n0,1,2\n");
+    let err = load_err(&main);
+    let text = err.to_string();
+    assert!(matches!(err, RecordingError::SiblingMag { .. }), "{text}");
+    assert!(
+        text.contains("rec_mag.csv")
+            && text.contains("line 2")
+            && text.contains("--no-mag-sibling"),
+        "{text}"
+    );
+    let options = LoadOptions {
+        no_mag_sibling: true,
+        ..Default::default()
+    };
+    assert!(Recording::load(&main, &options).is_ok());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_gyroscope_file_given_for_a_csv_recording_is_refused_not_ignored() {
+    let options = LoadOptions {
+        gyro_file: Some(real("imutk_xsens_multipos.csv")),
+        ..Default::default()
+    };
+    let err = Recording::load(&real("imucal_nilspod_ferraris.csv"), &options)
+        .expect_err("a CSV holds its own gyroscope columns");
+    assert!(
+        matches!(err, RecordingError::GyroFileWithCsv { .. }),
+        "{err}"
+    );
+}
+
+#[test]
 fn segment_labels_of_the_real_ferraris_session_are_kept_by_name() {
     let rec = Recording::load(
         &real("imucal_nilspod_ferraris.csv"),

@@ -176,6 +176,13 @@ fn report_command_fits_a_real_recording_and_checks_the_radius_against_the_model(
     );
     assert!(html.contains("WMM2025: F = "));
     assert!(html.matches("<svg").count() >= 9);
+    // The board is never still in this recording: the accelerometer and gyroscope are not
+    // fitted, and the headline says so instead of "fitted".
+    assert!(
+        html.contains("<p class=\"verdict marginal\">Verdict: partly fitted</p>"),
+        "headline"
+    );
+    assert!(html.contains("not fitted: "), "reason missing");
     let _ = std::fs::remove_dir_all(out);
 }
 
@@ -375,6 +382,8 @@ fn the_badge_is_neutral_when_nothing_was_checked_and_coloured_for_the_session_le
         ("marginal", "marginal"),
         ("poor", "poor"),
         ("fitted", "neutral"),
+        ("partly fitted", "marginal"),
+        ("not fitted", "poor"),
         ("unknown", "neutral"),
     ] {
         let html = render_html(&minimal_data(level)).expect("renders");

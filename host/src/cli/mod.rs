@@ -74,7 +74,13 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
             TimeUnitArg::Ns => 1e-9,
         }),
     };
-    Recording::load(&input.recording, &options).context("the recording could not be read")
+    let recording =
+        Recording::load(&input.recording, &options).context("the recording could not be read")?;
+    // Options that the file makes moot are said to be so, not silently dropped.
+    if input.rate.is_some() && !recording.time_is_index {
+        eprintln!("imucal: warning: --rate is ignored: the recording has its own time stamps");
+    }
+    Ok(recording)
 }
 
 /// The files a command reads for `input`: the recording (or a session directory's files), its

@@ -147,6 +147,22 @@ pub enum RecordingError {
         /// What differs.
         detail: String,
     },
+    /// The magnetometer file found beside the recording (read without being asked for) is bad.
+    #[error("{cause} (`{path}` was read as the recording's magnetometer because it sits beside it; pass --no-mag-sibling to leave it out)")]
+    SiblingMag {
+        /// The sibling file.
+        path: String,
+        /// What is wrong with it.
+        cause: Box<RecordingError>,
+    },
+    /// A gyroscope file was given for a CSV recording, which holds its own columns.
+    #[error("`{path}` is a CSV recording, but a separate gyroscope file was given ({gyro}); that pairs IMU-TK text files only: name the gyroscope columns `gx gy gz` in the CSV, or drop the gyroscope file")]
+    GyroFileWithCsv {
+        /// The CSV recording.
+        path: String,
+        /// The gyroscope file given.
+        gyro: String,
+    },
     /// A sample rate given on the command line is not a positive finite number.
     #[error("sample rate {0} Hz is not a positive finite number; pass e.g. `--rate 100`")]
     BadRate(f64),
@@ -296,20 +312,32 @@ impl Recording {
             },
             other => other,
         };
+        if let (Format::Csv | Format::Auto, Some(gyro)) = (format, &options.gyro_file) {
+            return Err(RecordingError::GyroFileWithCsv {
+                path: display(path),
+                gyro: display(gyro),
+            });
+        }
         let mut recording = match format {
             Format::Imutk => imutk::load(path, &mut lines, first, options)?,
             _ => csv::load(path, &mut lines, first, options)?,
         };
         if recording.mag.is_none() {
-            let mag_path = match &options.mag_file {
-                Some(p) => Some(p.clone()),
-                None if !options.no_mag_sibling && path.as_os_str() != lines::STDIN_PATH => {
-                    sibling_mag_file(path).filter(|p| p.is_file())
-                }
-                None => None,
+            let sibling = || {
+                let ok = !options.no_mag_sibling && path.as_os_str() != lines::STDIN_PATH;
+                ok.then(|| sibling_mag_file(path).filter(|p| p.is_file()))
+                    .flatten()
             };
-            if let Some(mag_path) = mag_path {
-                recording.mag = Some(csv::load_mag_stream(&mag_path, options)?);
+            if let Some(mag_path) = &options.mag_file {
+                recording.mag = Some(csv::load_mag_stream(mag_path, options)?);
+            } else if let Some(mag_path) = sibling() {
+                let stream = csv::load_mag_stream(&mag_path, options).map_err(|cause| {
+                    RecordingError::SiblingMag {
+                        path: display(&mag_path),
+                        cause: Box::new(cause),
+                    }
+                })?;
+                recording.mag = Some(stream);
             }
         } else if let Some(mag_path) = &options.mag_file {
             // An explicit file replaces magnetometer columns of the main file.

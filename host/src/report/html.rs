@@ -293,7 +293,8 @@ pub fn badge_class(level: &str) -> &'static str {
     match level {
         "good" => "good",
         "marginal" => "marginal",
-        "poor" => "poor",
+        "poor" | "not fitted" => "poor",
+        "partly fitted" => "marginal",
         _ => "neutral",
     }
 }

@@ -37,7 +37,6 @@ pub fn from_calibration(
 ) -> ReportData {
     let mut data = ReportData {
         source: calibration.provenance.source.clone(),
-        verdict_level: "fitted".to_string(),
         ..ReportData::default()
     };
     data.notes.extend(calibration.warnings.iter().cloned());
@@ -58,12 +57,22 @@ pub fn from_calibration(
             }
         };
         data.parameters.push(parameters(name, outcome, fit));
+        if let Some(verdict) = outcome.verdict() {
+            data.verdict.push(format!("{name}: {verdict}"));
+        }
         match outcome.sensor {
             Sensor::Accel => accel_poses(&mut data, input, calibration, fit),
             Sensor::Mag => mag_samples(&mut data, input, options, outcome, fit),
             Sensor::Gyro => gyro_poses(&mut data, input, outcome, fit),
         }
     }
+    // The headline says how much of what was asked for is in the report.
+    data.verdict_level = match (not_fitted.len(), calibration.sensors.len()) {
+        (0, _) => "fitted",
+        (n, all) if n < all => "partly fitted",
+        _ => "not fitted",
+    }
+    .to_string();
     data.verdict.splice(0..0, not_fitted_once(&not_fitted));
     if let (Some(field), Some(mag)) = (field, calibration.sensor(Sensor::Mag)) {
         if mag.radius_check.is_none() && mag.fit.is_ok() {
