@@ -412,3 +412,74 @@ fn help_of_every_command_has_an_example() {
         assert!(stdout.contains("Example"), "{command} --help:\n{stdout}");
     }
 }
+
+#[test]
+fn a_method_given_without_sensor_is_fitted_to_the_sensors_it_is_a_method_for() {
+    // NilsPod: accelerometer and gyroscope; six-position is an accelerometer method.
+    let nilspod = real("imucal_nilspod_ferraris.csv");
+    let (ok, stdout, stderr) = imucal(&[
+        "fit",
+        &nilspod,
+        "--gyro-unit",
+        "dps",
+        "--method",
+        "six-position",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let json: Value = serde_json::from_str(&stdout).expect("JSON");
+    assert_eq!(json["accel"]["method"], "six-position", "{stdout}");
+    assert_eq!(json["gyro"]["method"], "gyro-bias", "{stdout}");
+    assert!(
+        stderr.contains("--method six-position is fitted to the accel; the gyro keeps the default"),
+        "{stderr}"
+    );
+    // Named with --sensor, the gyroscope must take the method asked for.
+    let (ok, _, stderr) = imucal(&[
+        "fit",
+        &nilspod,
+        "--gyro-unit",
+        "dps",
+        "--method",
+        "six-position",
+        "--sensor",
+        "gyro",
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("does not apply to the gyro"), "{stderr}");
+}
+
+#[test]
+fn still_lists_the_holds_fit_uses_with_the_same_screening_and_label_names() {
+    // The NilsPod session with its segment column read as poses: some labelled rows span a
+    // move, and both commands leave those holds out alike.
+    let text = std::fs::read_to_string(real("imucal_nilspod_ferraris.csv")).expect("reads");
+    let (header, rows) = text.split_once('\n').expect("a header");
+    let dir = scratch("posecol");
+    let path = dir.join("posecol.csv");
+    std::fs::write(
+        &path,
+        format!("{}\n{rows}", header.replace("segment", "pose")),
+    )
+    .expect("writable");
+    let path = path.display().to_string();
+    let (ok, stdout, stderr) = imucal(&["still", &path, "--gyro-unit", "dps", "--json"]);
+    assert!(ok, "{stderr}");
+    let still: Value = serde_json::from_str(&stdout).expect("JSON");
+    let intervals = still["intervals"].as_array().expect("intervals");
+    let (ok, stdout, stderr) = imucal(&["fit", &path, "--gyro-unit", "dps", "--json"]);
+    assert!(ok, "{stderr}");
+    let fit: Value = serde_json::from_str(&stdout).expect("JSON");
+    assert_eq!(
+        fit["gyro"]["n_poses"].as_u64(),
+        Some(intervals.len() as u64),
+        "{stdout}"
+    );
+    assert!(
+        intervals
+            .iter()
+            .all(|i| i["label_name"].as_str().is_some_and(|n| n.contains('_'))),
+        "{intervals:?}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}

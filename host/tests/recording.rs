@@ -120,6 +120,30 @@ fn a_bad_sibling_magnetometer_file_is_named_as_such_with_the_option_that_leaves_
 }
 
 #[test]
+fn numbers_and_labels_in_quotes_are_read_as_without() {
+    let dir = scratch("quoted");
+    let plain = write(
+        &dir,
+        "plain.csv",
+        "t_s,ax,ay,az,segment\n0,0.5,0,9.8,x_p\n0.01,0.25,0,9.8,x_p\n",
+    );
+    let quoted = write(
+        &dir,
+        "quoted.csv",
+        "\"t_s\",\"ax\",\"ay\",\"az\",\"segment\"\n\"0\",\"0.5\",\"0\",\"9.8\",\"x_p\"\n\"0.01\",\"0.25\",\"0\",\"9.8\",\"x_p\"\n",
+    );
+    let a = Recording::load(&plain, &LoadOptions::default()).expect("plain reads");
+    let b = Recording::load(&quoted, &LoadOptions::default()).expect("quoted reads");
+    assert_eq!(a.accel, b.accel);
+    assert_eq!(a.time, b.time);
+    assert_eq!(
+        b.labels.as_ref().map(|l| l.names.clone()),
+        Some(vec!["x_p".to_string()])
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
 fn a_gyroscope_file_given_for_a_csv_recording_is_refused_not_ignored() {
     let options = LoadOptions {
         gyro_file: Some(real("imutk_xsens_multipos.csv")),

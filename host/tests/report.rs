@@ -456,6 +456,11 @@ fn every_column_of_a_parameter_table_uses_one_number_format() {
         ColumnFormat::for_column(&[1.006, 0.0, -8.0e-5]),
         ColumnFormat::Scientific
     );
+    // A column of small values only (counts to m/s²) would keep three digits fixed.
+    assert_eq!(
+        ColumnFormat::for_column(&[6.0179e-4, 1.2e-6, 0.0]),
+        ColumnFormat::Scientific
+    );
     let mut data = minimal_data("fitted");
     data.parameters[0].a = Mat3::new(1.006, 0.015, -8.0e-5, 0.0, 1.013, 2.0e-3, 0.0, 0.0, 0.978);
     let html = render_html(&data).expect("renders");

@@ -23,7 +23,7 @@ pub enum Command {
         imucal fit data/real/imucal_nilspod_ferraris.csv --gyro-unit dps\n  \
         imucal fit data/real/imutk_xsens_multipos.csv --accel-unit counts --gyro-unit counts --sensor accel --method chen --json\n  \
         imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --field-ut 48.5\n  \
-        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --accel-unit g --gyro-unit dps --mag-unit gauss --location 48.14,11.58")]
+        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --location 48.14,11.58   (the field there today)")]
     Fit(FitArgs),
     /// List the still intervals of a recording and the gravity directions they cover.
     #[command(
@@ -219,7 +219,8 @@ pub struct FitArgs {
     pub sensor: SensorChoice,
     /// Fitting method (default: the accelerometer model chosen by held-out error, `lm` for the
     /// magnetometer, `gyro-bias` for the gyroscope). One of: gyro-bias, gyro-scale, minmax,
-    /// axis-aligned, six-position, chen, li, lm, frosio, merayo.
+    /// axis-aligned, six-position, chen, li, lm, frosio, merayo. Without --sensor it is fitted
+    /// to the sensors it is a method for; the others keep their default.
     #[arg(long)]
     pub method: Option<String>,
     /// Print a JSON object keyed by sensor instead of a table.

@@ -60,6 +60,48 @@ fn requested(args: &FitArgs, recording: &Recording) -> anyhow::Result<Vec<Sensor
     Ok(wanted)
 }
 
+/// The method `name` for each of `sensors`. With every sensor of the recording (no --sensor),
+/// it applies to the sensors it is a method for and the others keep their default (said in a
+/// note); a sensor named with --sensor must take it.
+fn methods_for(
+    name: &str,
+    sensors: &[Sensor],
+    all_sensors: bool,
+) -> anyhow::Result<Vec<(Sensor, Method)>> {
+    let each: Vec<(Sensor, Result<Method, String>)> = sensors
+        .iter()
+        .map(|s| (*s, method_for_sensor(name, *s)))
+        .collect();
+    let applies: Vec<(Sensor, Method)> = each
+        .iter()
+        .filter_map(|(s, m)| m.as_ref().ok().map(|m| (*s, *m)))
+        .collect();
+    let first_refusal = each.iter().find_map(|(_, m)| m.as_ref().err());
+    match first_refusal {
+        None => Ok(applies),
+        Some(why) if !all_sensors || applies.is_empty() => bail!("{why}"),
+        Some(_) => {
+            let others: Vec<&str> = each
+                .iter()
+                .filter(|(_, m)| m.is_err())
+                .map(|(s, _)| s.name())
+                .collect();
+            eprintln!(
+                "imucal: note: --method {name} is fitted to the {}; the {} {} the default \
+                 (choose the sensor with --sensor)",
+                applies
+                    .iter()
+                    .map(|(s, _)| s.name())
+                    .collect::<Vec<_>>()
+                    .join(" and "),
+                others.join(" and "),
+                if others.len() == 1 { "keeps" } else { "keep" }
+            );
+            Ok(applies)
+        }
+    }
+}
+
 /// Rotation angle and axis of an alignment, with the angle's one-sigma uncertainty (the
 /// rotation-vector covariance projected on the axis; a left perturbation `exp([δw]×)·R` changes
 /// the angle by `axis·δw` to first order).
@@ -358,6 +400,12 @@ fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
 /// Run the command.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.params_out {
+        if path.as_os_str() == "-" {
+            bail!(
+                "--params-out - would write a file named `-`: name a file (to see the fit on \
+                 standard output, use --json)"
+            );
+        }
         check_outputs(
             &[Output::File(path)],
             &super::input_paths(&args.input),
@@ -370,11 +418,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     // A wrong --method is an argument error: report it before anything about the data.
     let methods: Vec<(Sensor, Method)> = match &args.method {
         None => Vec::new(),
-        Some(name) => sensors
-            .iter()
-            .map(|s| method_for_sensor(name, *s).map(|m| (*s, m)))
-            .collect::<Result<_, _>>()
-            .map_err(anyhow::Error::msg)?,
+        Some(name) => methods_for(name, &sensors, args.sensor == SensorChoice::All)?,
     };
     let input = check_input(
         recording,

@@ -31,7 +31,8 @@ pub struct HistoryArgs {
 /// Flags of commands that record a calibration.
 #[derive(Debug, Clone, Default, Args)]
 pub struct RecordArgs {
-    /// History database to record the calibration in: `sqlite://PATH` or
+    /// History database to record the calibration in (`imucal fit` records what it writes with
+    /// --params-out, nothing else): `sqlite://PATH` or
     /// `postgres://user@host/db[?host=/socket/dir&port=N]` (default: `$IMUCAL_DB`, else
     /// `$XDG_DATA_HOME/imucal/history.sqlite`).
     #[arg(long, value_name = "URL")]

@@ -1,9 +1,8 @@
 //! `imucal still`: list the still intervals of a recording and the directions they cover.
 
 use imucal::fit::Vec3;
-use imucal::input_checks;
-use imucal::recording::Sensor;
-use imucal::still::find_still;
+use imucal::pipeline::still_intervals;
+use imucal::recording::{Recording, Sensor};
 use serde_json::json;
 
 use super::args::StillArgs;
@@ -12,13 +11,25 @@ fn triple(v: &Vec3) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
 
+/// The text of the `pose` or `segment` label whose value is `value`.
+fn label_name(recording: &Recording, value: i64) -> Option<String> {
+    let labels = recording.labels.as_ref()?;
+    labels
+        .names
+        .iter()
+        .enumerate()
+        .find(|(i, _)| labels.value(*i) == value)
+        .map(|(_, name)| name.clone())
+}
+
 /// Run the command.
 pub fn run(args: &StillArgs) -> anyhow::Result<()> {
     let recording = super::load(&args.input)?;
-    let report = find_still(&recording, &super::still_options(&args.input))?;
-    input_checks::require_still(&recording, &report, args.input.min_hold)?;
-    for sentence in report.intervals.iter().filter_map(|i| i.dropped_sentence()) {
-        eprintln!("imucal: warning: {sentence}");
+    // The same intervals, screened alike, as `fit` and `report` use.
+    let (report, warnings) = still_intervals(&recording, &super::still_options(&args.input))
+        .map_err(anyhow::Error::msg)?;
+    for warning in &warnings {
+        eprintln!("imucal: warning: {warning}");
     }
     if args.json {
         let intervals: Vec<_> = report
@@ -26,7 +37,9 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             .iter()
             .map(|i| {
                 json!({
-                    "t_start": i.t_start, "t_end": i.t_end, "label": i.label, "direction": i.direction,
+                    "t_start": i.t_start, "t_end": i.t_end, "label": i.label,
+                    "label_name": i.label.and_then(|l| label_name(&recording, l)),
+                    "direction": i.direction,
                     "accel_mean": i.accel.as_ref().map(|p| triple(&p.mean)),
                     "gyro_mean": i.gyro.as_ref().map(|p| triple(&p.mean)),
                     "mag_mean": i.mag.as_ref().map(|p| triple(&p.mean)),
@@ -68,7 +81,9 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
         recording.units.symbol(Sensor::Accel)
     );
     for (k, i) in report.intervals.iter().enumerate() {
-        let label = i.label.map_or("-".to_string(), |l| l.to_string());
+        let label = i.label.map_or("-".to_string(), |l| {
+            label_name(&recording, l).unwrap_or_else(|| l.to_string())
+        });
         let dir = i.direction.map_or("-".to_string(), |d| d.to_string());
         let mean = i.accel.as_ref().map_or("-".to_string(), |p| {
             format!("[{:.4}, {:.4}, {:.4}]", p.mean.x, p.mean.y, p.mean.z)

@@ -89,7 +89,15 @@ impl SensorOutcome {
         let mut parts = Vec::new();
         if let Some(floor) = self.noise_floor.filter(|f| *f > 0.0) {
             let ratio = fit.rms / floor;
-            if ratio <= 3.0 {
+            // Noise never leaves a residual a millionth of its floor: the fit has as many
+            // unknowns as equations and passes through every pose.
+            if ratio < 1e-6 {
+                parts.push(
+                    "the fit passes through every pose exactly (as many unknowns as poses), so \
+                     its residual says nothing of its accuracy; add poses"
+                        .to_string(),
+                );
+            } else if ratio <= 3.0 {
                 parts.push(format!(
                     "residual is at the noise floor ({ratio:.1}× the pose noise)"
                 ));

@@ -254,7 +254,10 @@ fn stream_outliers_sentence(screening: &Screening, total: usize) -> String {
 /// Still intervals with the holds that cannot be used left out; refuses when none is found or
 /// none is usable. Returns warnings, among them one per hold and sensor whose outliers were
 /// dropped.
-fn still_intervals(
+/// The still intervals of `recording` as every command sees them: detected, required, and
+/// screened (holds the board moved during, saturated or spiked readings), with the warnings to
+/// show.
+pub fn still_intervals(
     recording: &Recording,
     options: &StillOptions,
 ) -> Result<(StillReport, Vec<String>), String> {

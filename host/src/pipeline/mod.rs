@@ -25,7 +25,7 @@ pub mod references;
 pub use calibrate::{calibrate, FitOptions};
 pub use calibration::{RecordingCalibration, SensorOutcome};
 pub use chain::{default_accel_chain, ChainChoice};
-pub use input::{check_input, CheckedInput, InputOptions};
+pub use input::{check_input, still_intervals, CheckedInput, InputOptions};
 pub use params_file::params_file;
 pub use references::{ReferenceError, References};
 

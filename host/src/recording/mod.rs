@@ -88,7 +88,7 @@ pub enum RecordingError {
         column: String,
     },
     /// A header names no sensor column at all.
-    #[error("`{path}`, header: no sensor columns found (expected some of `ax ay az`, `gx gy gz`, `mx my mz`); header was `{header}`; name the columns in the first line, e.g. `t_s,ax,ay,az,gx,gy,gz`")]
+    #[error("`{path}`, header: no sensor columns found (expected some of `ax ay az`, `gx gy gz`, `mx my mz`); header was `{header}`; name the columns in the first line, e.g. `t_s,ax,ay,az,gx,gy,gz`, or read the file as it is with --columns (any delimiter, e.g. `--columns t_ms=Time,ax=AccX,ay=AccY,az=AccZ`)")]
     NoSensor {
         /// File concerned.
         path: String,

@@ -260,8 +260,8 @@ pub(super) fn rms(values: &[f64]) -> f64 {
 }
 
 /// How one table column writes its numbers: fixed with six decimals when every value of the
-/// column is between 1e-4 and 1e5 (or zero), otherwise scientific with four, so a column never
-/// mixes the two.
+/// column is between 1e-4 and 1e5 (or zero) and the largest is at least 0.1, otherwise
+/// scientific with four, so a column never mixes the two.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ColumnFormat {
     /// `1.234567`
@@ -273,9 +273,13 @@ pub enum ColumnFormat {
 impl ColumnFormat {
     /// The format that suits every finite value of `column`.
     pub fn for_column(column: &[f64]) -> Self {
-        // Six decimals keep at least three significant digits down to 1e-4.
+        // Six decimals keep at least three significant digits down to 1e-4, and the column's
+        // largest value (a matrix column's diagonal) to six when it is at least 0.1; a column of
+        // small values only (e.g. counts to m/s², 6e-4) would keep just three.
         let fits = |v: &f64| *v == 0.0 || (1e-4..1e5).contains(&v.abs());
-        if column.iter().filter(|v| v.is_finite()).all(fits) {
+        let finite = || column.iter().filter(|v| v.is_finite());
+        let largest = finite().fold(0.0_f64, |m, v| m.max(v.abs()));
+        if finite().all(fits) && (largest == 0.0 || largest >= 0.1) {
             ColumnFormat::Fixed
         } else {
             ColumnFormat::Scientific

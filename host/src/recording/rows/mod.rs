@@ -362,9 +362,11 @@ fn parse_row(
         if let Role::Ignored = role {
             continue;
         }
-        // ASCII blanks are the usual padding; other Unicode spaces take the slower trim.
+        // ASCII blanks are the usual padding; other Unicode spaces take the slower trim, and a
+        // number in quotes (spreadsheet exports quote every field) is still a number.
         let value = parse_number(text.trim_ascii())
             .or_else(|| parse_number(text.trim()))
+            .or_else(|| parse_number(text.trim().trim_matches('"').trim()))
             .ok_or_else(|| RecordingError::BadNumber {
                 path: layout.path.to_string(),
                 line: line_no,
@@ -481,6 +483,8 @@ impl LabelInterner {
     }
 
     fn push(&mut self, text: &str) {
+        // A label in quotes (spreadsheet exports quote every field) is the same label.
+        let text = text.trim_matches('"').trim();
         let label = (!(text.is_empty() || text == "-")).then(|| self.intern(text));
         self.per_row.push(label);
     }
