@@ -483,3 +483,19 @@ fn still_lists_the_holds_fit_uses_with_the_same_screening_and_label_names() {
     );
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn a_still_detection_flag_out_of_range_is_a_usage_error_naming_the_flag() {
+    let nilspod = real("imucal_nilspod_ferraris.csv");
+    for (flag, value) in [
+        ("--window", "0"),
+        ("--min-hold", "-1"),
+        ("--still-margin", "0.5"),
+        ("--direction-angle", "nan"),
+    ] {
+        let given = format!("{flag}={value}");
+        let (ok, _, stderr) = imucal(&["fit", &nilspod, "--gyro-unit", "dps", &given]);
+        assert!(!ok, "{flag} {value}");
+        assert!(stderr.contains(&format!("for '{flag} ")), "{stderr}");
+    }
+}

@@ -168,17 +168,43 @@ pub struct InputArgs {
     #[arg(long, value_enum, default_value = "s")]
     pub imutk_time_unit: TimeUnitArg,
     /// Still detection: window length in seconds.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = positive)]
     pub window: f64,
     /// Still detection: shortest hold kept, in seconds.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = non_negative)]
     pub min_hold: f64,
-    /// Still detection: fixed margin over the χ² threshold (default: chosen from the data).
-    #[arg(long)]
+    /// Still detection: fixed margin over the χ² threshold, at least 1 (default: chosen from
+    /// the data).
+    #[arg(long, value_parser = at_least_one)]
     pub still_margin: Option<f64>,
     /// Holds whose gravity directions are within this angle (degrees) count as one direction.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = positive)]
     pub direction_angle: f64,
+}
+
+/// A finite number from `text` that satisfies `ok` (described by `what`), for flag values.
+fn number_that(text: &str, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, String> {
+    let value: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    if value.is_finite() && ok(value) {
+        Ok(value)
+    } else {
+        Err(format!("{value} is not {what}"))
+    }
+}
+
+fn positive(text: &str) -> Result<f64, String> {
+    number_that(text, |v| v > 0.0, "a positive number")
+}
+
+fn non_negative(text: &str) -> Result<f64, String> {
+    number_that(text, |v| v >= 0.0, "zero or a positive number")
+}
+
+fn at_least_one(text: &str) -> Result<f64, String> {
+    number_that(text, |v| v >= 1.0, "at least 1")
 }
 
 /// Reference values and fitting input shared by every command that fits a recording.
