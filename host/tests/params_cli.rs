@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
-use imucal::device::{DeviceClient, ParamsFile};
+use imucal::device::{DeviceClient, DeviceError, ParamsFile};
 use imucal_hil_sim::board::PersonSchedule;
 use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
 use imucal_protocol::CalibrationSet;
@@ -61,9 +61,23 @@ fn calibrated_set() -> CalibrationSet {
     set
 }
 
+/// Connects to the simulated board. The pty may still be held exclusively for a moment by the
+/// link a previous client (or `imucal` process) just closed: that is waited out, briefly.
+fn connect(port: &str) -> DeviceClient {
+    for _ in 0..100 {
+        match DeviceClient::open(port) {
+            Err(DeviceError::PortBusy { .. }) => {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            other => return other.expect("connect to the simulator"),
+        }
+    }
+    panic!("{port} stayed busy for 2 s");
+}
+
 /// Writes `set` to the board straight through the library (the link is closed on return).
 fn write_directly(sim: &SimHandle, set: &CalibrationSet) {
-    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let mut client = connect(sim.port_path());
     client
         .write_params_verified(set)
         .expect("the set is written");
@@ -71,7 +85,7 @@ fn write_directly(sim: &SimHandle, set: &CalibrationSet) {
 
 /// The board's active CRC and set, read directly (the link is closed again on return).
 fn active(sim: &SimHandle) -> (u32, CalibrationSet) {
-    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let mut client = connect(sim.port_path());
     let crc = client.status().expect("status").active_crc;
     (crc, client.get_params().expect("params"))
 }
@@ -92,11 +106,7 @@ fn a_saved_set_is_bound_to_its_board_and_flashes_back_with_the_same_crc() {
     ));
     let file = ParamsFile::load(&dir.join("saved.json")).expect("a valid parameter file");
     let (_, board_set) = active(&sim);
-    let device_id = DeviceClient::open(port)
-        .expect("connect")
-        .welcome()
-        .device_id
-        .to_string();
+    let device_id = connect(port).welcome().device_id.to_string();
     assert_eq!(file.device_id(), Some(device_id.as_str()));
     assert_eq!(file.to_calibration_set("saved.json").unwrap(), board_set);
 

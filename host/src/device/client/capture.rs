@@ -124,7 +124,7 @@ impl<L: Read + Write> DeviceClient<L> {
                     tries: resend.sends,
                 });
             }
-            if let Some(restart) = self.capture_resend_due(&resend, now) {
+            if let Some(restart) = self.capture_resend_due(&resend, now, pose.timeout) {
                 if resend.busy_elsewhere && resend.sends > 1 && !resend.busy_answered {
                     // The last resend drew no Busy: the other capture is over and ours runs.
                     resend.busy_elsewhere = false;
@@ -163,17 +163,27 @@ impl<L: Read + Write> DeviceClient<L> {
     ///
     /// Until a `Busy` has confirmed that the capture runs, the request is resent every reply
     /// timeout: the request or the `Busy` may have been lost. Once confirmed, it is resent only
-    /// after a frame was lost (it may have been the reply) and a reply timeout of silence, at most
-    /// `tries − 1` times; resending on silence alone could start a second capture just as the
-    /// first ends, leaving the board busy for the next one.
-    fn capture_resend_due(&self, resend: &CaptureResend, now: Instant) -> Option<bool> {
-        if now.saturating_duration_since(resend.sent_at) < self.options.reply_timeout {
+    /// when the reply may have been lost, at most `tries − 1` times: after a lost frame and a
+    /// reply timeout of silence, or after silence longer than the board's own capture timeout
+    /// `capture` and a reply timeout (the board has answered by then, so its reply was lost
+    /// whole, without a frame error to show for it). Resending on a short silence alone could
+    /// start a second capture just as the first ends, leaving the board busy for the next one.
+    fn capture_resend_due(
+        &self,
+        resend: &CaptureResend,
+        now: Instant,
+        capture: Duration,
+    ) -> Option<bool> {
+        let silent = now.saturating_duration_since(resend.sent_at);
+        if silent < self.options.reply_timeout {
             return None;
         }
         if !resend.running {
             return Some(false);
         }
-        let reply_may_be_lost = self.stats.frame_errors > resend.frame_errors;
+        let frame_lost = self.stats.frame_errors > resend.frame_errors;
+        let overdue = silent >= capture.saturating_add(self.options.reply_timeout);
+        let reply_may_be_lost = frame_lost || overdue;
         (reply_may_be_lost && resend.restarts + 1 < self.options.tries.max(1)).then_some(true)
     }
 }
