@@ -200,7 +200,7 @@ fn concurrent_writers_in_separate_processes_lose_no_record() {
                 Command::new(&exe)
                     .args(["--exact", "writer_process", "--ignored"])
                     .env(CHILD_ENV, format!("{writer} {url}"))
-                    .stdout(Stdio::null())
+                    .stdout(Stdio::piped())
                     .stderr(Stdio::piped())
                     .spawn()
                     .expect("spawn writer")
@@ -210,8 +210,9 @@ fn concurrent_writers_in_separate_processes_lose_no_record() {
             let out = child.wait_with_output().expect("writer ran");
             assert!(
                 out.status.success(),
-                "a writer failed on {}: {}",
+                "a writer failed on {}: {}{}",
                 location.display(),
+                String::from_utf8_lossy(&out.stdout),
                 String::from_utf8_lossy(&out.stderr)
             );
         }
@@ -234,6 +235,32 @@ fn concurrent_writers_in_separate_processes_lose_no_record() {
                 .filter(|r| r.record.station.as_deref() == Some(station.as_str()))
                 .count() as u64;
             assert_eq!(mine, PER_WRITER, "{station} on {}", location.display());
+        }
+    }
+}
+
+/// Stations that open a new SQLite file at the same moment all get in: switching the file to
+/// the WAL journal is retried while another opener holds the lock (SQLite reports "database is
+/// locked" there without waiting). Twenty fresh files make the race near certain to be hit.
+#[test]
+fn stations_opening_a_new_sqlite_file_together_all_get_in() {
+    let dir = history_support::scratch_dir("open_together");
+    for round in 0..20u64 {
+        let path = dir.join(format!("history{round}.sqlite"));
+        let openers: Vec<_> = (0..WRITERS)
+            .map(|writer| {
+                let location = DbLocation::Sqlite(path.clone());
+                std::thread::spawn(move || {
+                    let mut store = HistoryStore::open(&location).map_err(|e| e.to_string())?;
+                    store
+                        .record(&board_record(100 * round + writer))
+                        .map_err(|e| e.to_string())
+                })
+            })
+            .collect();
+        for opener in openers {
+            let outcome = opener.join().expect("opener thread");
+            assert!(outcome.is_ok(), "round {round}: {outcome:?}");
         }
     }
 }

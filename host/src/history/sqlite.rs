@@ -3,10 +3,10 @@
 //! insert wait for the others instead of failing.
 
 use std::path::Path;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use rusqlite::types::Value;
-use rusqlite::{Connection, TransactionBehavior};
+use rusqlite::{Connection, ErrorCode, TransactionBehavior};
 
 use super::schema::{self, Backend, Dialect, SqlValue, SCHEMA_VERSION, VERSION_TABLE};
 
@@ -27,11 +27,32 @@ impl SqliteBackend {
     pub fn open(path: &Path) -> Result<Self, String> {
         let connection = Connection::open(path).map_err(failed)?;
         connection.busy_timeout(BUSY_TIMEOUT).map_err(failed)?;
-        // WAL lets readers run while one process writes; the answer row is the mode set.
-        connection
-            .query_row("PRAGMA journal_mode=WAL", [], |_| Ok(()))
-            .map_err(failed)?;
+        set_wal_journal(&connection)?;
         Ok(Self { connection })
+    }
+}
+
+/// Switch to the WAL journal (readers run while one process writes). The switch takes an
+/// exclusive lock without going through the busy handler, so several stations opening a new
+/// file together see "database is locked" here: wait and retry as the busy timeout would.
+fn set_wal_journal(connection: &Connection) -> Result<(), String> {
+    let start = Instant::now();
+    let mut pause = Duration::from_millis(2);
+    loop {
+        // The answer row is the mode set; a file system without WAL keeps its own, which works.
+        match connection.query_row("PRAGMA journal_mode=WAL", [], |_| Ok(())) {
+            Ok(()) => return Ok(()),
+            Err(e)
+                if matches!(
+                    e.sqlite_error_code(),
+                    Some(ErrorCode::DatabaseBusy | ErrorCode::DatabaseLocked)
+                ) && start.elapsed() < BUSY_TIMEOUT =>
+            {
+                std::thread::sleep(pause);
+                pause = (pause * 2).min(Duration::from_millis(100));
+            }
+            Err(e) => return Err(failed(e)),
+        }
     }
 }
 
