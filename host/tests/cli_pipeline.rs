@@ -376,3 +376,64 @@ fn analyze_labels_a_gyroscope_without_a_scale_in_counts_not_rad_per_s() {
     assert!(gyro.contains("counts"), "{gyro}");
     assert!(!gyro.contains("rad/s"), "{gyro}");
 }
+
+#[test]
+fn a_magnetometer_sample_cap_below_an_ellipsoids_needs_is_refused_at_the_flag() {
+    // A cap of 5 would refuse every fit with "record longer": the flag itself is the cause.
+    let recording = real("sf_mpu6050_hmc5883l_full_sphere_mag.csv");
+    for command in ["fit", "report", "analyze"] {
+        let out = imucal(&[command, &recording, "--max-mag-samples", "5"]);
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "{command}");
+        assert!(
+            stderr.contains("--max-mag-samples") && stderr.contains("at least 12"),
+            "{command}: {stderr}"
+        );
+        assert!(!stderr.contains("record longer"), "{command}: {stderr}");
+    }
+}
+
+#[test]
+fn magnetometer_columns_replaced_by_a_mag_file_are_said_to_be_unread() {
+    let recording = real("tsm_qmc5883l_mag_rotation.csv");
+    let mag = real("sf_mpu6050_hmc5883l_full_sphere_mag.csv");
+    let out = imucal(&[
+        "fit",
+        &recording,
+        "--sensor",
+        "mag",
+        "--mag-unit",
+        "gauss",
+        "--mag-file",
+        &mag,
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("not read from") && stderr.contains("replaced by --mag-file"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_report_of_standard_input_goes_to_a_named_directory_not_a_dash() {
+    let dir = PathBuf::from(temp_file("stdin-report"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch directory");
+    let recording = std::fs::File::open(real("tsi_mpu6050_multipos.csv")).expect("recording");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .current_dir(&dir)
+        .args([
+            "report",
+            "-",
+            "--accel-unit",
+            "counts",
+            "--gyro-unit",
+            "counts",
+        ])
+        .stdin(recording)
+        .output()
+        .expect("the imucal binary runs");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(dir.join("recording_report/report.html").is_file());
+    assert!(!dir.join("-_report").exists());
+}

@@ -109,7 +109,8 @@ pub enum MagUnitArg {
 pub enum FormatArg {
     /// Decide from the first line.
     Auto,
-    /// CSV with a header of column names.
+    /// CSV with a header of column names: `t_s`, `ax ay az`, `gx gy gz`, `mx my mz`, `temp_c`,
+    /// and `pose` or `segment` labels (any subset; other columns are not read).
     Csv,
     /// IMU-TK text (`timestamp x y z` per line; the recording is the accelerometer file).
     Imutk,
@@ -207,6 +208,24 @@ fn at_least_one(text: &str) -> Result<f64, String> {
     number_that(text, |v| v >= 1.0, "at least 1")
 }
 
+/// `--max-mag-samples`: 0 (every sample) or enough for an ellipsoid fit. A smaller cap would
+/// only ever refuse the fit, and its refusal would read as a recording that is too short.
+fn sample_cap(text: &str) -> Result<usize, String> {
+    let needed = imucal::input_checks::MIN_MAG_SAMPLES;
+    let value: usize = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a whole number of samples"))?;
+    if value == 0 || value >= needed {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value} samples cannot determine an ellipsoid (it needs at least {needed}); give \
+             {needed} or more, or 0 for every sample"
+        ))
+    }
+}
+
 /// Reference values and fitting input shared by every command that fits a recording.
 #[derive(Debug, Args)]
 pub struct ReferenceArgs {
@@ -226,8 +245,9 @@ pub struct ReferenceArgs {
     #[arg(long)]
     pub gyro_scale: Option<f64>,
     /// Magnetometer fits use at most this many samples, evenly thinned (0, the default, = all:
-    /// the fits take about 0.3 s per 10⁶ samples, and thinning loses held-out accuracy).
-    #[arg(long, default_value_t = 0)]
+    /// the fits take about 0.3 s per 10⁶ samples, and thinning loses held-out accuracy); an
+    /// ellipsoid needs at least 12.
+    #[arg(long, default_value_t = 0, value_parser = sample_cap)]
     pub max_mag_samples: usize,
 }
 
@@ -290,7 +310,8 @@ pub struct ReportArgs {
     /// Reference values.
     #[command(flatten)]
     pub reference: ReferenceArgs,
-    /// Directory for `report.html` (default: the session directory, or `<recording>_report`).
+    /// Directory for `report.html` (default: the session directory, or `<recording>_report`;
+    /// `recording_report` for a recording read from standard input).
     #[arg(long, short = 'o')]
     pub out: Option<PathBuf>,
     /// Replace a `report.html` already in the output directory.

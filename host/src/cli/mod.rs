@@ -80,6 +80,13 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
     if input.rate.is_some() && !recording.time_is_index {
         eprintln!("imucal: warning: --rate is ignored: the recording has its own time stamps");
     }
+    if !recording.ignored_columns.is_empty() {
+        eprintln!(
+            "imucal: note: not read from {}: {}",
+            input.recording.display(),
+            recording.ignored_columns.join(", ")
+        );
+    }
     Ok(recording)
 }
 

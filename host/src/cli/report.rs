@@ -89,6 +89,10 @@ fn default_out(path: &Path, is_session: bool) -> PathBuf {
     if is_session {
         return path.to_path_buf();
     }
+    if path == Path::new("-") {
+        // Standard input has no name to derive one from.
+        return PathBuf::from("recording_report");
+    }
     let stem = path
         .file_stem()
         .map_or("recording".into(), |s| s.to_string_lossy().into_owned());

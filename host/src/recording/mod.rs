@@ -257,7 +257,8 @@ pub struct Recording {
     pub mag: Option<MagStream>,
     /// `pose` or `segment` labels, if present.
     pub labels: Option<Labels>,
-    /// Columns of the header that are not part of the format and were not read.
+    /// Columns of the header that were not read: not part of the format, or replaced by
+    /// another file.
     pub ignored_columns: Vec<String>,
     /// Units of the sensor columns.
     pub units: Units,
@@ -340,8 +341,13 @@ impl Recording {
                 recording.mag = Some(stream);
             }
         } else if let Some(mag_path) = &options.mag_file {
-            // An explicit file replaces magnetometer columns of the main file.
+            // An explicit file replaces magnetometer columns of the main file; they are then
+            // columns not read, and said to be.
             recording.mag = Some(csv::load_mag_stream(mag_path, options)?);
+            recording.ignored_columns.push(format!(
+                "the magnetometer columns (replaced by --mag-file {})",
+                display(mag_path)
+            ));
         }
         Ok(recording)
     }
