@@ -437,3 +437,40 @@ fn a_report_of_standard_input_goes_to_a_named_directory_not_a_dash() {
     assert!(dir.join("recording_report/report.html").is_file());
     assert!(!dir.join("-_report").exists());
 }
+
+#[test]
+fn analyze_studies_the_accelerometer_in_a_model_that_fit_does_not_refuse() {
+    // On these eleven poses `fit` refuses the full norm model (its scales would be uncertain
+    // by 4 %); the analysis must not build its findings on that model.
+    let recording = real("tsi_mpu6050_multipos.csv");
+    let units = ["--accel-unit", "counts", "--gyro-unit", "counts"];
+    let fit = imucal(&[&["fit", &recording, "--sensor", "accel"][..], &units].concat());
+    assert!(
+        text(&fit.stdout).contains("lm: refused"),
+        "{}",
+        text(&fit.stdout)
+    );
+    let analyze = imucal(&[&["analyze", &recording][..], &units].concat());
+    let stdout = text(&analyze.stdout);
+    assert!(analyze.status.success(), "{}", text(&analyze.stderr));
+    assert!(
+        stdout.contains("accel — base model axis-aligned"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn analyze_says_why_six_faces_cannot_carry_the_accelerometer_analysis() {
+    let recording = real("imucal_nilspod_ferraris.csv");
+    let out = imucal(&["analyze", &recording, "--gyro-unit", "dps"]);
+    let stdout = text(&out.stdout);
+    let accel = stdout
+        .lines()
+        .find(|l| l.starts_with("accel: not analysed"))
+        .unwrap_or_else(|| panic!("the accelerometer is not analysed: {stdout}"));
+    assert!(
+        accel.contains("6 distinct orientation") && accel.contains("held-out fold"),
+        "{accel}"
+    );
+    assert!(!accel.contains("did not converge"), "{accel}");
+}

@@ -3,8 +3,8 @@
 //!
 //! Norm model (accelerometer, magnetometer; seed 003's iteration on `|A(v)| = g`, seed 000
 //! eq. 17–29 for the ellipsoid): `rᵢ = (|yᵢ|/ref − 1)/σ'ᵢ`, `A` upper-triangular (the gauge of
-//! `fit::norm_lm`). Gyroscope at rest (seed 000 eq. 9): `rᵢ = yᵢ/σᵢ` per axis, since the true
-//! rate is zero. The unknowns are solved for in centred, scaled data (`x̃ = (x − c)/s`,
+//! `fit::norm_lm`), or diagonal for the axis-aligned base (seed 004). Gyroscope at rest (seed
+//! 000 eq. 9): `rᵢ = yᵢ/σᵢ` per axis, since the true rate is zero. The unknowns are solved for in centred, scaled data (`x̃ = (x − c)/s`,
 //! `τ = (T − T₀)/s_T`, `θ = (t − t₀)/s_t`, `f̃ = f/g`) where every parameter is of order one, and
 //! are mapped back to physical units afterwards. The weights `1/σ'ᵢ` are fixed once (from the
 //! base fit) so that the losses of nested models are comparable. The Jacobian is by central
@@ -24,6 +24,9 @@ pub enum BaseKind {
     Norm {
         /// Reference magnitude (g or the field strength, or 1).
         reference: f64,
+        /// `A` diagonal (6 unknowns: the axis-aligned models of seed 004) instead of upper
+        /// triangular (9): the base when the poses cannot determine the full model.
+        axis_aligned: bool,
     },
     /// `A(x − b) = 0` at rest with `A = scale·I` (gyroscope).
     Rest {
@@ -117,7 +120,7 @@ impl Problem {
         let weights = obs
             .iter()
             .map(|o| match base {
-                BaseKind::Norm { reference } => {
+                BaseKind::Norm { reference, .. } => {
                     let y = start.apply(&o.mean);
                     let grad = y
                         .try_normalize(0.0)
@@ -175,6 +178,9 @@ impl Problem {
     /// Number of base-model parameters.
     pub fn base_params(&self) -> usize {
         match self.base {
+            BaseKind::Norm {
+                axis_aligned: true, ..
+            } => 6,
             BaseKind::Norm { .. } => 9,
             BaseKind::Rest { .. } => 3,
         }
@@ -211,6 +217,15 @@ impl Problem {
         let tau = self.tau.as_ref().map_or(0.0, |t| t[i]);
         let mut offset = 0;
         let (r, b) = match self.base {
+            BaseKind::Norm {
+                axis_aligned: true, ..
+            } => {
+                offset = 6;
+                (
+                    Mat3::from_diagonal(&Vec3::new(p[0], p[1], p[2])),
+                    Vec3::new(p[3], p[4], p[5]),
+                )
+            }
             BaseKind::Norm { .. } => {
                 offset = 9;
                 (
@@ -335,7 +350,15 @@ pub fn start_params(
     effects: &[EffectKind],
 ) -> DVector<f64> {
     let mut p = match problem.base {
-        BaseKind::Norm { reference } => {
+        BaseKind::Norm {
+            reference,
+            axis_aligned: true,
+        } => {
+            // The start's diagonal: exact for the axis-aligned models it comes from.
+            let d = start.a.diagonal() * (problem.scale / reference);
+            vec![d[0], d[1], d[2], 0.0, 0.0, 0.0]
+        }
+        BaseKind::Norm { reference, .. } => {
             let r =
                 crate::fit::linalg::upper_triangular_gauge(&start.a) * (problem.scale / reference);
             vec![
@@ -432,7 +455,15 @@ pub fn physical_factor(problem: &Problem, effects: &[EffectKind], index: usize) 
 /// The base calibration `A`, `b` of a fitted parameter vector, in data units.
 pub fn base_calibration(problem: &Problem, params: &DVector<f64>) -> Calibration {
     match problem.base {
-        BaseKind::Norm { reference } => {
+        BaseKind::Norm {
+            reference,
+            axis_aligned: true,
+        } => Calibration {
+            a: Mat3::from_diagonal(&Vec3::new(params[0], params[1], params[2]))
+                * (reference / problem.scale),
+            b: problem.centre + Vec3::new(params[3], params[4], params[5]) * problem.scale,
+        },
+        BaseKind::Norm { reference, .. } => {
             let r = Mat3::new(
                 params[0], params[1], params[2], 0.0, params[3], params[4], 0.0, 0.0, params[5],
             );

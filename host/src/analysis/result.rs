@@ -40,12 +40,25 @@ pub enum AnalysisError {
         /// Why.
         source: FitError,
     },
-    /// The solver did not converge on the base model although there are enough observations.
+    /// The base model could not be refit on every held-out fold although there are enough
+    /// observations: as a rule, leaving out the poses of one orientation leaves too few
+    /// orientations to determine it.
     #[error(
-        "the solver did not converge on the {0} base model over its observations and held-out folds; \
-         the poses may not determine it (too few distinct orientations): record poses in more directions"
+        "the {sensor} base model {model} ({unknowns} unknowns) could not be refit on every \
+         held-out fold: the poses show {distinct} distinct orientation(s) (within 5°), and a \
+         fold that leaves out the poses of one of them leaves the others unable to determine \
+         it; record poses in more directions (e.g. the twelve positions)"
     )]
-    Refit(&'static str),
+    Refit {
+        /// Sensor name.
+        sensor: &'static str,
+        /// Base model name.
+        model: String,
+        /// Unknowns of the base model.
+        unknowns: usize,
+        /// Distinct orientations among the poses.
+        distinct: usize,
+    },
 }
 
 /// Settings of the analysis (the input options of `imucal fit`).

@@ -14,6 +14,7 @@ use super::extended_fit::{
 };
 use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, SensorAnalysis};
 use super::time_structure::{follows_time_p, timed_residuals, without_effect};
+use crate::fit::validate::count_distinct;
 use crate::fit::{Calibration, Vec3};
 use crate::recording::Sensor;
 use crate::stats::chi_square::ChiSquareTest;
@@ -169,7 +170,17 @@ pub fn analyse_observations(
                 needed,
             }
         } else {
-            AnalysisError::Refit(sensor.name())
+            let directions: Vec<Vec3> = problem
+                .points
+                .iter()
+                .filter_map(|p| p.try_normalize(0.0))
+                .collect();
+            AnalysisError::Refit {
+                sensor: sensor.name(),
+                model: base_model.to_string(),
+                unknowns: base_start.len(),
+                distinct: count_distinct(&directions, 5.0),
+            }
         }
     })?;
     let temps: Option<Vec<f64>> = observations.iter().map(|o| o.temp_c).collect();

@@ -11,8 +11,9 @@ use crate::fit::coverage::sphere_start;
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::li::{fit_li, LiOptions};
 use crate::fit::norm_lm::fit_mag_lm;
+use crate::fit::Method;
 use crate::fit::{Calibration, Vec3};
-use crate::pipeline::chain::default_accel_chain;
+use crate::pipeline::chain::{default_accel_chain, CandidateOutcome};
 use crate::recording::{Recording, Sensor};
 use crate::still::StillReport;
 
@@ -59,10 +60,19 @@ pub fn analyse_sensor(
             if obs.len() < 10 {
                 return Err(too_few("still poses", obs.len(), 10));
             }
-            // The default chain's model starts the extended fit; when every model of the chain
-            // refuses, the generic solver here restarts from the sphere.
-            let start = match default_accel_chain(&to_poses(&obs), options.gravity) {
-                Ok(choice) => choice.fit.cal,
+            // The default chain's model starts the extended fit. The base is the full norm model
+            // (an effect must not be credited with what misalignment explains) unless `fit`
+            // refused it because the poses cannot determine it (e.g. six faces, or a plane of
+            // tilts): then the axis-aligned model (6 unknowns), which `fit` can determine. When every model
+            // of the chain refuses, the generic solver restarts from the sphere.
+            let (start, axis_aligned) = match default_accel_chain(&to_poses(&obs), options.gravity)
+            {
+                Ok(choice) => {
+                    let axis_aligned = choice.candidates.iter().any(|c| {
+                        c.method == Method::Lm && matches!(c.outcome, CandidateOutcome::Refused(_))
+                    });
+                    (choice.fit.cal, axis_aligned)
+                }
                 Err(source) => {
                     let means: Vec<Vec3> = obs.iter().map(|o| o.mean).collect();
                     let sphere = sphere_start(&means, options.gravity);
@@ -71,6 +81,7 @@ pub fn analyse_sensor(
                         base_model: "lm",
                         base: BaseKind::Norm {
                             reference: options.gravity,
+                            axis_aligned: false,
                         },
                         start: sphere,
                         force: None,
@@ -85,9 +96,10 @@ pub fn analyse_sensor(
             };
             let setup = SensorSetup {
                 sensor,
-                base_model: "lm",
+                base_model: if axis_aligned { "axis-aligned" } else { "lm" },
                 base: BaseKind::Norm {
                     reference: options.gravity,
+                    axis_aligned,
                 },
                 start,
                 force: None,
@@ -180,7 +192,10 @@ pub fn analyse_sensor(
             let setup = SensorSetup {
                 sensor,
                 base_model: "lm",
-                base: BaseKind::Norm { reference },
+                base: BaseKind::Norm {
+                    reference,
+                    axis_aligned: false,
+                },
                 start,
                 force: None,
                 gravity: options.gravity,

@@ -93,6 +93,7 @@ pub fn analyse_poses(poses: &[CapturedPose], gravity_mps2: f64) -> RecordingAnal
                     base_model: "lm",
                     base: BaseKind::Norm {
                         reference: gravity_mps2,
+                        axis_aligned: false,
                     },
                     start: start.cal,
                     force: None,
