@@ -134,7 +134,7 @@ fn a_missing_session_file_is_named_and_empty_data_is_refused() {
     assert!(error.contains("params.json"), "{error}");
     let empty = render_html(&ReportData::default()).unwrap_err().to_string();
     assert!(
-        empty.contains("neither accelerometer poses nor magnetometer samples"),
+        empty.contains("no accelerometer or gyroscope poses and no magnetometer samples"),
         "{empty}"
     );
     let _ = std::fs::remove_dir_all(dir);
@@ -518,5 +518,55 @@ fn with_analyze_the_report_shows_the_extended_terms_and_the_checks_of_both_sets(
     assert!(html.contains("Extended terms on the board"));
     assert!(html.contains("m/s²/°C²"));
     assert!(html.contains("Extended terms added: accel bias_temperature"));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_gyroscope_only_recording_gets_a_report_of_the_bias_fit_finds() {
+    // Three seconds at rest with a known bias: `fit` calibrates the bias, so `report` must show
+    // it rather than refuse the recording for having no accelerometer.
+    let dir = scratch("gyro-only");
+    let bias = [0.010, -0.020, 0.005];
+    let mut csv = String::from("t_s,gx,gy,gz\n");
+    for i in 0..300 {
+        // A deterministic ±1 mrad/s wobble stands in for noise.
+        let wobble = 0.001 * f64::from(i % 7 - 3) / 3.0;
+        let _ = writeln!(
+            csv,
+            "{:.2},{:.6},{:.6},{:.6}",
+            f64::from(i) / 100.0,
+            bias[0] + wobble,
+            bias[1] - wobble,
+            bias[2] + wobble / 2.0
+        );
+    }
+    let recording = dir.join("gyro.csv");
+    std::fs::write(&recording, csv).expect("recording written");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["report", &recording.display().to_string(), "--force"])
+        .output()
+        .expect("the imucal binary runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(dir.join("gyro_report/report.html")).expect("report");
+    assert!(
+        html.contains("Gyroscope") && html.contains("gyro-bias"),
+        "{html}"
+    );
+    // The fitted bias is in the parameter table, printed `value ± σ` (the wobble's mean is
+    // below 2e-4 rad/s).
+    let shown: Vec<f64> = html
+        .split("<span class=std> ± ")
+        .filter_map(|before| before.rsplit('>').next()?.parse().ok())
+        .collect();
+    for b in bias {
+        assert!(
+            shown.iter().any(|v| (v - b).abs() < 2e-4),
+            "bias {b} not among {shown:?}"
+        );
+    }
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -9,13 +9,18 @@ use super::{plots, GyroPoses, ReportData, ReportError, RestCheck};
 use crate::fit::{Mat3, Vec3};
 use crate::session::rest::REST_QUANTITIES;
 
+/// "1 pose", "12 poses".
+fn poses(count: usize) -> String {
+    format!("{count} pose{}", if count == 1 { "" } else { "s" })
+}
+
 pub(super) fn figure(svg: &str) -> String {
     format!("<div class=fig>{svg}</div>")
 }
 
 /// Renders the report page.
 pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
-    if data.accel.is_none() && data.mag.is_none() {
+    if data.accel.is_none() && data.mag.is_none() && data.gyro.is_none() {
         return Err(ReportError::NoData);
     }
     let mut summary_rows = Vec::new();
@@ -139,10 +144,10 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
         summary_rows.push((
             "accelerometer |a| error RMS".to_string(),
             format!(
-                "{:.2} mg before, {:.3} mg after ({} poses)",
+                "{:.2} mg before, {:.3} mg after ({})",
                 rms(&before),
                 rms(&after),
-                after.len()
+                poses(after.len())
             ),
         ));
         body.push_str("<h2>Accelerometer</h2><p>Error of |a| against local gravity per pose, before and after calibration, each on its own scale.</p>");
@@ -348,10 +353,10 @@ fn gyro_section(
     summary_rows.push((
         "gyroscope rate at rest, RMS over poses, x, y, z".to_string(),
         format!(
-            "{} °/s before, {} °/s after ({} poses)",
+            "{} °/s before, {} °/s after ({})",
             per_axis(before),
             per_axis(after),
-            gyro.raw_dps.len()
+            poses(gyro.raw_dps.len())
         ),
     ));
     let mut body = String::from(

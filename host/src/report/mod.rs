@@ -61,7 +61,9 @@ pub enum ReportError {
     #[error(transparent)]
     Plot(#[from] plots::PlotError),
     /// There is nothing to show.
-    #[error("the input has neither accelerometer poses nor magnetometer samples to report on")]
+    #[error(
+        "the input has no accelerometer or gyroscope poses and no magnetometer samples to report on"
+    )]
     NoData,
     /// The report could not be written.
     #[error("cannot write `{path}`: {cause}; check that the directory is writable")]
