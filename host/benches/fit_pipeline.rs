@@ -12,7 +12,7 @@ mod common;
 use std::io::Write;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use imucal::pipeline::{calibrate, check_input, FitOptions, InputOptions};
+use imucal::pipeline::{calibrate, check_and_calibrate, check_input, FitOptions, InputOptions};
 use imucal::recording::{LoadOptions, Recording, Sensor};
 use imucal::stats::descriptive::window_variances;
 use imucal::stats::robust::screen_stream;
@@ -33,9 +33,10 @@ fn bench_pipeline(c: &mut Criterion) {
     let sensors = recording.sensors();
     let input_options = InputOptions::default();
     let fit_options = FitOptions::default();
+    // As `imucal fit` does it: the magnetometer's fit beside still detection.
     let whole = || {
-        let input = check_input(load(&path), &sensors, &input_options, None);
-        calibrate(&input, &fit_options).map(|c| c.sensors.len())
+        check_and_calibrate(load(&path), &sensors, &input_options, None, &fit_options)
+            .map(|(_, c)| c.sensors.len())
     };
 
     let mut group = c.benchmark_group("pipeline");

@@ -22,7 +22,7 @@ use imucal::history::{CalibrationRecord, RecordSource};
 use imucal::pipeline::chain::CandidateOutcome;
 use imucal::pipeline::methods::method_for_sensor;
 use imucal::pipeline::{
-    calibrate, check_input, params_file, FitOptions, RecordingCalibration, SensorOutcome,
+    check_and_calibrate, params_file, FitOptions, RecordingCalibration, SensorOutcome,
 };
 use imucal::recording::{Recording, Sensor};
 use nalgebra::Rotation3;
@@ -420,22 +420,22 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         None => Vec::new(),
         Some(name) => methods_for(name, &sensors, args.sensor == SensorChoice::All)?,
     };
-    let input = check_input(
-        recording,
-        &sensors,
-        &super::input_options(&args.input, &args.reference),
-        args.reference.field_ut,
-    );
-    for warning in &input.warnings {
-        eprintln!("imucal: warning: {warning}");
-    }
     let options = FitOptions {
         references: Some(references),
         location: args.reference.location,
         methods,
         device_id: args.device.clone(),
     };
-    let calibration = calibrate(&input, &options)?;
+    let (input, calibration) = check_and_calibrate(
+        recording,
+        &sensors,
+        &super::input_options(&args.input, &args.reference),
+        args.reference.field_ut,
+        &options,
+    )?;
+    for warning in &input.warnings {
+        eprintln!("imucal: warning: {warning}");
+    }
     if args.json {
         let object: serde_json::Map<String, Value> = calibration
             .sensors

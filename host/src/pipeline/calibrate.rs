@@ -6,16 +6,16 @@
 
 use std::collections::BTreeMap;
 
-use crate::fit::{Fit, Method};
+use crate::fit::{Fit, Method, Vec3};
 use crate::geomag::{local_field_today, LocalField, Location, RadiusCheck};
-use crate::recording::{Sensor, Units};
+use crate::recording::{Recording, Sensor, Units};
 use crate::still::StillReport;
 
 use super::align::align_mag;
 use super::calibration::{pose_noise_floor, RecordingCalibration, SensorOutcome};
 use super::chain::default_accel_chain;
 use super::gyro::{fit_gyroscope, gyro_unit_scale};
-use super::input::CheckedInput;
+use super::input::{check_input_then, CheckedInput, InputOptions};
 use super::methods::{fit_accel, fit_mag};
 use super::references::References;
 use super::PipelineError;
@@ -51,33 +51,91 @@ pub fn now_unix_s() -> u64 {
         .map_or(0, |d| d.as_secs())
 }
 
+/// The reference values a fit uses: the checked references, and the modelled field at the
+/// recording's location when the magnetometer is fitted there.
+struct FitReferences {
+    references: References,
+    field_model: Option<LocalField>,
+    /// The magnetometer's reference: the stated field, else the modelled one.
+    field_ut: Option<f64>,
+}
+
+impl FitReferences {
+    fn new(options: &FitOptions, fits_mag: bool) -> Result<Self, PipelineError> {
+        let references = match options.references {
+            Some(r) => r,
+            None => References::checked(crate::recording::STANDARD_GRAVITY, None, None)?,
+        };
+        let field_model = match (&options.location, fits_mag) {
+            (Some(location), true) => Some(
+                local_field_today(location)
+                    .map_err(|e| PipelineError::FieldModel(e.to_string()))?,
+            ),
+            _ => None,
+        };
+        Ok(Self {
+            references,
+            field_model,
+            field_ut: references.field_ut.or(field_model.map(|m| m.total_ut)),
+        })
+    }
+}
+
 /// Fit every sensor of `input` that passed its checks.
 pub fn calibrate(
     input: &CheckedInput,
     options: &FitOptions,
 ) -> Result<RecordingCalibration, PipelineError> {
-    let references = match options.references {
-        Some(r) => r,
-        None => References::checked(crate::recording::STANDARD_GRAVITY, None, None)?,
-    };
-    let field_model = match (&options.location, input.sensors.contains(&Sensor::Mag)) {
-        (Some(location), true) => Some(
-            local_field_today(location).map_err(|e| PipelineError::FieldModel(e.to_string()))?,
-        ),
-        _ => None,
-    };
-    let field_ut = references.field_ut.or(field_model.map(|m| m.total_ut));
+    let references = FitReferences::new(options, input.sensors.contains(&Sensor::Mag))?;
+    Ok(calibrate_with(input, options, &references, None))
+}
+
+/// [`check_input`](super::check_input) and [`calibrate`] in one: the magnetometer's fit starts
+/// as soon as its checks pass, beside still detection, instead of after it (on a recording of
+/// 10⁶ rows the detection is the input stage's longest part). The result is the same as the
+/// two steps give.
+pub fn check_and_calibrate(
+    recording: Recording,
+    sensors: &[Sensor],
+    input_options: &InputOptions,
+    stated_field_ut: Option<f64>,
+    options: &FitOptions,
+) -> Result<(CheckedInput, RecordingCalibration), PipelineError> {
+    let references = FitReferences::new(options, sensors.contains(&Sensor::Mag))?;
+    let method = options.method(Sensor::Mag);
+    let (input, mag) = check_input_then(
+        recording,
+        sensors,
+        input_options,
+        stated_field_ut,
+        |recording, points| fit_magnetometer(recording, points, &references, method),
+    );
+    let calibration = calibrate_with(&input, options, &references, mag);
+    Ok((input, calibration))
+}
+
+/// Fit the sensors of `input`, the magnetometer's outcome given when already fitted.
+fn calibrate_with(
+    input: &CheckedInput,
+    options: &FitOptions,
+    references: &FitReferences,
+    fitted_mag: Option<SensorOutcome>,
+) -> RecordingCalibration {
     let recording = &input.recording;
     let fit_one = |sensor: Sensor| {
         let unit = recording.units.symbol(sensor);
         match input.refusal(sensor) {
             Some(reason) => SensorOutcome::without_fit(sensor, unit, reason.to_string()),
+            None if sensor == Sensor::Mag => fit_magnetometer(
+                recording,
+                input.mag_points(),
+                references,
+                options.method(sensor),
+            ),
             None => {
                 let context = SensorContext {
                     input,
-                    references: &references,
-                    field_ut,
-                    field_model,
+                    references: &references.references,
                     method: options.method(sensor),
                 };
                 context.fit(sensor)
@@ -87,16 +145,29 @@ pub fn calibrate(
     // The sensors' fits share nothing but the input, so each runs on its own thread: on a
     // long recording the magnetometer's pass over every sample overlaps the accelerometer's
     // chain. The outcomes keep the order of `input.sensors`.
+    let mut fitted_mag = fitted_mag;
     let mut sensors: Vec<SensorOutcome> = std::thread::scope(|scope| {
         let fits: Vec<_> = input
             .sensors
             .iter()
-            .map(|&sensor| scope.spawn(move || fit_one(sensor)))
+            .map(|&sensor| {
+                let done = if sensor == Sensor::Mag {
+                    fitted_mag.take()
+                } else {
+                    None
+                };
+                match done {
+                    Some(outcome) => Fitting::Done(Box::new(outcome)),
+                    None => Fitting::Running(scope.spawn(move || fit_one(sensor))),
+                }
+            })
             .collect();
         fits.into_iter()
-            .map(|fit| {
-                fit.join()
-                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            .map(|fit| match fit {
+                Fitting::Done(outcome) => *outcome,
+                Fitting::Running(handle) => handle
+                    .join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
             })
             .collect()
     });
@@ -109,7 +180,7 @@ pub fn calibrate(
             Some((s.sensor.name().to_string(), fit.method.name().to_string()))
         })
         .collect();
-    Ok(RecordingCalibration {
+    RecordingCalibration {
         provenance: Provenance {
             tool: Provenance::tool(),
             source: recording.source.display().to_string(),
@@ -119,11 +190,17 @@ pub fn calibrate(
             created_unix_s: now_unix_s(),
         },
         sensors,
-        gravity_mps2: references.gravity_mps2,
-        field_ut,
+        gravity_mps2: references.references.gravity_mps2,
+        field_ut: references.field_ut,
         still_summary: input.still.as_ref().map(StillReport::summary),
         warnings: input.warnings.clone(),
-    })
+    }
+}
+
+/// A sensor's fit: already done, or running on a thread.
+enum Fitting<'scope> {
+    Done(Box<SensorOutcome>),
+    Running(std::thread::ScopedJoinHandle<'scope, SensorOutcome>),
 }
 
 fn input_units(units: &Units, sensors: &[Sensor]) -> BTreeMap<String, String> {
@@ -133,12 +210,10 @@ fn input_units(units: &Units, sensors: &[Sensor]) -> BTreeMap<String, String> {
         .collect()
 }
 
-/// What fitting one sensor needs.
+/// What fitting one inertial sensor needs.
 struct SensorContext<'a> {
     input: &'a CheckedInput,
     references: &'a References,
-    field_ut: Option<f64>,
-    field_model: Option<LocalField>,
     method: Option<Method>,
 }
 
@@ -148,10 +223,6 @@ impl SensorContext<'_> {
         let mut outcome =
             SensorOutcome::without_fit(sensor, recording.units.symbol(sensor), String::new());
         outcome.to_nominal = recording.units.to_si(sensor);
-        if sensor == Sensor::Mag {
-            self.fit_mag(&mut outcome);
-            return outcome;
-        }
         let Some(still) = &self.input.still else {
             outcome.fit = Err("still intervals are needed for this sensor".to_string());
             return outcome;
@@ -185,31 +256,38 @@ impl SensorContext<'_> {
         outcome.fit = fit.map_err(|e| e.to_string());
         outcome
     }
+}
 
-    fn fit_mag(&self, outcome: &mut SensorOutcome) {
-        let points = self.input.mag_points();
-        outcome.n_samples = points.len();
-        outcome.output_unit = match self.field_ut {
-            Some(_) => "µT".to_string(),
-            None => "field = 1".to_string(),
-        };
-        outcome.field_model = self.field_model;
-        let method = self.method.unwrap_or(Method::Lm);
-        let fit = fit_mag(method, points, self.field_ut.unwrap_or(1.0));
-        if let (Ok(f), Some(model), Some(to_ut)) = (
-            &fit,
-            &self.field_model,
-            self.input.recording.units.mag.to_si(),
-        ) {
-            // Mean distance of the raw readings from the fitted offset: the sphere's radius.
-            let radius = points.iter().map(|p| (p - f.cal.b).norm()).sum::<f64>()
-                / points.len().max(1) as f64;
-            let check = RadiusCheck::new(radius * to_ut, model);
-            outcome.notes.push(check.sentence());
-            outcome.radius_check = Some(check);
-        }
-        outcome.fit = fit.map_err(|e| e.to_string());
+/// Fit the magnetometer's `points` (its checked samples) of `recording`.
+fn fit_magnetometer(
+    recording: &Recording,
+    points: &[Vec3],
+    references: &FitReferences,
+    method: Option<Method>,
+) -> SensorOutcome {
+    let unit = recording.units.symbol(Sensor::Mag);
+    let mut outcome = SensorOutcome::without_fit(Sensor::Mag, unit, String::new());
+    outcome.to_nominal = recording.units.to_si(Sensor::Mag);
+    outcome.n_samples = points.len();
+    outcome.output_unit = match references.field_ut {
+        Some(_) => "µT".to_string(),
+        None => "field = 1".to_string(),
+    };
+    outcome.field_model = references.field_model;
+    let method = method.unwrap_or(Method::Lm);
+    let fit = fit_mag(method, points, references.field_ut.unwrap_or(1.0));
+    if let (Ok(f), Some(model), Some(to_ut)) =
+        (&fit, &references.field_model, recording.units.mag.to_si())
+    {
+        // Mean distance of the raw readings from the fitted offset: the sphere's radius.
+        let radius =
+            points.iter().map(|p| (p - f.cal.b).norm()).sum::<f64>() / points.len().max(1) as f64;
+        let check = RadiusCheck::new(radius * to_ut, model);
+        outcome.notes.push(check.sentence());
+        outcome.radius_check = Some(check);
     }
+    outcome.fit = fit.map_err(|e| e.to_string());
+    outcome
 }
 
 /// Rotate the magnetometer fit into the accelerometer frame when both were asked for.
@@ -237,4 +315,55 @@ fn align_outcomes(sensors: &mut [SensorOutcome], still: Option<&StillReport>) {
         mag_fit.cal = alignment.apply_to(&mag_fit.cal);
     }
     mag.alignment = Some(outcome);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::check_input;
+    use crate::recording::LoadOptions;
+
+    /// A recording with every sensor, read from a temporary file.
+    fn recording(rows: usize) -> Recording {
+        let path = std::env::temp_dir().join(format!(
+            "imucal-check-and-calibrate-{}.csv",
+            std::process::id()
+        ));
+        let mut text = Vec::new();
+        crate::synthetic::write_long_recording(rows, &mut text).expect("written to memory");
+        std::fs::write(&path, text).expect("temporary file");
+        let recording = Recording::load(&path, &LoadOptions::default()).expect("reads back");
+        let _ = std::fs::remove_file(&path);
+        recording
+    }
+
+    #[test]
+    fn checking_and_fitting_in_one_gives_what_the_two_steps_give() {
+        let recording = recording(60_000);
+        let sensors = recording.sensors();
+        assert_eq!(
+            sensors.len(),
+            3,
+            "accelerometer, gyroscope and magnetometer"
+        );
+        let input_options = InputOptions::default();
+        let options = FitOptions::default();
+        let input = check_input(recording.clone(), &sensors, &input_options, None);
+        let two_steps = calibrate(&input, &options).expect("fits");
+        let (_, in_one) =
+            check_and_calibrate(recording, &sensors, &input_options, None, &options).expect("fits");
+        for (a, b) in two_steps.sensors.iter().zip(&in_one.sensors) {
+            assert_eq!(a.sensor, b.sensor);
+            let (fa, fb) = (
+                a.fit.as_ref().expect("fitted"),
+                b.fit.as_ref().expect("fitted"),
+            );
+            // The same arithmetic on the same samples: equal bit for bit.
+            assert_eq!(fa.cal, fb.cal, "{}", a.sensor);
+            assert_eq!(fa.rms.to_bits(), fb.rms.to_bits(), "{}", a.sensor);
+            assert_eq!(a.notes, b.notes, "{}", a.sensor);
+            assert_eq!(a.n_samples, b.n_samples, "{}", a.sensor);
+        }
+        assert_eq!(two_steps.sensors.len(), in_one.sensors.len());
+    }
 }

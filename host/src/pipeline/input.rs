@@ -79,6 +79,20 @@ pub fn check_input(
     options: &InputOptions,
     stated_field_ut: Option<f64>,
 ) -> CheckedInput {
+    check_input_then(recording, sensors, options, stated_field_ut, |_, _| ()).0
+}
+
+/// [`check_input`], and `then_mag` on the magnetometer's samples as soon as its checks pass,
+/// on the thread that ran them, while still detection goes on: a long recording's
+/// magnetometer fit then overlaps the detection instead of waiting for it. `None` when the
+/// magnetometer was not asked for or was refused.
+pub fn check_input_then<T: Send>(
+    recording: Recording,
+    sensors: &[Sensor],
+    options: &InputOptions,
+    stated_field_ut: Option<f64>,
+    then_mag: impl FnOnce(&Recording, &[Vec3]) -> T + Send,
+) -> (CheckedInput, Option<T>) {
     let mut refusals: Vec<(Sensor, String)> = Vec::new();
     let mut unit_refusals: Vec<(Sensor, String)> = Vec::new();
     let mut warnings = Vec::new();
@@ -90,7 +104,7 @@ pub fn check_input(
     // The accelerometer's unit check, then the magnetometer's checks, and the still-interval
     // detection read the recording independently: on a long one they run side by side (the
     // detection takes longest).
-    let (mag, accel_unit, still) = std::thread::scope(|scope| {
+    let (mag, accel_unit, still, mag_next) = std::thread::scope(|scope| {
         let side = scope.spawn(|| {
             let accel_unit = match (sensors.contains(&Sensor::Accel), &recording.accel) {
                 (true, Some(accel)) => {
@@ -101,13 +115,20 @@ pub fn check_input(
             let mag = sensors
                 .contains(&Sensor::Mag)
                 .then(|| checked_mag_points(&recording, options, stated_field_ut));
-            (mag, accel_unit)
+            let mag_next = match &mag {
+                Some(checked) if matches!(checked.verdict, MagVerdict::Usable) => {
+                    let recorded = recording.samples(Sensor::Mag).unwrap_or(&[]);
+                    Some(then_mag(&recording, checked.points.as_slice(recorded)))
+                }
+                _ => None,
+            };
+            (mag, accel_unit, mag_next)
         });
         let still = (!inertial.is_empty()).then(|| still_intervals(&recording, &options.still));
-        let (mag, accel_unit) = side
+        let (mag, accel_unit, mag_next) = side
             .join()
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-        (mag, accel_unit, still)
+        (mag, accel_unit, still, mag_next)
     });
     if let Some(e) = accel_unit {
         unit_refusals.push((Sensor::Accel, e.to_string()));
@@ -150,7 +171,7 @@ pub fn check_input(
     // A unit refusal is the first reason given for its sensor.
     refusals.retain(|(s, _)| !unit_refusals.iter().any(|(u, _)| u == s));
     refusals.splice(0..0, unit_refusals.iter().cloned());
-    CheckedInput {
+    let checked = CheckedInput {
         recording,
         sensors: sensors.to_vec(),
         unit_refusals,
@@ -158,7 +179,8 @@ pub fn check_input(
         mag_points,
         refusals,
         warnings,
-    }
+    };
+    (checked, mag_next)
 }
 
 /// Which magnetometer samples its fit uses.

@@ -22,10 +22,10 @@ pub mod methods;
 pub mod params_file;
 pub mod references;
 
-pub use calibrate::{calibrate, FitOptions};
+pub use calibrate::{calibrate, check_and_calibrate, FitOptions};
 pub use calibration::{RecordingCalibration, SensorOutcome};
 pub use chain::{default_accel_chain, ChainChoice};
-pub use input::{check_input, still_intervals, CheckedInput, InputOptions};
+pub use input::{check_input, check_input_then, still_intervals, CheckedInput, InputOptions};
 pub use params_file::params_file;
 pub use references::{ReferenceError, References};
 
