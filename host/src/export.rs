@@ -68,17 +68,20 @@ pub fn export(
     format: ExportFormat,
     source: &str,
 ) -> Result<String, InvalidParamsReason> {
-    export_checked_as(set, set, format, source)
+    export_checked_as(set, set, format, source, &[])
 }
 
 /// [`export`] of `set`, validated as `checked`: the set with the sensors whose calibration
 /// takes raw counts (no nominal unit, so the board's limits do not apply to them) replaced by
 /// identity. Those sensors are still refused when any of their numbers is not finite.
+/// `raw_inputs` names them with their input unit (`("accel", "counts")`), which the generated
+/// comment and the JSON state in place of the nominal unit.
 pub fn export_checked_as(
     set: &CalibrationSet,
     checked: &CalibrationSet,
     format: ExportFormat,
     source: &str,
+    raw_inputs: &[(&str, &str)],
 ) -> Result<String, InvalidParamsReason> {
     validate_for_ranges(checked, &FullScale::WIDEST_SUPPORTED)?;
     let finite = |s: &SensorCalibration| s.a.iter().flatten().chain(&s.b).all(|v| v.is_finite());
@@ -93,11 +96,13 @@ pub fn export_checked_as(
         return Err(InvalidParamsReason::NonFinite(ParamField::Matrix(kind)));
     }
     Ok(match format {
-        ExportFormat::CHeader => c_header(set, source),
-        ExportFormat::Rust => rust_module(set, source),
+        ExportFormat::CHeader => c_header(set, source, raw_inputs),
+        ExportFormat::Rust => rust_module(set, source, raw_inputs),
         ExportFormat::Json => {
             // A tree of numbers and strings always serialises.
-            serde_json::to_string_pretty(&json_document(set, source)).unwrap_or_default() + "\n"
+            serde_json::to_string_pretty(&json_document(set, source, raw_inputs))
+                .unwrap_or_default()
+                + "\n"
         }
     })
 }
@@ -132,8 +137,8 @@ fn c_mat(m: &[[f32; 3]; 3]) -> String {
     )
 }
 
-fn model_comment(prefix: &str) -> String {
-    [
+fn model_comment(prefix: &str, raw_inputs: &[(&str, &str)]) -> String {
+    let mut lines: Vec<String> = [
         "Model per sensor (as the imucal firmware applies it):",
         "  dT = clamp(T - T_ref, -125, 125)    (degC; T_ref = the sensor's t_ref_c)",
         "  u  = x - (b + c1*dT + c2*dT^2 + c3*dT^3)",
@@ -142,19 +147,27 @@ fn model_comment(prefix: &str) -> String {
         "Without extended terms this is y = A * (x - b). Matrices are row-major: A[row][col].",
         "Inputs x in the sensor's nominal unit, outputs y in m/s^2, rad/s, uT; T in degC.",
     ]
-    .iter()
-    .map(|line| format!("{prefix}{line}").trim_end().to_string())
-    .collect::<Vec<_>>()
-    .join("\n")
+    .map(String::from)
+    .to_vec();
+    for (sensor, unit) in raw_inputs {
+        lines.push(format!(
+            "Except: {sensor} inputs x are raw readings in {unit} (as fitted), not the nominal unit."
+        ));
+    }
+    lines
+        .iter()
+        .map(|line| format!("{prefix}{line}").trim_end().to_string())
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// The C header.
-fn c_header(set: &CalibrationSet, source: &str) -> String {
+fn c_header(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) -> String {
     let mut out = String::new();
     out.push_str(&format!(
         "/*\n * IMU calibration exported by imucal from {source} (parameter format {}).\n *\n{}\n */\n#pragma once\n\n",
         set.format_version,
-        model_comment(" * ")
+        model_comment(" * ", raw_inputs)
     ));
     out.push_str(&format!(
         "#define IMUCAL_PARAMS_FORMAT {}\n#define IMUCAL_GRAVITY_MPS2 {}\n#define IMUCAL_FIELD_UT {}\n",
@@ -277,11 +290,11 @@ fn rust_mat(m: &[[f32; 3]; 3]) -> String {
 }
 
 /// The Rust module (plain `//` comments, so it can be pasted or `include!`d anywhere).
-fn rust_module(set: &CalibrationSet, source: &str) -> String {
+fn rust_module(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) -> String {
     let mut out = format!(
         "// IMU calibration exported by imucal from {source} (parameter format {}).\n//\n{}\n\n",
         set.format_version,
-        model_comment("// ")
+        model_comment("// ", raw_inputs)
     );
     out.push_str(&format!(
         "/// Parameter format of the source file.\npub const PARAMS_FORMAT: u16 = {};\n/// Local gravity of the fit, m/s².\npub const GRAVITY_MPS2: f32 = {};\n/// Local field magnitude of the fit, µT.\npub const FIELD_UT: f32 = {};\n",
@@ -401,7 +414,8 @@ fn json_sensor(cal: &SensorCalibration, unit: &str) -> Value {
 }
 
 /// The JSON document of schema [`EXPORT_SCHEMA_NAME`] version [`EXPORT_SCHEMA_VERSION`].
-pub fn json_document(set: &CalibrationSet, source: &str) -> Value {
+/// Each sensor's `input_unit` is its nominal unit, or its entry in `raw_inputs`.
+pub fn json_document(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) -> Value {
     let mut document = json!({
         "schema": EXPORT_SCHEMA_NAME,
         "schema_version": EXPORT_SCHEMA_VERSION,
@@ -427,6 +441,11 @@ pub fn json_document(set: &CalibrationSet, source: &str) -> Value {
             _ => "uT",
         };
         document[name] = json_sensor(sensor(set, name), unit);
+        let input = raw_inputs
+            .iter()
+            .find(|(raw, _)| *raw == name)
+            .map_or(unit, |(_, raw_unit)| raw_unit);
+        document[name]["input_unit"] = json!(input);
     }
     if let Some(k) = &set.gyro_g_sensitivity {
         document["gyro_g_sensitivity"] = json!(k);

@@ -474,3 +474,36 @@ fn analyze_says_why_six_faces_cannot_carry_the_accelerometer_analysis() {
     );
     assert!(!accel.contains("did not converge"), "{accel}");
 }
+
+#[test]
+fn a_fit_of_raw_counts_is_exported_with_its_input_unit_and_never_in_adafruits_forms() {
+    // The Adafruit library subtracts its offsets from m/s²: offsets of ≈ 700 counts there
+    // would ruin every reading.
+    let (path, _) = fit_params(
+        "tsi_mpu6050_multipos.csv",
+        &["--accel-unit", "counts", "--gyro-unit", "counts"],
+    );
+    for format in ["adafruit-json", "motioncal"] {
+        let out_file = temp_file(&format!("counts-{format}.out"));
+        let out = imucal(&["export", &path, "--format", format, "-o", &out_file]);
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "{format}");
+        assert!(
+            stderr.contains("accel in counts") && stderr.contains("m/s²"),
+            "{format}: {stderr}"
+        );
+        assert!(!std::path::Path::new(&out_file).exists(), "{format}");
+    }
+    let header = imucal(&["export", &path, "--format", "c-header"]);
+    assert!(header.status.success(), "{}", text(&header.stderr));
+    assert!(
+        text(&header.stdout).contains("Except: accel inputs x are raw readings in counts"),
+        "{}",
+        text(&header.stdout)
+    );
+    let json = imucal(&["export", &path, "--format", "json"]);
+    let document: serde_json::Value =
+        serde_json::from_slice(&json.stdout).expect("the export is JSON");
+    assert_eq!(document["accel"]["input_unit"], "counts");
+    assert_eq!(document["gyro"]["input_unit"], "rad/s");
+}

@@ -67,8 +67,36 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
         anyhow::bail!("`{shown}` is not exported: {why}");
     }
     let set = params.to_calibration_set(&shown)?;
-    for sensor in params.non_nominal_inputs() {
-        eprintln!("imucal: note: the {sensor} calibration takes raw readings in that unit, not the nominal unit the exported comment states");
+    let raw_inputs: Vec<(&str, &str)> = [
+        ("accel", &params.accel),
+        ("gyro", &params.gyro),
+        ("mag", &params.mag),
+    ]
+    .into_iter()
+    .filter_map(|(name, s)| s.input_unit.as_deref().map(|unit| (name, unit)))
+    .collect();
+    let adafruit = matches!(
+        args.format,
+        ExportFormatArg::Motioncal | ExportFormatArg::AdafruitJson
+    );
+    if adafruit && !raw_inputs.is_empty() {
+        let which: Vec<String> = raw_inputs
+            .iter()
+            .map(|(sensor, unit)| format!("{sensor} in {unit}"))
+            .collect();
+        anyhow::bail!(
+            "`{shown}` is not exported for Adafruit_Sensor_Calibration: its calibration takes \
+             raw readings ({}), but the library applies its offsets and matrix to readings in \
+             m/s², rad/s and µT; fit a recording in those units (e.g. `imucal record` from the \
+             board, or --accel-unit g / --gyro-unit dps / --mag-unit gauss with --field-ut)",
+            which.join(", ")
+        );
+    }
+    for (sensor, unit) in &raw_inputs {
+        eprintln!(
+            "imucal: note: the {sensor} calibration takes raw readings in {unit}, not the nominal \
+             unit (the export says so)"
+        );
     }
     for (sensor, why) in &params.not_fitted {
         eprintln!("imucal: note: `{shown}` has no {sensor} calibration ({why}); it is exported as identity");
@@ -97,7 +125,7 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
             *cal = SensorCalibration::identity();
         }
     }
-    let text = export_checked_as(&set, &checked, format, &name)
+    let text = export_checked_as(&set, &checked, format, &name, &raw_inputs)
         .map_err(|reason| anyhow::anyhow!("`{shown}` is not exported: {reason}"))?;
     write_output(args.out.as_deref(), text.as_bytes())
 }

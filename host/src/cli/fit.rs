@@ -342,9 +342,20 @@ fn write_params(file: ParamsFile, path: &Path) -> anyhow::Result<Option<ParamsFi
     }
     std::fs::write(path, file.to_json())
         .with_context(|| format!("could not write the parameter file `{}`", path.display()))?;
+    let shown = path.display();
+    // A board applies its set to m/s², rad/s and µT: a fit of raw counts is for export only.
+    let raw = file.non_nominal_inputs();
+    let next = if raw.is_empty() {
+        format!("`imucal export {shown} --format c-header` or `imucal flash {shown}` use it")
+    } else {
+        format!(
+            "`imucal export {shown} --format c-header` uses it (not `imucal flash`: {} takes \
+             raw readings, and a board applies its set to m/s², rad/s and µT)",
+            raw.join(", ")
+        )
+    };
     eprintln!(
-        "imucal: wrote {}{}; `imucal export {0} --format c-header` or `imucal flash {0}` use it",
-        path.display(),
+        "imucal: wrote {shown}{}; {next}",
         if left_out.is_empty() {
             String::new()
         } else {
