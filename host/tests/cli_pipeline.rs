@@ -507,3 +507,44 @@ fn a_fit_of_raw_counts_is_exported_with_its_input_unit_and_never_in_adafruits_fo
     assert_eq!(document["accel"]["input_unit"], "counts");
     assert_eq!(document["gyro"]["input_unit"], "rad/s");
 }
+
+#[test]
+fn a_rate_is_said_to_be_ignored_only_when_the_file_has_its_own_time_stamps() {
+    let with_time = real("imucal_nilspod_ferraris.csv");
+    // The same rows without the `t_s` column: then the rate is what times them.
+    let without: String = std::fs::read_to_string(&with_time)
+        .expect("recording")
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_once(',').map_or(l, |(_, rest)| rest).to_string() + "\n")
+        .collect();
+    let without_time = temp_file("no-time.csv");
+    std::fs::write(&without_time, without).expect("scratch file");
+    let flags = ["--gyro-unit", "dps", "--sensor", "gyro", "--rate", "102.4"];
+    let moot = imucal(&[&["fit", with_time.as_str()][..], &flags].concat());
+    assert!(text(&moot.stderr).contains("--rate is ignored"));
+    let used = imucal(&[&["fit", without_time.as_str()][..], &flags].concat());
+    assert!(used.status.success(), "{}", text(&used.stderr));
+    assert!(!text(&used.stderr).contains("--rate is ignored"));
+}
+
+#[test]
+fn a_gyroscope_scale_given_for_data_in_a_physical_unit_is_said_to_be_unused() {
+    let recording = real("imucal_nilspod_ferraris.csv");
+    let out = imucal(&[
+        "fit",
+        &recording,
+        "--gyro-unit",
+        "dps",
+        "--gyro-scale",
+        "0.001",
+        "--sensor",
+        "gyro",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("--gyro-scale 0.001 was not used"),
+        "{}",
+        text(&out.stdout)
+    );
+}

@@ -60,6 +60,7 @@ fn six_face_recording(seed: u64, hold_s: f64) -> (Recording, Vec<(f64, f64, Vec3
         source: "synthetic.csv".into(),
         time,
         time_is_index: false,
+        time_from_file: true,
         accel: Some(accel),
         gyro: Some(gyro),
         temp_c: None,

@@ -11,7 +11,7 @@ use imucal::analysis::{analyse_recording, report, AnalysisError, AnalysisOptions
 use imucal::device::ParamsFile;
 use imucal::geomag::local_field_today;
 use imucal::pipeline::check_input;
-use imucal::pipeline::gyro::gyro_unit_scale;
+use imucal::pipeline::gyro::{gyro_unit_scale, moot_gyro_scale};
 use imucal::session::{analyse_poses, extend_set, load_poses};
 
 use super::args::{AnalyzeArgs, InputArgs};
@@ -160,6 +160,9 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
     };
     let recording = &checked.recording;
     let (gyro_scale, gyro_unit) = gyro_unit_scale(recording, references.gyro_scale);
+    if let Some(moot) = moot_gyro_scale(recording, references.gyro_scale) {
+        eprintln!("imucal: warning: {moot}");
+    }
     let options = AnalysisOptions {
         gravity: references.gravity_mps2,
         field_ut: match (references.field_ut, &args.reference.location) {

@@ -77,7 +77,7 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
     let recording =
         Recording::load(&input.recording, &options).context("the recording could not be read")?;
     // Options that the file makes moot are said to be so, not silently dropped.
-    if input.rate.is_some() && !recording.time_is_index {
+    if input.rate.is_some() && recording.time_from_file {
         eprintln!("imucal: warning: --rate is ignored: the recording has its own time stamps");
     }
     if !recording.ignored_columns.is_empty() {

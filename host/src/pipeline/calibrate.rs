@@ -14,7 +14,7 @@ use crate::still::StillReport;
 use super::align::align_mag;
 use super::calibration::{pose_noise_floor, RecordingCalibration, SensorOutcome};
 use super::chain::default_accel_chain;
-use super::gyro::{fit_gyroscope, gyro_unit_scale};
+use super::gyro::{fit_gyroscope, gyro_unit_scale, moot_gyro_scale};
 use super::input::{check_input_then, CheckedInput, InputOptions};
 use super::methods::{fit_accel, fit_mag};
 use super::references::References;
@@ -248,6 +248,9 @@ impl SensorContext<'_> {
             fit
         } else {
             let (scale, unit) = gyro_unit_scale(recording, self.references.gyro_scale);
+            if let Some(moot) = moot_gyro_scale(recording, self.references.gyro_scale) {
+                outcome.notes.push(moot);
+            }
             outcome.output_unit = unit.to_string();
             outcome.to_nominal = (unit == "rad/s").then_some(scale);
             let method = self.method.unwrap_or(Method::GyroBias);

@@ -17,6 +17,19 @@ pub fn gyro_unit_scale(recording: &Recording, gyro_scale: Option<f64>) -> (f64, 
     }
 }
 
+/// A note when a rad/s-per-count scale was given for a gyroscope whose data are declared in a
+/// physical unit (the unit's own scale is used; the given one is not).
+pub fn moot_gyro_scale(recording: &Recording, gyro_scale: Option<f64>) -> Option<String> {
+    let given = gyro_scale?;
+    recording.units.to_si(Sensor::Gyro).map(|_| {
+        format!(
+            "--gyro-scale {given} was not used: the data are declared in {}, whose scale to \
+             rad/s is known; it applies only with --gyro-unit counts",
+            recording.units.symbol(Sensor::Gyro)
+        )
+    })
+}
+
 /// Fit the gyroscope of `recording` with `method` (bias or scale); `scale` converts its data to
 /// rad/s and `gravity` (m/s²) is the accelerometer's reference for the scale fit.
 pub fn fit_gyroscope(

@@ -225,10 +225,12 @@ pub(super) fn load(
     options: &LoadOptions,
 ) -> Result<Recording, RecordingError> {
     let table = read_table(path, lines, header_line)?;
+    let time_from_file = table.time.is_some();
     let (time, time_is_index) = row_times(table.time, table.rows, options.rate_hz);
     let mut recording = Recording {
         source: path.to_path_buf(),
         time_is_index,
+        time_from_file,
         accel: None,
         gyro: None,
         temp_c: table.temp,

@@ -135,6 +135,7 @@ pub(super) fn load(
         source: path.to_path_buf(),
         time,
         time_is_index: false,
+        time_from_file: true,
         accel: Some(accel),
         gyro,
         temp_c: None,

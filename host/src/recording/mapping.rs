@@ -294,6 +294,7 @@ pub fn parse(
     Ok(Recording {
         source: path.to_path_buf(),
         time_is_index: time_column.is_none() && rate_hz.is_none(),
+        time_from_file: time_column.is_some(),
         accel: present(&sensor_columns[0], accel),
         gyro: present(&sensor_columns[1], gyro),
         temp_c: temp_column.map(|_| temp),

@@ -247,6 +247,8 @@ pub struct Recording {
     pub time: Vec<f64>,
     /// True when `time` counts rows rather than seconds.
     pub time_is_index: bool,
+    /// True when `time` was read from the file (a given sample rate is then not used).
+    pub time_from_file: bool,
     /// Accelerometer readings per row, if present.
     pub accel: Option<Vec<Vec3>>,
     /// Gyroscope readings per row, if present.

@@ -118,6 +118,7 @@ fn parse_lines(
     Ok(Recording {
         source: path.to_path_buf(),
         time_is_index: rate_hz.is_none(),
+        time_from_file: false,
         accel: Some(accel),
         gyro: Some(gyro),
         temp_c: None,
