@@ -499,3 +499,42 @@ fn a_still_detection_flag_out_of_range_is_a_usage_error_naming_the_flag() {
         assert!(stderr.contains(&format!("for '{flag} ")), "{stderr}");
     }
 }
+
+#[test]
+fn a_gyroscope_bias_from_one_wandering_hold_states_the_wander_in_its_uncertainty() {
+    // Five minutes still at 100 Hz; the x bias random-walks (as a MEMS gyroscope's does over
+    // minutes), y and z carry white noise only. σ/√n would claim the x bias to a tenth of what
+    // its batch means show.
+    let mut rng = rand::rngs::StdRng::seed_from_u64(21);
+    let noise = Normal::new(0.0, 0.002).expect("σ > 0");
+    let n = 30_000;
+    let mut walk = 0.0;
+    let mut csv = String::from("t_s,gx,gy,gz\n");
+    for i in 0..n {
+        walk += rng.gen_range(-1.5e-4..1.5e-4);
+        let g = [
+            0.01 + walk + noise.sample(&mut rng),
+            -0.02 + noise.sample(&mut rng),
+            0.005 + noise.sample(&mut rng),
+        ];
+        csv.push_str(&format!(
+            "{:.2},{:.7},{:.7},{:.7}\n",
+            i as f64 / 100.0,
+            g[0],
+            g[1],
+            g[2]
+        ));
+    }
+    let path = scratch("wandering_gyro").join("rec.csv");
+    std::fs::write(&path, csv).expect("scratch file");
+    let (ok, stdout, stderr) = imucal(&["fit", path.to_str().expect("utf-8"), "--json"]);
+    assert!(ok, "{stderr}");
+    let json: Value = serde_json::from_str(&stdout).expect("JSON");
+    let std = vector(&json["gyro"]["param_std"]["b"]);
+    // White noise: σ/√n = 0.002/√30000 ≈ 1.15e-5 rad/s (kept within the fit's ±20 %).
+    let white = 0.002 / (n as f64).sqrt();
+    for axis in [1, 2] {
+        assert!((std[axis] / white - 1.0).abs() < 0.2, "{std:?}");
+    }
+    assert!(std[0] > 3.0 * white, "the wander is not in σ: {std:?}");
+}

@@ -2,8 +2,9 @@
 //! misalignment from the motions between holds (Tedaldi, Pretto & Menegatti 2014), whose gravity
 //! directions come from the default accelerometer chain.
 
-use crate::fit::{Fit, FitError, Method};
+use crate::fit::{Fit, FitError, Method, Pose, Vec3};
 use crate::recording::{Recording, Sensor};
+use crate::stats::batch_means::excess_wander;
 use crate::still::StillReport;
 
 use super::chain::default_accel_chain;
@@ -44,6 +45,28 @@ pub fn fit_gyroscope(
             let accel = default_accel_chain(&still.poses(Sensor::Accel), gravity)?;
             crate::still::motions::fit_gyro_scale_recording(recording, still, &accel.fit.cal, scale)
         }
-        m => fit_gyro(m, &still.poses(Sensor::Gyro), scale),
+        m => fit_gyro(m, &bias_poses(recording, still), scale),
     }
+}
+
+/// The gyroscope's still poses with a variance of the mean that allows for the bias wandering
+/// within a hold ([`excess_wander`]): over a long hold a MEMS gyroscope's bias moves by more
+/// than white noise explains, and `σ²/n` would understate the bias's uncertainty many times.
+/// Each pose's `var` is scaled so that `var/n` is that variance of the mean.
+fn bias_poses(recording: &Recording, still: &StillReport) -> Vec<Pose> {
+    let all = recording.samples(Sensor::Gyro).unwrap_or(&[]);
+    still
+        .intervals
+        .iter()
+        .filter_map(|interval| {
+            let mut pose = interval.pose(Sensor::Gyro)?.clone();
+            let samples: Vec<Vec3> = interval
+                .rows(recording)
+                .into_iter()
+                .filter_map(|row| all.get(row).copied())
+                .collect();
+            pose.var = excess_wander(&samples, pose.var_of_mean()) * pose.n.max(1) as f64;
+            Some(pose)
+        })
+        .collect()
 }

@@ -2,6 +2,7 @@
 //! names its formula and source; none depends on recordings or fits.
 
 pub mod autocorrelation;
+pub mod batch_means;
 pub mod chi_square;
 pub mod descriptive;
 pub mod distributions;
