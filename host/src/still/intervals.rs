@@ -191,7 +191,14 @@ impl StillReport {
             .iter()
             .map(|i| i.accel.as_ref().map(|p| p.mean))
             .collect();
-        let counts = recording.units.is_counts(Sensor::Accel);
+        let counts = recording.units.is_counts(Sensor::Accel).then(|| {
+            // The largest per-sample standard deviation of any hold and axis.
+            self.intervals
+                .iter()
+                .filter_map(|i| i.accel.as_ref())
+                .map(|p| p.var.max().max(0.0).sqrt())
+                .fold(0.0, f64::max)
+        });
         let (members, directions) = cluster_directions(&means, counts, angle_deg);
         for (interval, direction) in self.intervals.iter_mut().zip(members) {
             interval.direction = direction;
