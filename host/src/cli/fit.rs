@@ -28,7 +28,7 @@ use imucal::recording::{Recording, Sensor};
 use nalgebra::Rotation3;
 use serde_json::{json, Value};
 
-use imucal::report::gain::{gain, gain_text};
+use imucal::report::gain::{gain, gain_text_of, Estimated};
 
 use super::args::{FitArgs, SensorChoice};
 use super::write_policy::{check_outputs, Output};
@@ -246,10 +246,11 @@ fn print_table(calibration: &RecordingCalibration) {
             }
             Ok(fit) => fit,
         };
-        let rms_unit = if result.sensor == Sensor::Gyro {
-            result.output_unit.as_str()
-        } else {
-            "relative"
+        let rms_unit = match (result.sensor, fit.method) {
+            // Tedaldi's residuals are the angles left over each turn.
+            (Sensor::Gyro, Method::GyroScale) => "rad, angle per turn",
+            (Sensor::Gyro, _) => result.output_unit.as_str(),
+            _ => "relative",
         };
         println!(
             "{} — method {} — {} poses, {} samples — {} → {} (y = A·(x − b))",
@@ -276,7 +277,8 @@ fn print_table(calibration: &RecordingCalibration) {
             .filter(|_| !result.output_unit.contains("field"))
             .and_then(|k| gain(&fit.cal.a, k))
         {
-            println!("  {}", gain_text(&g, 3));
+            let estimated = Estimated::of(&fit.cal.a);
+            println!("  {}", gain_text_of(&g, 3, estimated));
         }
         let loo = fit
             .loo_rms

@@ -326,7 +326,7 @@ pub(super) fn parameter_table(p: &SensorParameters) -> String {
         .to_nominal
         .and_then(|k| gain::gain(&p.a, k).map(|g| (k, g)))
         .map_or(String::new(), |(k, g)| {
-            gain_table(&g, k, &p.unit_in, &p.unit_out)
+            gain_table(&g, gain::Estimated::of(&p.a), k, &p.unit_in, &p.unit_out)
         });
     format!(
         "<h3>{}</h3><p class=small>y = A·(x − b); x in {}, y in {}</p><table><tr><th></th><th colspan=3>A</th><th>b</th></tr>{rows}</table>{readable}",
@@ -338,22 +338,38 @@ pub(super) fn parameter_table(p: &SensorParameters) -> String {
 
 /// The matrix read as a person reads it: scale factor and scale error per axis and the angles
 /// between the axes, with the unit conversion (`to_nominal` output units per input unit) apart.
-fn gain_table(g: &gain::Gain, to_nominal: f64, unit_in: &str, unit_out: &str) -> String {
+/// Parts the model did not estimate ([`gain::Estimated`]) say so instead of showing zeros.
+fn gain_table(
+    g: &gain::Gain,
+    estimated: gain::Estimated,
+    to_nominal: f64,
+    unit_in: &str,
+    unit_out: &str,
+) -> String {
+    const FIXED: &str = "<td colspan=3>not estimated by this model</td>";
     let mut rows = String::from(
         "<tr><th></th><th>x</th><th>y</th><th>z</th></tr><tr><th>scale factor against nominal</th>",
     );
-    for s in g.scale {
-        rows.push_str(&format!("<td>{s:.5}</td>"));
-    }
-    rows.push_str("</tr><tr><th>scale error</th>");
-    for s in g.scale {
-        rows.push_str(&format!("<td>{:+.3} %</td>", (s - 1.0) * 100.0));
+    if estimated.scale {
+        for s in g.scale {
+            rows.push_str(&format!("<td>{s:.5}</td>"));
+        }
+        rows.push_str("</tr><tr><th>scale error</th>");
+        for s in g.scale {
+            rows.push_str(&format!("<td>{:+.3} %</td>", (s - 1.0) * 100.0));
+        }
+    } else {
+        rows.push_str(FIXED);
     }
     rows.push_str(
         "</tr><tr><th></th><th>yz</th><th>xz</th><th>xy</th></tr><tr><th>axes off 90° by</th>",
     );
-    for d in g.skew_deg {
-        rows.push_str(&format!("<td>{d:+.3}°</td>"));
+    if estimated.axes {
+        for d in g.skew_deg {
+            rows.push_str(&format!("<td>{d:+.3}°</td>"));
+        }
+    } else {
+        rows.push_str(FIXED);
     }
     rows.push_str("</tr>");
     let conversion = if (to_nominal - 1.0).abs() < 1e-12 {

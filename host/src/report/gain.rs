@@ -7,6 +7,28 @@
 
 use crate::fit::Mat3;
 
+/// Which parts of a [`Gain`] the fit estimated. A model that fixes the axes at 90° (the
+/// axis-aligned models) leaves the off-diagonal entries of `A` exactly zero, and one that fixes
+/// the scale too (the bias-only gyroscope fit) leaves `A` an exact multiple of the identity;
+/// no fitted value lands exactly there, and printing `+0.000 %` or `+0.000°` for them would read
+/// as a measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Estimated {
+    /// The sensitivities (the diagonal of `A`).
+    pub scale: bool,
+    /// The angles between the axes (the off-diagonal entries).
+    pub axes: bool,
+}
+
+impl Estimated {
+    /// What the model behind `a` estimated (see the type's comment).
+    pub fn of(a: &Mat3) -> Self {
+        let axes = (0..3).any(|i| (0..3).any(|j| i != j && a[(i, j)] != 0.0));
+        let scale = axes || a[(0, 0)] != a[(1, 1)] || a[(1, 1)] != a[(2, 2)];
+        Self { scale, axes }
+    }
+}
+
 /// Sensitivities and axis non-orthogonality of one calibration matrix.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gain {
@@ -38,6 +60,20 @@ pub fn gain(a: &Mat3, to_nominal: f64) -> Option<Gain> {
         scale: norms.map(|n| n * to_nominal),
         skew_deg,
     })
+}
+
+/// [`gain_text`] saying "not estimated" for the parts the model fixed.
+pub fn gain_text_of(gain: &Gain, digits: usize, estimated: Estimated) -> String {
+    let full = gain_text(gain, digits);
+    let (scale, axes) = full.split_once("; ").unwrap_or((full.as_str(), ""));
+    match (estimated.scale, estimated.axes) {
+        (true, true) => full.clone(),
+        (true, false) => format!("{scale}; axes taken as at 90° (not estimated by this model)"),
+        (false, true) => format!("scale not estimated (fixed by this model); {axes}"),
+        (false, false) => {
+            "scale and axis angles not estimated (this model fits the offset only)".to_string()
+        }
+    }
 }
 
 /// `scale [+1.300 %, …]; axes off 90° by yz …°, xz …°, xy …°` with `digits` decimals of percent.
@@ -94,5 +130,35 @@ mod tests {
     #[test]
     fn a_singular_matrix_has_no_gain() {
         assert_eq!(gain(&Mat3::zeros(), 1.0), None);
+    }
+
+    #[test]
+    fn terms_a_model_fixes_are_not_shown_as_measured() {
+        let g = gain(&(Mat3::identity() * 0.0174533), 57.29578).expect("invertible");
+        let bias_only = Estimated::of(&(Mat3::identity() * 0.0174533));
+        assert_eq!(
+            bias_only,
+            Estimated {
+                scale: false,
+                axes: false
+            }
+        );
+        assert!(gain_text_of(&g, 3, bias_only).contains("not estimated"));
+        let diagonal = Mat3::from_diagonal(&Vec3::new(1.003, 0.997, 0.977));
+        let axis_aligned = Estimated::of(&diagonal);
+        assert!(axis_aligned.scale && !axis_aligned.axes);
+        let text = gain_text_of(&gain(&diagonal, 1.0).expect("invertible"), 3, axis_aligned);
+        assert!(
+            text.contains("-0.299 %") && text.contains("axes taken as at 90°"),
+            "{text}"
+        );
+        let full = Mat3::new(1.0, 0.01, 0.0, 0.0, 1.0, 0.002, 0.0, 0.0, 0.99);
+        assert_eq!(
+            Estimated::of(&full),
+            Estimated {
+                scale: true,
+                axes: true
+            }
+        );
     }
 }
