@@ -34,6 +34,13 @@ pub const SATURATED_FRACTION: f64 = 0.5;
 pub const MIN_DIRECTIONS: usize = 6;
 /// Fewest magnetometer samples accepted: the general ellipsoid has 9 unknowns.
 pub const MIN_MAG_SAMPLES: usize = 12;
+
+/// Largest distance of the samples from zero, in sphere radii, of a magnetometer that was
+/// turned. Turned, the samples lie on a sphere of the field's radius about the hard-iron
+/// offset, which a working sensor keeps within its range: at most about 16 fields for common
+/// parts (±8 gauss against a 0.5 gauss field), so their distance from zero is at most about 17
+/// radii. Not turned, the fitted sphere has the radius of the noise, hundreds of times smaller.
+const NOT_TURNED_RATIO: f64 = 20.0;
 /// Poses or samples whose directions all lie within this angle of a plane are refused.
 pub const MIN_SPREAD_DEG: f64 = validate::MIN_SPREAD_DEG;
 /// A stated field further than this fraction from the data's field draws a warning: an
@@ -337,6 +344,22 @@ pub fn check_mag_coverage(points: &[Vec3]) -> Result<(), InputError> {
             count: points.len(),
             needed: MIN_MAG_SAMPLES,
         });
+    }
+    // Samples of a board that was not turned sit in one small patch far from zero: a sphere
+    // fitted to them has the radius of the noise. The ratio is the same in any unit, so this
+    // is told apart from a unit mix-up (which the field check would report).
+    if let Some(radius) = sphere_radius(points) {
+        let distance = validate::median_centre(points).norm();
+        if distance > NOT_TURNED_RATIO * radius {
+            return Err(InputError::Degenerate {
+                sensor: Sensor::Mag,
+                detail: format!(
+                    "its samples sit in one patch of radius {radius:.3e}, {distance:.3e} from \
+                     zero (in the data's unit): the board was not turned while they were \
+                     recorded; turn it slowly through all orientations"
+                ),
+            });
+        }
     }
     validate::check_spread_of(directions_from_median(points), MIN_SPREAD_DEG).map_err(|e| {
         InputError::Degenerate {

@@ -475,3 +475,32 @@ fn a_magnetometer_turned_only_flat_is_refused_as_planar() {
         ],
     );
 }
+
+#[test]
+fn a_magnetometer_that_was_never_turned_is_refused_as_such_not_as_a_unit_mix_up() {
+    // Five minutes on a table in gauss: the samples are the field plus noise in one spot. A
+    // sphere fitted to them has the noise's radius, which read as "far below the Earth's field
+    // in gauss, pass --mag-unit counts" before.
+    let mut rng = StdRng::seed_from_u64(5);
+    let noise = Normal::new(0.0, 0.002).expect("valid sigma");
+    let field = Vec3::new(0.21, -0.05, 0.43);
+    let mut out = String::from("t_s,mx,my,mz\n");
+    for i in 0..3000 {
+        let m = field + Vec3::from_fn(|_, _| noise.sample(&mut rng));
+        out.push_str(&format!(
+            "{:.2},{:.6},{:.6},{:.6}\n",
+            i as f64 / 10.0,
+            m.x,
+            m.y,
+            m.z
+        ));
+    }
+    let path = write("mag_still.csv", out.as_bytes());
+    let outcome = imucal(&["fit", &path, "--sensor", "mag", "--mag-unit", "gauss"]);
+    assert_refused(&outcome, &["was not turned", "turn it slowly"]);
+    assert!(
+        !outcome.stderr.contains("--mag-unit counts"),
+        "{}",
+        outcome.stderr
+    );
+}
