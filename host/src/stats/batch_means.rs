@@ -59,7 +59,7 @@ pub fn excess_wander(samples: &[Vec3], white_var_of_mean: Vec3) -> Vec3 {
     let dof = (k - 1) as f64;
     Vec3::from_fn(|axis, _| {
         let white = white_var_of_mean[axis];
-        if !(white > 0.0) {
+        if white.is_nan() || white <= 0.0 {
             return white;
         }
         // The batch means of white noise have variance σ²/b = k·white each.
