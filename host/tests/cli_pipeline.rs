@@ -548,3 +548,48 @@ fn a_gyroscope_scale_given_for_data_in_a_physical_unit_is_said_to_be_unused() {
         text(&out.stdout)
     );
 }
+
+#[test]
+fn a_sensor_left_out_of_the_parameter_file_has_no_residual_in_it() {
+    // The gyroscope in counts without --gyro-scale is fitted but not written: its RMS, in
+    // counts, must not stand in the file's rad/s field.
+    let (_, file) = fit_params(
+        "tsi_mpu6050_multipos.csv",
+        &["--accel-unit", "counts", "--gyro-unit", "counts"],
+    );
+    assert!(file.not_fitted.contains_key("gyro"));
+    assert_eq!(file.residuals.gyro_rms, 0.0);
+    assert!(file.residuals.accel_rms > 0.0);
+}
+
+#[test]
+fn a_fit_of_standard_input_is_not_recorded_as_a_board_without_a_device_id() {
+    let recording = std::fs::File::open(real("tsi_mpu6050_multipos.csv")).expect("recording");
+    let params = temp_file("stdin-params.json");
+    let db = temp_file("stdin-history.sqlite");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", format!("sqlite://{db}"))
+        .args([
+            "fit",
+            "-",
+            "--accel-unit",
+            "counts",
+            "--gyro-unit",
+            "counts",
+            "--params-out",
+            &params,
+        ])
+        .stdin(recording)
+        .output()
+        .expect("the imucal binary runs");
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("not recorded in the calibration history") && stderr.contains("--device"),
+        "{stderr}"
+    );
+    assert!(
+        !std::path::Path::new(&db).exists(),
+        "no history was written"
+    );
+}

@@ -395,6 +395,19 @@ fn fitted_but_not_written(
 /// Record the fit written by --params-out in the history.
 fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
     let recording = &args.input.recording;
+    let named = args.device.is_some()
+        || file
+            .provenance
+            .as_ref()
+            .is_some_and(|p| p.device_id.is_some());
+    if recording.as_os_str() == "-" && !named {
+        // Every piped recording would be one board `recording:-`, compared with the others.
+        eprintln!(
+            "imucal: note: not recorded in the calibration history: a recording read from \
+             standard input names no board; pass --device ID to record it"
+        );
+        return Ok(());
+    }
     let device = args
         .device
         .clone()

@@ -73,6 +73,12 @@ pub fn params_file(calibration: &RecordingCalibration) -> ParamsFile {
     let gyro = sensor(Sensor::Gyro);
     let mag = sensor(Sensor::Mag);
     let field = calibration.field_ut.unwrap_or(1.0);
+    // A sensor left out of the file has no residual in it either (its fit may be in counts).
+    let written = |s: Sensor| {
+        calibration
+            .sensor(s)
+            .filter(|_| !not_fitted.contains_key(s.name()))
+    };
     ParamsFile {
         format: PARAMS_FILE_FORMAT,
         created_unix_s: calibration.provenance.created_unix_s,
@@ -85,9 +91,9 @@ pub fn params_file(calibration: &RecordingCalibration) -> ParamsFile {
             field_ut: field,
         },
         residuals: ResidualsJson {
-            accel_rms: residual(calibration.sensor(Sensor::Accel), calibration.gravity_mps2),
-            gyro_rms: residual(calibration.sensor(Sensor::Gyro), 1.0),
-            mag_rms: residual(calibration.sensor(Sensor::Mag), field),
+            accel_rms: residual(written(Sensor::Accel), calibration.gravity_mps2),
+            gyro_rms: residual(written(Sensor::Gyro), 1.0),
+            mag_rms: residual(written(Sensor::Mag), field),
         },
         not_fitted,
         provenance: Some(calibration.provenance.clone()),
