@@ -335,10 +335,11 @@ fn accel_centre(recording: &Recording, still: &StillReport) -> Vec3 {
     (lo + hi) / 2.0
 }
 
-/// Refuse magnetometer samples that do not cover the sphere: too few, or all directions (seen
-/// from the per-axis median) within [`MIN_SPREAD_DEG`] of a plane, as when the board is only
-/// turned flat on a table.
-pub fn check_mag_coverage(points: &[Vec3]) -> Result<(), InputError> {
+/// Refuse magnetometer samples that do not cover the sphere: too few, in one patch (the board
+/// was not turned), or all directions (seen from the per-axis median) within
+/// [`MIN_SPREAD_DEG`] of a plane, as when the board is only turned flat on a table. Returns
+/// the radius of the sphere fitted to them, for [`check_mag_field`].
+pub fn check_mag_coverage(points: &[Vec3]) -> Result<Option<f64>, InputError> {
     if points.len() < MIN_MAG_SAMPLES {
         return Err(InputError::TooFewMagSamples {
             count: points.len(),
@@ -348,8 +349,10 @@ pub fn check_mag_coverage(points: &[Vec3]) -> Result<(), InputError> {
     // Samples of a board that was not turned sit in one small patch far from zero: a sphere
     // fitted to them has the radius of the noise. The ratio is the same in any unit, so this
     // is told apart from a unit mix-up (which the field check would report).
-    if let Some(radius) = sphere_radius(points) {
-        let distance = validate::median_centre(points).norm();
+    let radius = sphere_radius(points);
+    let centre = validate::median_centre(points);
+    if let Some(radius) = radius {
+        let distance = centre.norm();
         if distance > NOT_TURNED_RATIO * radius {
             return Err(InputError::Degenerate {
                 sensor: Sensor::Mag,
@@ -361,20 +364,19 @@ pub fn check_mag_coverage(points: &[Vec3]) -> Result<(), InputError> {
             });
         }
     }
-    validate::check_spread_of(directions_from_median(points), MIN_SPREAD_DEG).map_err(|e| {
-        InputError::Degenerate {
+    validate::check_spread_of(directions_from(points, centre), MIN_SPREAD_DEG)
+        .map_err(|e| InputError::Degenerate {
             sensor: Sensor::Mag,
             detail: format!(
                 "{}; turn the board through all orientations, not only about one axis",
                 strip_fit_prefix(&e.to_string())
             ),
-        }
-    })
+        })
+        .map(|()| radius)
 }
 
-/// Unit directions of `points` from their median centre, computed as they are read.
-fn directions_from_median(points: &[Vec3]) -> impl Iterator<Item = Vec3> + '_ {
-    let centre = validate::median_centre(points);
+/// Unit directions of `points` from `centre`, computed as they are read.
+fn directions_from(points: &[Vec3], centre: Vec3) -> impl Iterator<Item = Vec3> + '_ {
     points
         .iter()
         .filter_map(move |p| (p - centre).try_normalize(1e-300))
@@ -417,19 +419,19 @@ pub fn sphere_radius(points: &[Vec3]) -> Option<f64> {
     (radius_squared > 0.0 && radius_squared.is_finite()).then(|| radius_squared.sqrt() * scale)
 }
 
-/// Check the declared magnetometer unit and a stated field magnitude against the data.
-/// Returns warnings; refuses a unit the field radius contradicts, and a field more than
-/// [`FIELD_REFUSE_FACTOR`] from the data's. Call [`check_mag_coverage`] first: the radius is
-/// only trusted on samples that cover the sphere.
+/// Check the declared magnetometer unit and a stated field magnitude against the data, from
+/// the `radius` of the sphere fitted to its samples ([`check_mag_coverage`] returns it: the
+/// radius is only trusted on samples that cover the sphere). Returns warnings; refuses a unit
+/// the field radius contradicts, and a field more than [`FIELD_REFUSE_FACTOR`] from the data's.
 pub fn check_mag_field(
-    points: &[Vec3],
+    radius: Option<f64>,
     declared: MagUnit,
     field_ut: Option<f64>,
 ) -> Result<Vec<String>, InputError> {
     let Some(to_ut) = declared.to_si() else {
         return Ok(Vec::new());
     };
-    let Some(radius) = sphere_radius(points) else {
+    let Some(radius) = radius else {
         return Ok(Vec::new());
     };
     let gauss_band = (UT_BAND.0 / 100.0, UT_BAND.1 / 100.0);

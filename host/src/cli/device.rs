@@ -212,7 +212,11 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     if let (Some(why), true) = (file.holds_nothing(), args.reset.is_empty()) {
         anyhow::bail!("`{shown}` is not written: {why}");
     }
-    let counts = file.non_nominal_inputs();
+    let counts: Vec<String> = file
+        .non_nominal_inputs()
+        .iter()
+        .map(|(sensor, unit)| format!("{sensor} ({unit})"))
+        .collect();
     if !counts.is_empty() {
         anyhow::bail!(
             "`{shown}` calibrates {} from raw data without a known scale, but the board applies \

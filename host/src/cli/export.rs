@@ -67,14 +67,7 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
         anyhow::bail!("`{shown}` is not exported: {why}");
     }
     let set = params.to_calibration_set(&shown)?;
-    let raw_inputs: Vec<(&str, &str)> = [
-        ("accel", &params.accel),
-        ("gyro", &params.gyro),
-        ("mag", &params.mag),
-    ]
-    .into_iter()
-    .filter_map(|(name, s)| s.input_unit.as_deref().map(|unit| (name, unit)))
-    .collect();
+    let raw_inputs = params.non_nominal_inputs();
     let adafruit = matches!(
         args.format,
         ExportFormatArg::Motioncal | ExportFormatArg::AdafruitJson

@@ -346,7 +346,11 @@ fn write_params(file: ParamsFile, path: &Path) -> anyhow::Result<Option<ParamsFi
         .with_context(|| format!("could not write the parameter file `{}`", path.display()))?;
     let shown = path.display();
     // A board applies its set to m/s², rad/s and µT: a fit of raw counts is for export only.
-    let raw = file.non_nominal_inputs();
+    let raw: Vec<String> = file
+        .non_nominal_inputs()
+        .iter()
+        .map(|(sensor, unit)| format!("{sensor} ({unit})"))
+        .collect();
     let next = if raw.is_empty() {
         format!("`imucal export {shown} --format c-header` or `imucal flash {shown}` use it")
     } else {
@@ -395,27 +399,25 @@ fn fitted_but_not_written(
 /// Record the fit written by --params-out in the history.
 fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
     let recording = &args.input.recording;
-    let named = args.device.is_some()
-        || file
-            .provenance
-            .as_ref()
-            .is_some_and(|p| p.device_id.is_some());
-    if recording.as_os_str() == "-" && !named {
-        // Every piped recording would be one board `recording:-`, compared with the others.
-        eprintln!(
-            "imucal: note: not recorded in the calibration history: a recording read from \
-             standard input names no board; pass --device ID to record it"
-        );
-        return Ok(());
-    }
-    let device = args
+    let named = args
         .device
         .clone()
-        .or_else(|| file.provenance.as_ref().and_then(|p| p.device_id.clone()))
-        .unwrap_or_else(|| {
+        .or_else(|| file.provenance.as_ref().and_then(|p| p.device_id.clone()));
+    let device = match named {
+        Some(device) => device,
+        // Every piped recording would be one board `recording:-`, compared with the others.
+        None if recording.as_os_str() == "-" => {
+            eprintln!(
+                "imucal: note: not recorded in the calibration history: a recording read from \
+                 standard input names no board; pass --device ID to record it"
+            );
+            return Ok(());
+        }
+        None => {
             let stem = recording.file_stem().unwrap_or(recording.as_os_str());
             format!("recording:{}", stem.to_string_lossy())
-        });
+        }
+    };
     let crc = file
         .to_calibration_set(&recording.display().to_string())
         .map_or(0, |set| set.crc32());

@@ -381,15 +381,15 @@ impl Narrow<'_> {
 }
 
 impl ParamsFile {
-    /// `sensor (unit)` for every sensor whose input is not the board's nominal unit.
-    pub fn non_nominal_inputs(&self) -> Vec<String> {
+    /// `(sensor, unit)` for every sensor whose input is not the board's nominal unit.
+    pub fn non_nominal_inputs(&self) -> Vec<(&'static str, &str)> {
         [
             ("accel", &self.accel),
             ("gyro", &self.gyro),
             ("mag", &self.mag),
         ]
         .into_iter()
-        .filter_map(|(name, s)| s.input_unit.as_ref().map(|u| format!("{name} ({u})")))
+        .filter_map(|(name, s)| s.input_unit.as_deref().map(|u| (name, u)))
         .collect()
     }
 

@@ -245,8 +245,8 @@ fn checked_mag_points(
     let selected = points.as_slice(all);
     let verdict = match input_checks::check_mag_coverage(selected) {
         Err(e) => MagVerdict::Refused(e.to_string()),
-        Ok(()) => {
-            match input_checks::check_mag_field(selected, recording.units.mag, stated_field_ut) {
+        Ok(radius) => {
+            match input_checks::check_mag_field(radius, recording.units.mag, stated_field_ut) {
                 Ok(w) => {
                     warnings.extend(w);
                     MagVerdict::Usable

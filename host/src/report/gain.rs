@@ -64,12 +64,16 @@ pub fn gain(a: &Mat3, to_nominal: f64) -> Option<Gain> {
 
 /// [`gain_text`] saying "not estimated" for the parts the model fixed.
 pub fn gain_text_of(gain: &Gain, digits: usize, estimated: Estimated) -> String {
-    let full = gain_text(gain, digits);
-    let (scale, axes) = full.split_once("; ").unwrap_or((full.as_str(), ""));
     match (estimated.scale, estimated.axes) {
-        (true, true) => full.clone(),
-        (true, false) => format!("{scale}; axes taken as at 90° (not estimated by this model)"),
-        (false, true) => format!("scale not estimated (fixed by this model); {axes}"),
+        (true, true) => gain_text(gain, digits),
+        (true, false) => format!(
+            "{}; axes taken as at 90° (not estimated by this model)",
+            scale_text(gain, digits)
+        ),
+        (false, true) => format!(
+            "scale not estimated (fixed by this model); {}",
+            axes_text(gain)
+        ),
         (false, false) => {
             "scale and axis angles not estimated (this model fits the offset only)".to_string()
         }
@@ -78,21 +82,25 @@ pub fn gain_text_of(gain: &Gain, digits: usize, estimated: Estimated) -> String 
 
 /// `scale [+1.300 %, …]; axes off 90° by yz …°, xz …°, xy …°` with `digits` decimals of percent.
 pub fn gain_text(gain: &Gain, digits: usize) -> String {
+    format!("{}; {}", scale_text(gain, digits), axes_text(gain))
+}
+
+fn scale_text(gain: &Gain, digits: usize) -> String {
     let scale: Vec<String> = gain
         .scale
         .iter()
         .map(|s| format!("{:+.digits$} %", (s - 1.0) * 100.0))
         .collect();
+    format!("scale error [{}] of nominal", scale.join(", "))
+}
+
+fn axes_text(gain: &Gain) -> String {
     let skew: Vec<String> = ["yz", "xz", "xy"]
         .iter()
         .zip(gain.skew_deg)
         .map(|(pair, d)| format!("{pair} {d:+.3}°"))
         .collect();
-    format!(
-        "scale error [{}] of nominal; axes off 90° by {}",
-        scale.join(", "),
-        skew.join(", ")
-    )
+    format!("axes off 90° by {}", skew.join(", "))
 }
 
 #[cfg(test)]

@@ -85,14 +85,7 @@ mod tests {
     fn unsigned_counts_over_several_faces_are_centred_on_their_midrange() {
         // Unsigned 16-bit data: offset 32768 per axis, 16384 counts per g; the six faces.
         let offset = Vec3::repeat(32_768.0);
-        let faces = [
-            Vec3::x(),
-            -Vec3::x(),
-            Vec3::y(),
-            -Vec3::y(),
-            Vec3::z(),
-            -Vec3::z(),
-        ];
+        let faces = crate::fit::validate::face_directions();
         let means: Vec<Option<Vec3>> = faces.iter().map(|f| Some(offset + f * 16_384.0)).collect();
         let (_, directions) = cluster_directions(&means, Some(3.0), 10.0);
         assert_eq!(directions.len(), 6);
