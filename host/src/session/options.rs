@@ -57,7 +57,8 @@ pub struct SessionOptions {
     pub mag_timeout: Duration,
     /// Most magnetometer samples fitted (evenly thinned; 0 = all).
     pub mag_max_fit_samples: usize,
-    /// Stillness needed before the rest measurement, s (board time).
+    /// Stillness (after the window first says still) not kept before the rest measurement, s
+    /// (board time).
     pub rest_settle_s: f64,
     /// Length of each rest measurement, s (board time).
     pub rest_measure_s: f64,
@@ -74,8 +75,10 @@ impl Default for SessionOptions {
     /// sensor noise; a turn between positions is far above both); holds of at most 1.5 s, ended
     /// sooner by [`super::hold`]; 0.15 s of stillness seen before a capture (on top of the 0.5 s
     /// window that judges it); the full-rate stream while watching (the gyroscope's moves);
-    /// 1 s of rest before a 3 s "before" measurement (which also gives the gyroscope's bias
-    /// without a hand on the board); budgets 2 mg, 0.5 %, and 0.1 % / 0.05° for the gyroscope.
+    /// 0.5 s of rest (on top of the 0.5 s window that judges it: the end of the turn into the
+    /// rest, whose last slow rotation would bias the gyroscope's mean rate) before a 3 s
+    /// "before" measurement in the same stream (which also gives the gyroscope's bias without a
+    /// hand on the board); budgets 2 mg, 0.5 %, and 0.1 % / 0.05° for the gyroscope.
     fn default() -> Self {
         Self {
             gravity_mps2: solve::STANDARD_GRAVITY,
@@ -104,7 +107,7 @@ impl Default for SessionOptions {
             mag_accept_fraction: 0.8,
             mag_timeout: Duration::from_secs(180),
             mag_max_fit_samples: 3000,
-            rest_settle_s: 1.0,
+            rest_settle_s: 0.5,
             rest_measure_s: 3.0,
             rest_timeout: Duration::from_secs(120),
             read_timeout: Duration::from_secs(3),
