@@ -161,6 +161,46 @@ fn in_band(value: f64, band: (f64, f64)) -> bool {
     value >= band.0 && value <= band.1
 }
 
+/// Slowest row rate, Hz, at which a recording can show a hold: a hand holds a pose for 2–3 s,
+/// and the stillness test needs several samples in a window of half a second.
+pub const SLOWEST_PLAUSIBLE_RATE_HZ: f64 = 1.0;
+
+/// Warnings about a recording's time stamps (`time` in seconds, as read from the file):
+/// - rows that repeat the time stamp of the row before: a logger that writes a row per sensor
+///   per tick, or a clock coarser than the sampling. The rate is then taken from the steps
+///   between distinct stamps ([`crate::recording::median_rate`]), which may not be the rate of
+///   the rows, and the still windows, set in seconds, hold a different number of rows;
+/// - a rate below [`SLOWEST_PLAUSIBLE_RATE_HZ`]: most often milliseconds in a `t_s` column, which
+///   makes every hold a thousand times longer than it was and every move too slow to see (the
+///   still detection then finds nothing and says so, without this cause).
+pub fn time_stamp_warnings(time: &[f64]) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let mut repeats = time.windows(2).filter(|w| w[1] == w[0]);
+    if let Some(first) = repeats.next() {
+        let count = 1 + repeats.count();
+        warnings.push(format!(
+            "{count} of {} rows repeat the time stamp of the row before (the first at t = {} \
+             s): the rate is taken from the steps between distinct time stamps; if the logger \
+             writes a row per sensor per tick, merge them into one row per sample, and if its \
+             clock is coarser than its rate, record the time with more digits",
+            time.len(),
+            first[0]
+        ));
+    }
+    if let Some(rate) = crate::recording::median_rate(time) {
+        if rate < SLOWEST_PLAUSIBLE_RATE_HZ {
+            warnings.push(format!(
+                "the time column advances {:.4} s per row ({rate:.4} Hz), slower than any \
+                 inertial recording that shows holds of a few seconds; if it holds milliseconds, \
+                 write it in seconds, or read the file as it is with --columns mapping `t_ms=t_s` \
+                 and each sensor column to itself (`t_us`, `t_ns` for finer units)",
+                1.0 / rate
+            ));
+        }
+    }
+    warnings
+}
+
 /// Check the declared accelerometer unit against the median magnitude of all samples, which is
 /// 1 g at rest and stays near it during hand motion (the median ignores brief accelerations).
 pub fn check_accel_unit(samples: &[Vec3], declared: AccelUnit) -> Result<(), InputError> {

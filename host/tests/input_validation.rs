@@ -195,6 +195,58 @@ fn a_clean_synthetic_recording_is_accepted_without_warnings() {
 }
 
 #[test]
+fn rows_repeating_the_time_stamp_before_them_are_counted_in_a_warning_and_the_fit_goes_on() {
+    // Every fourth row carries the time stamp of the row before (a clock coarser than the rate).
+    let clean = Synthetic::new(twelve_directions()).csv();
+    let mut lines: Vec<String> = clean.lines().map(str::to_string).collect();
+    let mut repeated = 0;
+    for i in (4..lines.len()).step_by(4) {
+        let previous_time = lines[i - 1].split(',').next().expect("a time").to_string();
+        let rest = lines[i].split_once(',').expect("fields").1.to_string();
+        lines[i] = format!("{previous_time},{rest}");
+        repeated += 1;
+    }
+    let rows = lines.len() - 1;
+    let path = write("repeated_times.csv", (lines.join("\n") + "\n").as_bytes());
+    let outcome = imucal(&["fit", &path, "--json"]);
+    assert!(outcome.success, "{}", outcome.stderr);
+    let expected = format!("{repeated} of {rows} rows repeat the time stamp of the row before");
+    assert!(outcome.stderr.contains(&expected), "{}", outcome.stderr);
+    assert_eq!(outcome.stderr.matches("repeat the time stamp").count(), 1);
+}
+
+#[test]
+fn milliseconds_in_the_seconds_column_are_named_before_the_detection_finds_no_hold() {
+    // The clean recording with its time written in milliseconds under `t_s`.
+    let clean = Synthetic::new(twelve_directions()).csv();
+    let mut lines = clean.lines();
+    let mut text = format!("{}\n", lines.next().expect("header"));
+    for line in lines {
+        let (t, rest) = line.split_once(',').expect("fields");
+        let ms = t.parse::<f64>().expect("a time") * 1000.0;
+        text += &format!("{ms:.0},{rest}\n");
+    }
+    let path = write("milliseconds.csv", text.as_bytes());
+    for command in ["fit", "still"] {
+        let outcome = imucal(&[command, &path]);
+        assert!(!outcome.success, "{command}: {}", outcome.stdout);
+        assert!(
+            outcome
+                .stderr
+                .contains("the time column advances 10.0000 s per row (0.1000 Hz)"),
+            "{command}: {}",
+            outcome.stderr
+        );
+        assert!(outcome.stderr.contains("`t_ms=t_s`"), "{}", outcome.stderr);
+    }
+    // Read as milliseconds, the same file fits.
+    let columns = "t_ms=t_s,ax=ax,ay=ay,az=az,gx=gx,gy=gy,gz=gz";
+    let outcome = imucal(&["fit", &path, "--columns", columns, "--json"]);
+    assert!(outcome.success, "{}", outcome.stderr);
+    assert!(!outcome.stderr.contains("advances"), "{}", outcome.stderr);
+}
+
+#[test]
 fn too_few_directions_are_refused_and_the_missing_faces_asked_for() {
     let path = Synthetic::new(six_faces().into_iter().take(3).collect()).write("three.csv");
     let outcome = imucal(&["fit", &path, "--sensor", "accel"]);

@@ -130,3 +130,36 @@ fn write_fifo(path: &Path) {
     f.write_all(mag_recording().as_bytes())
         .expect("the reader takes the whole recording");
 }
+
+#[test]
+fn a_semicolon_separated_file_is_refused_with_the_columns_option_that_reads_it() {
+    let path = scratch("semicolon").join("mag.csv");
+    std::fs::write(&path, mag_recording().replace(',', ";")).expect("writable");
+    let path = path.display().to_string();
+    let error = fit_mag(&path, None).expect_err("a semicolon header is not imucal's CSV");
+    let mapping = "t_s=t_s,mx=mx,my=my,mz=mz";
+    assert!(error.contains("separated by `;`"), "{error}");
+    assert!(error.contains(&format!("--columns {mapping}")), "{error}");
+    // The option it names reads the file, and the fit is the comma file's.
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args([
+            "fit",
+            &path,
+            "--sensor",
+            "mag",
+            "--json",
+            "--columns",
+            mapping,
+        ])
+        .output()
+        .expect("the binary runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    for (a, b) in offset(&json).iter().zip(offset(&file_fit())) {
+        assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{a} vs {b}");
+    }
+}

@@ -298,7 +298,7 @@ pub struct FitArgs {
 /// Examples shown by `imucal report --help`.
 pub const REPORT_EXAMPLES: &str = "Examples:\n  \
     imucal report session-2025-11-21/                      (a directory written by `imucal calibrate -o`)\n  \
-    imucal report data/real/sf_mpu6050_hmc5883l_full_sphere.csv --accel-unit g --gyro-unit dps --mag-unit gauss --location 46.05,14.51 -o report/\n  \
+    imucal report data/real/sf_mpu6050_hmc5883l_full_sphere.csv --accel-unit g --gyro-unit dps --mag-unit gauss --location 48.14,11.58 -o report/\n  \
     imucal report motioncal_log.txt --format motioncal --rate 100 -o report/";
 
 /// Arguments of `imucal report`.

@@ -25,6 +25,12 @@ fn label_name(recording: &Recording, value: i64) -> Option<String> {
 /// Run the command.
 pub fn run(args: &StillArgs) -> anyhow::Result<()> {
     let recording = super::load(&args.input)?;
+    // Said before the detection, which may find nothing because of them.
+    if recording.time_from_file {
+        for warning in imucal::input_checks::time_stamp_warnings(&recording.time) {
+            eprintln!("imucal: warning: {warning}");
+        }
+    }
     // The same intervals, screened alike, as `fit` and `report` use.
     let (report, warnings) = still_intervals(&recording, &super::still_options(&args.input))
         .map_err(anyhow::Error::msg)?;
@@ -54,7 +60,12 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             .map(|n| json!({"sensor": n.sensor.name(), "sigma": triple(&n.sigma), "margin": n.margin}))
             .collect();
         let directions: Vec<_> = report.directions.iter().map(triple).collect();
-        let out = json!({"intervals": intervals, "directions": directions, "noise": noise, "window": report.window});
+        // The window in the unit `--window` takes, and in rows as the detector used it.
+        let window_s = recording.rate_hz().map(|rate| report.window as f64 / rate);
+        let out = json!({
+            "intervals": intervals, "directions": directions, "noise": noise,
+            "window_s": window_s, "window_samples": report.window,
+        });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }

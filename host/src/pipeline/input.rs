@@ -95,7 +95,11 @@ pub fn check_input_then<T: Send>(
 ) -> (CheckedInput, Option<T>) {
     let mut refusals: Vec<(Sensor, String)> = Vec::new();
     let mut unit_refusals: Vec<(Sensor, String)> = Vec::new();
-    let mut warnings = Vec::new();
+    let mut warnings: Vec<String> = if recording.time_from_file {
+        input_checks::time_stamp_warnings(&recording.time)
+    } else {
+        Vec::new()
+    };
     let inertial: Vec<Sensor> = sensors
         .iter()
         .copied()

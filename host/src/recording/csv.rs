@@ -7,6 +7,7 @@
 use std::path::Path;
 
 use super::lines::LineReader;
+use super::mapping;
 use super::rows::{content, parse_block, Block, Columns, LabelInterner, Layout, Part, Role};
 use super::{
     display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError, Sensor,
@@ -120,6 +121,30 @@ fn column_roles(header: &Header) -> Vec<Role> {
 /// the second thread costs well under 1 % of the block's parsing, small enough to stay in cache.
 const BLOCK_BYTES: usize = 1 << 20;
 
+/// The refusal of a header that names imucal's columns with another delimiter than the comma
+/// (semicolon or tab, as spreadsheets in many locales write), with the `--columns` mapping that
+/// reads it; `None` when it does not.
+fn other_delimiter(path: &Path, header_line: &str) -> Option<RecordingError> {
+    let (delimiter, shown) = [(';', ";"), ('\t', "tab")]
+        .into_iter()
+        .find(|(d, _)| header_line.contains(*d))?;
+    let header = parse_header(path, &header_line.replace(delimiter, ",")).ok()?;
+    if header.sensors.is_empty() {
+        return None;
+    }
+    let mapped: Vec<String> = header
+        .names
+        .iter()
+        .filter(|name| mapping::is_target(name))
+        .map(|name| format!("{name}={name}"))
+        .collect();
+    Some(RecordingError::OtherDelimiter {
+        path: display(path),
+        delimiter: shown.to_string(),
+        mapping: mapped.join(","),
+    })
+}
+
 /// Read the rows after `header_line` (the first line that is not skipped, if any) from `lines`.
 fn read_table(
     path: &Path,
@@ -143,10 +168,12 @@ fn read_table(
     let header_line = content(&header_line);
     let header = parse_header(path, header_line)?;
     if header.sensors.is_empty() {
-        return Err(RecordingError::NoSensor {
-            path: display(path),
-            header: header_line.chars().take(80).collect(),
-        });
+        return Err(other_delimiter(path, header_line).unwrap_or_else(|| {
+            RecordingError::NoSensor {
+                path: display(path),
+                header: header_line.chars().take(80).collect(),
+            }
+        }));
     }
     let path_text = display(path);
     let layout = Layout {

@@ -118,6 +118,13 @@ pub struct ColumnMapping {
 
 const TIME_KEYS: [(&str, f64); 4] = [("t_s", 1.0), ("t_ms", 1e-3), ("t_us", 1e-6), ("t_ns", 1e-9)];
 
+/// Whether `name` is an imucal column a mapping can name (`ax` … `mz`, `temp_c`, a time key).
+pub(super) fn is_target(name: &str) -> bool {
+    TIME_KEYS.iter().any(|(key, _)| *key == name)
+        || name == "temp_c"
+        || Sensor::ALL.iter().any(|s| s.columns().contains(&name))
+}
+
 impl FromStr for ColumnMapping {
     type Err = ImportError;
 

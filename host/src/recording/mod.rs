@@ -95,6 +95,16 @@ pub enum RecordingError {
         /// The header line as read.
         header: String,
     },
+    /// A header whose names are right but separated by another delimiter than the comma.
+    #[error("`{path}`, header: the columns are separated by `{delimiter}`, not by commas; read the file as it is with `--columns {mapping}` (each column mapped to itself; that option reads any delimiter), or write it with commas")]
+    OtherDelimiter {
+        /// File concerned.
+        path: String,
+        /// The delimiter the header uses.
+        delimiter: String,
+        /// A `--columns` mapping of the columns it names.
+        mapping: String,
+    },
     /// A field is not a finite number.
     #[error("`{path}` line {line}, column `{column}`: `{text}` is not a finite number; correct or delete that row")]
     BadNumber {
