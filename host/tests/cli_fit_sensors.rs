@@ -422,3 +422,62 @@ fn location_supplies_the_field_reference_and_checks_the_radius() {
     assert!(!ok);
     assert!(stderr.contains("latitude 95° is outside"), "{stderr}");
 }
+
+#[test]
+fn still_names_the_unit_problem_that_fit_refuses_the_sensor_for() {
+    // Raw counts read as m/s² and rad/s: `fit` refuses both sensors, `still` lists the holds
+    // and says the same.
+    let path = real("tsi_mpu6050_multipos.csv");
+    let (fit_ok, _, fit_err) = imucal(&["fit", &path]);
+    assert!(!fit_ok);
+    let (ok, stdout, stderr) = imucal(&["still", &path]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("still intervals detected"), "{stdout}");
+    for phrase in ["pass --accel-unit counts", "pass --gyro-unit counts"] {
+        assert!(fit_err.contains(phrase), "fit: {fit_err}");
+        assert!(stderr.contains(phrase), "still: {stderr}");
+    }
+    // With the right units there is nothing to say.
+    let (_, _, stderr) = imucal(&[
+        "still",
+        &path,
+        "--accel-unit",
+        "counts",
+        "--gyro-unit",
+        "counts",
+    ]);
+    assert!(!stderr.contains("refuse the sensor"), "{stderr}");
+}
+
+#[test]
+fn a_parameter_file_names_the_methods_and_units_of_the_sensors_it_holds_only() {
+    let path = real("tsi_mpu6050_multipos.csv");
+    let out = scratch("provenance").join("params.json");
+    let _ = std::fs::remove_file(&out);
+    let out_text = out.display().to_string();
+    let (_, _, stderr) = imucal(&[
+        "fit",
+        &path,
+        "--accel-unit",
+        "counts",
+        "--gyro-unit",
+        "counts",
+        "--no-history",
+        "--params-out",
+        &out_text,
+    ]);
+    let file = json(&std::fs::read_to_string(&out).unwrap_or_else(|e| panic!("{e}: {stderr}")));
+    let not_fitted = file["not_fitted"].as_object().expect("not_fitted");
+    assert!(not_fitted.contains_key("gyro"), "{file}");
+    let provenance = &file["provenance"];
+    for key in ["methods", "input_units"] {
+        let listed = provenance[key].as_object().expect("a map");
+        assert!(listed.contains_key("accel"), "{provenance}");
+        for left_out in not_fitted.keys() {
+            assert!(
+                !listed.contains_key(left_out),
+                "{key} names {left_out}: {provenance}"
+            );
+        }
+    }
+}

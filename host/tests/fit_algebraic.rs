@@ -332,7 +332,7 @@ fn six_position_refuses_tilted_poses_without_expected_directions() {
     let poses = accel_poses(&mut r, &truth, &dirs, G, 0.0, 1);
     assert!(is_underdetermined_with(
         fit_six_position(&poses, None, G),
-        "expected direction"
+        "every pose must lie on a face"
     ));
 }
 

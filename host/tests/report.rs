@@ -333,6 +333,12 @@ fn the_gyroscope_section_shows_each_axis_rate_at_rest_before_and_after_and_the_s
         "misalignment_deg": 0.04, "misalignment_sigma_deg": 0.01, "moves_recorded": 14,
         "moves_used": 12, "rms_deg": 0.05, "tilt_deg": [700.0, 650.0, 400.0]});
     std::fs::write(dir.join("summary.json"), summary.to_string()).unwrap();
+    // The written set holds that correction too (its errors are what both tables show).
+    let params_path = dir.join("params.json");
+    let mut params: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&params_path).unwrap()).unwrap();
+    params["gyro"]["A"][0][0] = serde_json::json!(1.0 / 1.013);
+    std::fs::write(&params_path, params.to_string()).unwrap();
     let data = from_session_dir(&dir).expect("session");
     let gyro = data.gyro.as_ref().expect("the poses carry gyroscope means");
     for (raw, calibrated) in gyro.raw_dps.iter().zip(&gyro.calibrated_dps) {

@@ -406,7 +406,7 @@ pub fn analyse_observations(
             coefficients: coefficients(&problem, &final_fit, idx, unit, inflation),
             note: if provisional.contains(&kind.name()) {
                 format!(
-                    "provisional: confounded with time (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); improves held-out error by \
+                    "provisional: confounded with time (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); lowers the held-out mean square error by \
                      {:.0} % (corrected t p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
                      applies temperature terms only; confirm with a recording where temperature does not follow time \
                      (a cool-down, or a second warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
@@ -415,7 +415,7 @@ pub fn analyse_observations(
                 )
             } else {
                 format!(
-                    "improves held-out error by {:.0} % (corrected t p = {p_value:.1e})",
+                    "lowers the held-out mean square error by {:.0} % (corrected t p = {p_value:.1e})",
                     100.0 * score
                 )
             },

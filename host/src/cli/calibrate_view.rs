@@ -217,11 +217,18 @@ fn fit_headline(accel: imucal::fit::Method, gyro: imucal::fit::Method) -> String
     )
 }
 
+/// The sensor's gain error against nominal per axis, ppm, as the gyroscope's line, `fit` and
+/// the report give it: a correction `A = 1.02` is a sensor that reads 1/1.02 of the truth,
+/// −1.96 %. Its σ relative to the gain is that of `A`'s diagonal to first order.
+fn scale_error_ppm(a: &imucal::fit::Mat3) -> [f64; 3] {
+    gain(a, 1.0).map_or([f64::NAN; 3], |g| g.scale.map(|s| (s - 1.0) * 1e6))
+}
+
 pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
     let u = &fit.uncertainties;
     let mg = 1000.0 / imucal::session::solve::STANDARD_GRAVITY;
     let accel_b = [0, 1, 2].map(|i| fit.accel.cal.b[i] * mg);
-    let accel_scale = [0, 1, 2].map(|i| (fit.accel.cal.a[(i, i)] - 1.0) * 1e6);
+    let accel_scale = scale_error_ppm(&fit.accel.cal.a);
     let gyro_b = [0, 1, 2].map(|i| fit.gyro.cal.b[i].to_degrees());
     let mag_b = [0, 1, 2].map(|i| fit.mag.cal.b[i]);
     let source = match fit.field_source {
@@ -237,7 +244,7 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
             sigmas(u.accel_bias_mg, 3)
         ),
         format!(
-            "                 scale  {} ppm ± {}",
+            "                 scale error {} ppm ± {}",
             triple(accel_scale, 0),
             sigmas(u.accel_scale_ppm, 0)
         ),
@@ -502,6 +509,19 @@ mod tests {
         );
         let bias_only = fit_headline(Method::Lm, Method::GyroBias);
         assert!(bias_only.contains("scale not calibrated"), "{bias_only}");
+    }
+
+    #[test]
+    fn the_accelerometer_scale_error_has_the_sign_of_the_gyroscope_line_and_the_report() {
+        // A correction of 1.02 on x: the sensor reads 1/1.02 of the truth, −19 608 ppm.
+        let a = imucal::fit::Mat3::from_diagonal(&imucal::fit::Vec3::new(1.02, 1.0, 0.99));
+        let ppm = scale_error_ppm(&a);
+        assert!((ppm[0] - (1.0 / 1.02 - 1.0) * 1e6).abs() < 1e-6, "{ppm:?}");
+        assert!(ppm[1].abs() < 1e-9, "{ppm:?}");
+        assert!(ppm[2] > 10_000.0, "{ppm:?}");
+        // The same convention as the gain text the gyroscope's line prints.
+        let text = gain_text(&gain(&a, 1.0).expect("regular"), 3);
+        assert!(text.contains("-1.961 %"), "{text}");
     }
 
     #[test]

@@ -81,10 +81,20 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
         eprintln!("imucal: warning: --rate is ignored: the recording has its own time stamps");
     }
     if !recording.ignored_columns.is_empty() {
+        // A trailing delimiter leaves a column without a name: say so rather than nothing.
+        let named: Vec<String> = recording
+            .ignored_columns
+            .iter()
+            .map(|name| match name.trim() {
+                "" => "a column without a name (a trailing or doubled comma in the header)"
+                    .to_string(),
+                _ => name.clone(),
+            })
+            .collect();
         eprintln!(
             "imucal: note: not read from {}: {}",
             input.recording.display(),
-            recording.ignored_columns.join(", ")
+            named.join(", ")
         );
     }
     Ok(recording)

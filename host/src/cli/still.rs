@@ -1,6 +1,7 @@
 //! `imucal still`: list the still intervals of a recording and the directions they cover.
 
 use imucal::fit::Vec3;
+use imucal::input_checks;
 use imucal::pipeline::still_intervals;
 use imucal::recording::{Recording, Sensor};
 use serde_json::json;
@@ -36,6 +37,22 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?;
     for warning in &warnings {
         eprintln!("imucal: warning: {warning}");
+    }
+    // The unit checks `fit`, `analyze` and `report` refuse a sensor for: this command lists
+    // the holds all the same, in the declared units, and says so.
+    let accel_unit = recording
+        .accel
+        .as_deref()
+        .and_then(|accel| input_checks::check_accel_unit(accel, recording.units.accel).err());
+    let gyro_unit = recording
+        .gyro
+        .as_ref()
+        .and_then(|_| input_checks::check_gyro_unit(&recording, &report).err());
+    for problem in accel_unit.iter().chain(gyro_unit.iter()) {
+        eprintln!(
+            "imucal: warning: {problem} (fit, analyze and report refuse the sensor for this; \
+             the figures below are in the declared unit)"
+        );
     }
     if args.json {
         let intervals: Vec<_> = report

@@ -149,8 +149,10 @@ fn expected_directions(poses: &[Pose], expected: Option<&[Vec3]>) -> Result<Vec<
             .map(|(i, d)| {
                 d.ok_or_else(|| {
                     FitError::Underdetermined(format!(
-                        "pose {i} is more than {FACE_TOLERANCE_DEG}° from every axis; pass the \
-                         expected direction of each pose"
+                        "pose {i} is more than {FACE_TOLERANCE_DEG}° from every axis, and the \
+                         six-position fit takes each pose's face from its reading: every pose \
+                         must lie on a face (an axis up or down); for tilted poses use a norm \
+                         model (--method lm or axis-aligned)"
                     ))
                 })
             })

@@ -95,8 +95,18 @@ pub fn params_file(calibration: &RecordingCalibration) -> ParamsFile {
             gyro_rms: residual(written(Sensor::Gyro), 1.0),
             mag_rms: residual(written(Sensor::Mag), field),
         },
+        // The methods and units of the sensors the file holds, not of those it leaves out.
+        provenance: Some({
+            let mut provenance = calibration.provenance.clone();
+            provenance
+                .methods
+                .retain(|name, _| !not_fitted.contains_key(name));
+            provenance
+                .input_units
+                .retain(|name, _| !not_fitted.contains_key(name));
+            provenance
+        }),
         not_fitted,
-        provenance: Some(calibration.provenance.clone()),
         // A recording names no board; `fit --device` goes into the provenance.
         device: None,
         absent_sensors: Vec::new(),

@@ -4,7 +4,7 @@ use serde_json::Value;
 
 use super::{gain, MagSamples, SensorParameters};
 use crate::device::ParamsFile;
-use crate::fit::Vec3;
+use crate::fit::{Mat3, Vec3};
 use crate::session::coverage::{sphere_centre, Coverage, REGIONS};
 
 /// Text for a value that was not estimated (NaN, infinite or absent in the input).
@@ -105,8 +105,9 @@ fn significant(value: f64, digits: usize) -> String {
     format!("{value:.decimals$}")
 }
 
-/// The summary's gyroscope scale fit (`gyro_scale`) as rows for the report.
-pub(super) fn gyro_scale_rows(value: &Value) -> Vec<(String, String)> {
+/// The summary's gyroscope scale fit (`gyro_scale`) as rows for the report; `a` is the written
+/// gyroscope matrix, whose scale errors the parameter table gives, so that both say the same.
+pub(super) fn gyro_scale_rows(value: &Value, a: &Mat3) -> Vec<(String, String)> {
     let number = |key: &str| value[key].as_f64();
     let triple = |key: &str| -> Option<[f64; 3]> {
         let a = value[key].as_array()?;
@@ -120,8 +121,10 @@ pub(super) fn gyro_scale_rows(value: &Value) -> Vec<(String, String)> {
         return Vec::new();
     };
     let sigma = triple("scale_sigma_pct").unwrap_or([f64::NAN; 3]);
-    // `scale` is the correction (diagonal of A); the sensor reads high by its inverse, as the
-    // parameter table's scale error says.
+    // The sensor's gain against nominal, as the parameter table computes it from the whole
+    // matrix (the gyroscope's A also turns it into the accelerometer's frame, so its diagonal
+    // alone is not the gain); the diagonal's inverse when the matrix is singular.
+    let gains = gain::gain(a, 1.0).map_or(scale.map(|d| 1.0 / d), |g| g.scale);
     let mut rows = vec![(
         "scale error of x, y, z (how far the sensor reads from nominal, ± one standard \
          deviation)"
@@ -130,7 +133,7 @@ pub(super) fn gyro_scale_rows(value: &Value) -> Vec<(String, String)> {
             .map(|i| {
                 format!(
                     "{:+.3} % ± {}",
-                    (1.0 / scale[i] - 1.0) * 100.0,
+                    (gains[i] - 1.0) * 100.0,
                     with_unit(Some(sigma[i]), "%")
                 )
             })
@@ -456,4 +459,34 @@ pub(super) fn constant_temperature_text(what: &str, temps: &[f64]) -> String {
         (lo + hi) / 2.0,
         hi - lo
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn the_gyroscope_scale_rows_give_the_scale_errors_of_the_parameter_table() {
+        // A gain error of 2 % on x, turned by 3° about z into another frame: the diagonal
+        // alone is not the gain.
+        let turn = nalgebra::Rotation3::from_axis_angle(&Vec3::z_axis(), 3f64.to_radians());
+        let a = turn.matrix() * Mat3::from_diagonal(&Vec3::new(1.0 / 1.02, 1.0, 1.0));
+        let summary = json!({
+            "scale": [a[(0, 0)], a[(1, 1)], a[(2, 2)]],
+            "scale_sigma_pct": [0.01, 0.01, 0.01],
+            "misalignment_deg": 0.0,
+            "misalignment_sigma_deg": 0.01,
+        });
+        let rows = gyro_scale_rows(&summary, &a);
+        let (_, scale) = &rows[0];
+        let table = gain::gain(&a, 1.0).expect("regular").scale;
+        for (text, g) in scale.split(", ").zip(table) {
+            assert!(
+                text.starts_with(&format!("{:+.3} %", (g - 1.0) * 100.0)),
+                "{text} vs {g}"
+            );
+        }
+        assert!(scale.starts_with("+2.000 %"), "{scale}");
+    }
 }

@@ -273,7 +273,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
             }
         }
         if let Some(gyro) = data.gyro.as_mut() {
-            gyro.scale_fit = gyro_scale_rows(&summary["gyro_scale"]);
+            gyro.scale_fit = gyro_scale_rows(&summary["gyro_scale"], &mat3_of(&params.gyro.a));
         }
     } else {
         data.verdict_level = "unknown".to_string();
