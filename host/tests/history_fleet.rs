@@ -232,6 +232,43 @@ fn in_a_fleet_of_eight_the_faulty_board_is_found_with_the_axes_pooled() {
     }
 }
 
+#[test]
+fn a_set_fitted_from_raw_counts_is_not_compared_with_a_fleet_in_nominal_units() {
+    // Seven healthy boards in m/s², and one whose accelerometer set maps raw counts
+    // (16384 per g): its offset in counts is thousands of the fleet's m/s² away.
+    let records: Vec<CalibrationRecord> = (0..8)
+        .map(|b| {
+            let mut record = board_record(2000 + b);
+            if b == 7 {
+                record.params.accel.input_unit = Some("counts".into());
+                record.params.accel.b = [703.0, -361.0, -1834.0];
+                for k in 0..3 {
+                    record.params.accel.a[k][k] = 9.80665 / 16384.0;
+                }
+            }
+            record
+        })
+        .collect();
+    let refs: Vec<&CalibrationRecord> = records.iter().collect();
+    let model = FleetModel::fit(&refs, &FleetOptions::default()).expect("eight boards");
+    for healthy in &records[..7] {
+        assert!(model.outlying(healthy).is_empty());
+    }
+    let findings = model.outlying(&records[7]);
+    assert!(
+        findings.iter().all(|f| !f.parameter.starts_with("accel.")),
+        "{findings:?}"
+    );
+    // The same numbers declared in m/s² are a gross fault: what protects the board above is
+    // that its unit is known, not that its values are near.
+    let mut mislabelled = records[7].clone();
+    mislabelled.params.accel.input_unit = None;
+    assert!(model
+        .outlying(&mislabelled)
+        .iter()
+        .any(|f| f.parameter.starts_with("accel.")));
+}
+
 /// The pooled small-fleet test keeps its stated false-alarm rate: over 300 batches of eight
 /// healthy boards (2 400 boards, each compared with the other seven), the expected number of
 /// flagged boards at 0.1 % per board is 2.4; more than 10 (Poisson tail below 10⁻⁴) would mean

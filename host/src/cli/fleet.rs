@@ -70,6 +70,14 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
             p.parameter, p.boards, p.median, sd, p.threshold_z, p.min, p.max
         );
     }
+    for board in report.results.iter().filter(|b| !b.not_compared.is_empty()) {
+        println!(
+            "{}: not compared with the fleet: {} (its parameters map raw counts, the fleet's \
+             the nominal units)",
+            board.device_id,
+            board.not_compared.join(", ")
+        );
+    }
     let outliers: Vec<_> = report.results.iter().filter(|b| b.outlier).collect();
     println!("\n{} outlying boards", outliers.len());
     for board in outliers {

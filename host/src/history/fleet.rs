@@ -137,6 +137,10 @@ pub struct BoardResult {
     pub max_abs_z: f64,
     /// The parameters beyond the threshold, farthest first.
     pub findings: Vec<Finding>,
+    /// Sensors left out of the comparison with the unit their parameters map from: a set fitted
+    /// from raw counts (`input_unit`) has an `A` and `b` in counts, which no board calibrated in
+    /// the nominal units can be compared with.
+    pub not_compared: Vec<String>,
 }
 
 /// The fleet's statistics and every board's test.
@@ -265,7 +269,7 @@ impl FleetModel {
         let boards = records.len();
         let mut values: BTreeMap<String, Vec<f64>> = BTreeMap::new();
         for record in records {
-            for (name, value) in record.parameters() {
+            for (name, value) in comparable_parameters(record) {
                 if value.is_finite() {
                     values.entry(name).or_default().push(value);
                 }
@@ -343,7 +347,7 @@ impl FleetModel {
     /// `|z|` of every parameter of `record` against the fleet, largest first, as findings
     /// (those beyond the threshold are the outlying ones).
     pub fn distances(&self, record: &CalibrationRecord) -> Vec<Finding> {
-        let values = record.parameters();
+        let values = comparable_parameters(record);
         let mut out: Vec<Finding> = self
             .parameters
             .iter()
@@ -452,7 +456,33 @@ fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
         outlier: !findings.is_empty(),
         max_abs_z,
         findings,
+        not_compared: stored
+            .record
+            .params
+            .non_nominal_inputs()
+            .into_iter()
+            .map(|(sensor, unit)| format!("{sensor} (fitted from {unit})"))
+            .collect(),
     }
+}
+
+/// The parameters of `record` the fleet compares: those of the sensors fitted in their nominal
+/// units (m/s², rad/s, µT), not of a sensor whose set maps raw counts (see
+/// [`BoardResult::not_compared`]).
+fn comparable_parameters(record: &CalibrationRecord) -> BTreeMap<String, f64> {
+    let foreign: Vec<&str> = record
+        .params
+        .non_nominal_inputs()
+        .into_iter()
+        .map(|(sensor, _)| sensor)
+        .collect();
+    let mut parameters = record.parameters();
+    parameters.retain(|name, _| {
+        name.split('.')
+            .next()
+            .is_none_or(|sensor| !foreign.contains(&sensor))
+    });
+    parameters
 }
 
 /// Test `record` against the fleet in `store` (the newest record of every other board) before
