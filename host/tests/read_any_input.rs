@@ -37,8 +37,14 @@ fn mag_recording() -> String {
 /// Run `imucal fit ARGS --sensor mag --json` with `stdin` as its input; the parsed JSON, or the
 /// error text.
 fn fit_mag(input: &str, stdin: Option<&str>) -> Result<Value, String> {
+    fit_mag_with(input, stdin, &[])
+}
+
+/// [`fit_mag`] with `extra` arguments.
+fn fit_mag_with(input: &str, stdin: Option<&str>, extra: &[&str]) -> Result<Value, String> {
     let mut child = Command::new(env!("CARGO_BIN_EXE_imucal"))
         .args(["fit", input, "--sensor", "mag", "--json"])
+        .args(extra)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -141,24 +147,7 @@ fn a_semicolon_separated_file_is_refused_with_the_columns_option_that_reads_it()
     assert!(error.contains("separated by `;`"), "{error}");
     assert!(error.contains(&format!("--columns {mapping}")), "{error}");
     // The option it names reads the file, and the fit is the comma file's.
-    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
-        .args([
-            "fit",
-            &path,
-            "--sensor",
-            "mag",
-            "--json",
-            "--columns",
-            mapping,
-        ])
-        .output()
-        .expect("the binary runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let json = fit_mag_with(&path, None, &["--columns", mapping]).expect("the option reads it");
     for (a, b) in offset(&json).iter().zip(offset(&file_fit())) {
         assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{a} vs {b}");
     }

@@ -71,12 +71,7 @@ impl RestMeasurement {
         match state {
             Some(state) if state.still && state.still_for_s >= self.settle_s => {
                 self.kept.push(*sample);
-                let span = match (self.kept.first(), self.kept.last()) {
-                    (Some(a), Some(b)) => b.t_s - a.t_s,
-                    _ => 0.0,
-                };
-                // NaN (a non-finite request) ends the measurement at once instead of never.
-                if span >= self.measure_s || self.measure_s.is_nan() {
+                if covers(&self.kept, self.measure_s) {
                     self.done = true;
                     RestProgress::Done
                 } else {
@@ -170,6 +165,16 @@ impl<L: Read + Write> Runner<'_, L> {
     }
 }
 
+/// Whether `samples` span `seconds` of board time; a NaN request counts as covered, so that it
+/// ends a measurement at once instead of never.
+fn covers(samples: &[UnitSample], seconds: f64) -> bool {
+    let span = match (samples.first(), samples.last()) {
+        (Some(a), Some(b)) => b.t_s - a.t_s,
+        _ => 0.0,
+    };
+    span >= seconds || seconds.is_nan()
+}
+
 /// Stream `kind` at full rate until `seconds` of board time are covered, then stop the stream;
 /// `read_timeout` is the longest wait for each sample batch.
 pub fn stream_for<L: Read + Write>(
@@ -191,12 +196,7 @@ pub fn stream_for<L: Read + Write>(
             }
             Err(e) => break Err(e.into()),
         }
-        let span = match (samples.first(), samples.last()) {
-            (Some(a), Some(b)) => b.t_s - a.t_s,
-            _ => 0.0,
-        };
-        // NaN (a non-finite request) ends the stream at once instead of never.
-        if span >= seconds || seconds.is_nan() {
+        if covers(&samples, seconds) {
             break Ok(());
         }
     };
