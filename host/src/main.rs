@@ -7,12 +7,28 @@ use std::any::Any;
 use std::io::ErrorKind;
 use std::process::ExitCode;
 
-use clap::Parser;
+use clap::{CommandFactory, FromArgMatches};
 
 use cli::args::{Cli, Command};
 
+/// `command` and its subcommands with every option value allowed to be a negative number:
+/// `--min-hold -1` then reaches the option's own check ("must be ≥ 0"), instead of clap reading
+/// `-1` as a flag and suggesting `-- -1`, which passes it as a file name.
+fn negative_values_allowed(command: clap::Command) -> clap::Command {
+    command
+        .mut_args(|arg| {
+            if arg.get_action().takes_values() && !arg.is_positional() {
+                arg.allow_negative_numbers(true)
+            } else {
+                arg
+            }
+        })
+        .mut_subcommands(negative_values_allowed)
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let matches = negative_values_allowed(Cli::command()).get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     // `print!` panics when standard output fails: a reader that closed the pipe
     // (`imucal ports | head -0`) or a full disk. Such a failure ends the command as described in
     // `output_failure`, never with a panic message; any other panic keeps the default report.

@@ -501,6 +501,23 @@ fn a_still_detection_flag_out_of_range_is_a_usage_error_naming_the_flag() {
 }
 
 #[test]
+fn a_negative_option_value_written_with_a_space_reaches_the_option_check() {
+    let nilspod = real("imucal_nilspod_ferraris.csv");
+    // `--min-hold -1` is the option's value, refused by its own range check, not an unknown
+    // flag with a tip to write `-- -1` (which would pass `-1` as the recording's name).
+    let (ok, _, stderr) = imucal(&["fit", &nilspod, "--gyro-unit", "dps", "--min-hold", "-1"]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("for '--min-hold ") && stderr.contains("not zero or a positive number"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("-- -1"), "{stderr}");
+    // A negative value where one makes sense is read as a number.
+    let (_, _, stderr) = imucal(&["fit", &nilspod, "--gyro-unit", "dps", "--field-ut", "-3"]);
+    assert!(stderr.contains("--field-ut -3 is outside"), "{stderr}");
+}
+
+#[test]
 fn a_gyroscope_bias_from_one_wandering_hold_states_the_wander_in_its_uncertainty() {
     // Five minutes still at 100 Hz; the x bias random-walks (as a MEMS gyroscope's does over
     // minutes), y and z carry white noise only. σ/√n would claim the x bias to a tenth of what

@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 use history_support::{board_record, databases, url};
 use imucal::history::{
     device_changes, CalibrationRecord, DbLocation, HistoryError, HistoryStore, RecordVerdict,
-    TemperatureSpan,
+    SensorChange, TemperatureSpan,
 };
 
 fn full_record() -> CalibrationRecord {
@@ -130,6 +130,60 @@ fn changes_since_the_previous_calibration_are_in_combined_sigma() {
             .expect("noise compared");
         assert_eq!(noise.change_sigma, None);
         assert_eq!(noise.change, 0.0);
+    }
+}
+
+#[test]
+fn a_sensor_fitted_anew_or_from_another_unit_is_named_and_not_compared() {
+    for location in databases("sensor_changes") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        let mut before = board_record(4);
+        before
+            .params
+            .not_fitted
+            .insert("gyro".into(), "never rested".into());
+        let mut after = board_record(4);
+        after.recorded_unix_ms += 86_400_000;
+        // The accelerometer fitted from raw counts this time: A and b map counts.
+        after.params.accel.input_unit = Some("counts".into());
+        after.params.accel.b = [120.0, -80.0, 40.0];
+        store.record(&before).expect("write");
+        store.record(&after).expect("write");
+        let history = device_changes(store.records(None).expect("read"));
+        let latest = &history[1];
+        assert_eq!(
+            latest.sensor_changes,
+            vec![
+                SensorChange::InputUnitChanged {
+                    sensor: "accel".into(),
+                    before: "nominal units".into(),
+                    after: "counts".into(),
+                },
+                SensorChange::NowFitted {
+                    sensor: "gyro".into()
+                },
+            ],
+            "{}",
+            location.display()
+        );
+        // Neither sensor's parameters are differences of like with like.
+        assert!(
+            !latest
+                .changes
+                .iter()
+                .any(|c| c.parameter.starts_with("accel.") || c.parameter.starts_with("gyro.")),
+            "{:?}",
+            latest.changes
+        );
+        assert!(latest
+            .changes
+            .iter()
+            .any(|c| c.parameter.starts_with("mag.")));
+        assert_eq!(
+            latest.sensor_changes[1].sentence(),
+            "gyro now calibrated",
+            "what `history` prints"
+        );
     }
 }
 

@@ -178,10 +178,12 @@ fn print_entry(entry: &RecordChanges, shown: usize) {
                     None => format!("{} {:+.4}", c.parameter, c.change),
                 })
                 .collect();
-            if listed.is_empty() {
+            let kinds: Vec<String> = entry.sensor_changes.iter().map(|c| c.sentence()).collect();
+            let said: Vec<String> = kinds.into_iter().chain(listed).collect();
+            if said.is_empty() {
                 println!("       since #{previous}: no parameter changed");
             } else {
-                println!("       since #{previous}: {}", listed.join(", "));
+                println!("       since #{previous}: {}", said.join(", "));
             }
         }
     }

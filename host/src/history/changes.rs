@@ -2,6 +2,11 @@
 //! one-sigma uncertainty of both fits: `(x₂ − x₁) / √(σ₁² + σ₂²)`. A change of a few σ is within
 //! what two honest fits of the same board disagree by; tens of σ mean the board changed (a
 //! knock, re-soldering, a new magnetised part) or one of the fits was poor.
+//!
+//! Parameters are compared only where both records calibrated the sensor from the same input
+//! unit: a sensor fitted in one record and not in the other is listed as such (its placeholder
+//! identity is no measurement), and one fitted from raw counts in one and from nominal units in
+//! the other has `A` and `b` in different units, so a difference of the two says nothing.
 
 use std::collections::BTreeMap;
 
@@ -34,6 +39,103 @@ pub struct RecordChanges {
     pub previous: Option<RecordId>,
     /// Every parameter both records have, largest change in σ first (then unscaled ones).
     pub changes: Vec<ParameterChange>,
+    /// Sensors this record calibrates and the previous one did not, and the reverse, and those
+    /// whose input unit changed: none of their parameters is in `changes`.
+    pub sensor_changes: Vec<SensorChange>,
+}
+
+/// How a sensor's calibration changed in kind since the board's previous record.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(tag = "change", rename_all = "snake_case")]
+pub enum SensorChange {
+    /// Calibrated now, not in the previous record.
+    NowFitted {
+        /// `accel`, `gyro` or `mag`.
+        sensor: String,
+    },
+    /// Calibrated in the previous record, not now.
+    NoLongerFitted {
+        /// `accel`, `gyro` or `mag`.
+        sensor: String,
+    },
+    /// Calibrated in both, from different input units (`counts` or the nominal unit).
+    InputUnitChanged {
+        /// `accel`, `gyro` or `mag`.
+        sensor: String,
+        /// The previous record's input unit.
+        before: String,
+        /// This record's.
+        after: String,
+    },
+}
+
+impl SensorChange {
+    /// The change in words, e.g. "gyro now calibrated".
+    pub fn sentence(&self) -> String {
+        match self {
+            Self::NowFitted { sensor } => format!("{sensor} now calibrated"),
+            Self::NoLongerFitted { sensor } => format!("{sensor} no longer calibrated"),
+            Self::InputUnitChanged {
+                sensor,
+                before,
+                after,
+            } => format!(
+                "{sensor} fitted from {after} instead of {before} (its parameters are in other \
+                 units, not compared)"
+            ),
+        }
+    }
+
+    fn sensor(&self) -> &str {
+        match self {
+            Self::NowFitted { sensor }
+            | Self::NoLongerFitted { sensor }
+            | Self::InputUnitChanged { sensor, .. } => sensor,
+        }
+    }
+}
+
+/// The input unit of `sensor` in `record`: `counts`, or `nominal` (m/s², rad/s or µT).
+fn input_unit<'a>(record: &'a StoredRecord, sensor: &str) -> &'a str {
+    record
+        .record
+        .params
+        .non_nominal_inputs()
+        .into_iter()
+        .find(|(s, _)| *s == sensor)
+        .map_or("nominal units", |(_, unit)| unit)
+}
+
+/// The sensors whose calibration changed in kind between `before` and `after`.
+fn sensor_changes(before: &StoredRecord, after: &StoredRecord) -> Vec<SensorChange> {
+    let (was, now) = (
+        before.record.params.fitted_sensors(),
+        after.record.params.fitted_sensors(),
+    );
+    ["accel", "gyro", "mag"]
+        .into_iter()
+        .filter_map(|sensor| {
+            let sensor_name = sensor.to_string();
+            match (was.contains(&sensor), now.contains(&sensor)) {
+                (false, true) => Some(SensorChange::NowFitted {
+                    sensor: sensor_name,
+                }),
+                (true, false) => Some(SensorChange::NoLongerFitted {
+                    sensor: sensor_name,
+                }),
+                (true, true) => {
+                    let (unit_before, unit_after) =
+                        (input_unit(before, sensor), input_unit(after, sensor));
+                    (unit_before != unit_after).then(|| SensorChange::InputUnitChanged {
+                        sensor: sensor_name,
+                        before: unit_before.to_string(),
+                        after: unit_after.to_string(),
+                    })
+                }
+                (false, false) => None,
+            }
+        })
+        .collect()
 }
 
 /// `records` (oldest first, any devices) with each one's changes since the same device's
@@ -43,25 +145,40 @@ pub fn device_changes(records: Vec<StoredRecord>) -> Vec<RecordChanges> {
     let mut out = Vec::with_capacity(records.len());
     for stored in records {
         let before = previous.insert(stored.record.device_id.clone(), stored.clone());
+        let sensors = before
+            .as_ref()
+            .map(|b| sensor_changes(b, &stored))
+            .unwrap_or_default();
         let changes = before
             .as_ref()
-            .map(|b| parameter_changes(b, &stored))
+            .map(|b| parameter_changes(b, &stored, &sensors))
             .unwrap_or_default();
         out.push(RecordChanges {
             previous: before.map(|b| b.id),
             stored,
             changes,
+            sensor_changes: sensors,
         });
     }
     out
 }
 
-fn parameter_changes(before: &StoredRecord, after: &StoredRecord) -> Vec<ParameterChange> {
+/// The changes of the parameters both records have, leaving out the sensors of `sensors`
+/// (their units differ).
+fn parameter_changes(
+    before: &StoredRecord,
+    after: &StoredRecord,
+    sensors: &[SensorChange],
+) -> Vec<ParameterChange> {
     let old = before.record.parameters();
     let mut changes: Vec<ParameterChange> = after
         .record
         .parameters()
         .into_iter()
+        .filter(|(parameter, _)| {
+            let sensor = parameter.split('.').next().unwrap_or("");
+            !sensors.iter().any(|c| c.sensor() == sensor)
+        })
         .filter_map(|(parameter, now)| {
             let was = *old.get(&parameter)?;
             let sigma = match (

@@ -28,7 +28,7 @@ pub mod sqlite;
 pub mod stats;
 pub mod store;
 
-pub use changes::{device_changes, ParameterChange, RecordChanges};
+pub use changes::{device_changes, ParameterChange, RecordChanges, SensorChange};
 pub use fleet::{
     fleet_report, is_outlier_against_fleet, Finding, FleetCheck, FleetError, FleetOptions,
     FleetReport,
