@@ -145,9 +145,16 @@ fn assert_gyro_matches_truth(outcome: &SessionOutcome, truth: &imucal_hil_sim::p
 }
 
 fn run_calibration(seed: u64, chip: SensorChip) -> (SimHandle, DeviceClient, SessionOutcome) {
+    run_calibration_with(seed, |options| options.board.sensor = chip)
+}
+
+fn run_calibration_with(
+    seed: u64,
+    board: impl FnOnce(&mut SimOptions),
+) -> (SimHandle, DeviceClient, SessionOutcome) {
     let mut sim_options = SimOptions::new(seed);
     sim_options.speed = SPEED;
-    sim_options.board.sensor = chip;
+    board(&mut sim_options);
     let sim = SimServer::start(sim_options).expect("the simulator starts");
     let truth = sim.truth();
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
@@ -338,6 +345,25 @@ fn an_unattended_session_calibrates_the_simulated_board_to_its_truth() {
         outcome.before.gyro_rate_dps,
         wall.elapsed().as_secs_f64()
     );
+}
+
+#[test]
+fn a_sensor_converting_slower_than_the_read_timer_still_gets_its_gyroscope_scale() {
+    // 2 % slow: every 50th read finds no new conversion and the firmware leaves it out, so the
+    // stream's stamps jump by two periods now and then. The moves are integrated on the
+    // sensor's own period; before, every move was refused as having a gap and the gyroscope
+    // kept A = I.
+    let (sim, _client, outcome) = run_calibration_with(2024, |options| {
+        options.board.lsm9ds1_odr_error = Some(-0.02);
+    });
+    let gyro = outcome.gyro_scale.as_ref().expect("the scale was fitted");
+    assert!(
+        gyro.moves_used + 2 >= gyro.moves_recorded,
+        "{} of {} moves used",
+        gyro.moves_used,
+        gyro.moves_recorded
+    );
+    assert_gyro_matches_truth(&outcome, &sim.truth().imu);
 }
 
 #[test]

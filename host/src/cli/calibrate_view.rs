@@ -224,6 +224,19 @@ fn scale_error_ppm(a: &imucal::fit::Mat3) -> [f64; 3] {
     gain(a, 1.0).map_or([f64::NAN; 3], |g| g.scale.map(|s| (s - 1.0) * 1e6))
 }
 
+/// The gyroscope's scale and axis angles, or that they were not calibrated: the identity
+/// written in their place is no measurement of a perfect gyroscope.
+fn gyro_gain_line(fit: &SessionFit) -> String {
+    if fit.gyro.method != imucal::fit::Method::GyroScale {
+        return "scale and axis angles not calibrated (identity written; the verdict says why)"
+            .to_string();
+    }
+    gain(&fit.gyro.cal.a, 1.0).map_or_else(
+        || "scale: the fitted matrix is singular".to_string(),
+        |g| gain_text(&g, 3),
+    )
+}
+
 pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
     let u = &fit.uncertainties;
     let mg = 1000.0 / imucal::session::solve::STANDARD_GRAVITY;
@@ -257,13 +270,7 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
             triple(gyro_b, 3),
             sigmas(u.gyro_bias_dps, 4)
         ),
-        format!(
-            "                 {}",
-            gain(&fit.gyro.cal.a, 1.0).map_or_else(
-                || "scale: the fitted matrix is singular".to_string(),
-                |g| gain_text(&g, 3)
-            )
-        ),
+        format!("                 {}", gyro_gain_line(fit)),
         format!(
             "  magnetometer   offset {} µT ± {}",
             triple(mag_b, 2),

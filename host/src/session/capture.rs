@@ -116,6 +116,7 @@ impl<L: Read + Write> Runner<'_, L> {
             }
             let chunk = self.read_chunk()?;
             let mut latest = None;
+            self.current_move_lost |= chunk.lost_before > 0;
             self.current_move.extend_from_slice(&chunk.samples);
             for sample in &chunk.samples {
                 self.record_mag(sample, Phase::Positions);

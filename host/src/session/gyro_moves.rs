@@ -38,17 +38,38 @@ const EDGE_MIN_SAMPLES: usize = 5;
 /// had 3–4 times X's σ.)
 pub const LACKING_FRACTION: f64 = 0.5;
 
-/// Time step of a stream (mean interval), `None` when samples are missing (a gap of more than
-/// 1.5 intervals) or the time stamps do not increase.
-fn even_step_s(samples: &[UnitSample]) -> Option<f64> {
-    let (first, last) = (samples.first()?, samples.last()?);
-    if samples.len() < 2 {
+/// Longest step between two time stamps, in sample periods, of a stream still integrated:
+/// one read the board skipped (two periods) with room for the sensor's rate error.
+const MAX_STEP_PERIODS: f64 = 2.5;
+
+/// Time step of a stream: the least-squares slope of the time stamps against the sample count.
+///
+/// A sensor converts on its own oscillator, a few per cent off the board's read timer, and the
+/// firmware leaves out a read that finds no new conversion: a stream from a sensor slower than
+/// the timer jumps by two read periods now and then, while its samples are evenly spaced on the
+/// sensor's clock. The slope is that clock's period (each stamp lags its conversion by less than
+/// a read period, which averages out over the stream); the mean interval of the two ends would
+/// carry the lag of both, up to a period per move. Samples lost in transport are not this
+/// case: the session drops a move whose stream index has a gap ([`super::runner`]). `None` when
+/// the stamps do not increase or a step exceeds [`MAX_STEP_PERIODS`] periods.
+pub(super) fn sample_step_s(samples: &[UnitSample]) -> Option<f64> {
+    let n = samples.len();
+    if n < 2 {
         return None;
     }
-    let dt = (last.t_s - first.t_s) / (samples.len() - 1) as f64;
+    let mean_k = (n - 1) as f64 / 2.0;
+    let t0 = samples[0].t_s;
+    let mean_t = samples.iter().map(|s| s.t_s - t0).sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (k, s) in samples.iter().enumerate() {
+        let dk = k as f64 - mean_k;
+        sxy += dk * (s.t_s - t0 - mean_t);
+        sxx += dk * dk;
+    }
+    let dt = sxy / sxx;
     let even = samples
         .windows(2)
-        .all(|w| w[1].t_s > w[0].t_s && w[1].t_s - w[0].t_s <= 1.5 * dt);
+        .all(|w| w[1].t_s > w[0].t_s && w[1].t_s - w[0].t_s <= MAX_STEP_PERIODS * dt);
     (dt.is_finite() && dt > 0.0 && even).then_some(dt)
 }
 
@@ -192,7 +213,7 @@ pub(super) fn move_ends(
     bias: &Vec3,
     still_rate: f64,
 ) -> Option<MoveEnds> {
-    let dt = even_step_s(samples)?;
+    let dt = sample_step_s(samples)?;
     let rates: Vec<Vec3> = samples.iter().map(|s| Vec3::from(s.gyro) - bias).collect();
     let edge = ((EDGE_MAX_S / dt).round() as usize).max(EDGE_MIN_SAMPLES);
     let head = still_run(rates.iter().copied(), still_rate, edge);
@@ -255,7 +276,7 @@ pub fn motions_of(
 pub fn tilt_per_axis_deg(moves: &[Vec<UnitSample>]) -> [f64; 3] {
     let mut total = Vec3::zeros();
     for samples in moves {
-        let (Some(dt), Some(first)) = (even_step_s(samples), samples.first()) else {
+        let (Some(dt), Some(first)) = (sample_step_s(samples), samples.first()) else {
             continue;
         };
         let rates: Vec<Vec3> = samples.iter().map(|s| Vec3::from(s.gyro)).collect();
@@ -345,6 +366,56 @@ mod tests {
         // The still ends are exact; only the step rate's discretisation (one sample) remains.
         assert!((angle - 90.0).abs() < 1.0, "{angle}");
         assert!((motion.dt - 0.01).abs() < 1e-12);
+    }
+
+    /// The quarter turn converted every `period` s on the sensor's clock and read every 0.01 s
+    /// by the board, which skips a read that finds no new conversion and stamps each sample with
+    /// its read time.
+    fn quarter_turn_on_sensor_clock(period: f64) -> Vec<UnitSample> {
+        let rate = std::f64::consts::FRAC_PI_2;
+        let angle_at = |t: f64| rate * (t.clamp(0.5, 1.5) - 0.5);
+        let mut out = Vec::new();
+        let mut last_conversion = None;
+        for read in 0..=200 {
+            let t = read as f64 * 0.01;
+            let conversion = (t / period).floor() as i64;
+            if last_conversion == Some(conversion) {
+                continue;
+            }
+            last_conversion = Some(conversion);
+            let tc = conversion as f64 * period;
+            let w = if (0.5..1.5).contains(&tc) { rate } else { 0.0 };
+            let angle = angle_at(tc);
+            let up = Vec3::new(0.0, angle.sin(), angle.cos()) * 9.8;
+            out.push(sample(t, up, Vec3::new(w, 0.0, 0.0)));
+        }
+        out
+    }
+
+    #[test]
+    fn a_sensor_slower_than_the_read_timer_gives_moves_at_its_own_period() {
+        // 3 % slow: every 33rd read finds no new conversion and is left out.
+        let samples = quarter_turn_on_sensor_clock(0.0103);
+        assert!(
+            samples.windows(2).any(|w| w[1].t_s - w[0].t_s > 0.015),
+            "the stream has skipped reads"
+        );
+        let motion = motion_of(
+            &samples,
+            &Calibration::identity(),
+            &Mat3::identity(),
+            &Vec3::zeros(),
+            0.02,
+            None,
+        )
+        .expect("a usable move");
+        // The sensor's period from 200 read stamps that lag their conversions by up to 10 ms.
+        assert!((motion.dt / 0.0103 - 1.0).abs() < 2e-3, "{}", motion.dt);
+        let turned = integrate_rotation(&Mat3::identity(), &motion.rates, motion.dt)
+            .angle()
+            .to_degrees();
+        // Integrated on the read timer's 10 ms instead, the turn would read 3 % (2.7°) short.
+        assert!((turned - 90.0).abs() < 0.5, "{turned}");
     }
 
     #[test]

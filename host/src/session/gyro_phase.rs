@@ -29,6 +29,14 @@ impl<L: Read + Write> Runner<'_, L> {
         let mut added = 0;
         loop {
             let tilt = tilt_per_axis_deg(&self.moves);
+            if tilt.iter().sum::<f64>() <= 0.0 {
+                return Ok(format!(
+                    "none of the {} moves between the holds could be integrated (a gap in the \
+                     stream or time stamps that do not increase), so the gyroscope's scale \
+                     cannot be calibrated from them",
+                    self.moves.len()
+                ));
+            }
             let Some((axis, advice)) = missing_rotation_advice(&tilt) else {
                 return Ok(format!(
                     "the moves tilted the board {:.0}°, {:.0}° and {:.0}° about its X, Y and Z \

@@ -26,6 +26,9 @@ pub(super) struct Runner<'a, L: Read + Write> {
     pub(super) mag: Vec<MagSample>,
     /// The raw stream since watching for a position last started (the move in progress).
     pub(super) current_move: Vec<UnitSample>,
+    /// Whether samples of the move in progress were lost on the way (a gap in the stream
+    /// index): its integration would miss their rotation, so it is not kept.
+    pub(super) current_move_lost: bool,
     /// Finished moves, each from the end of one hold to the start of the next capture.
     pub(super) moves: Vec<Vec<UnitSample>>,
     /// The axis the moves were last said to lack rotation about.
@@ -72,6 +75,7 @@ impl<'a, L: Read + Write> Runner<'a, L> {
             observer,
             mag: Vec::new(),
             current_move: Vec::new(),
+            current_move_lost: false,
             moves: Vec::new(),
             lacking_axis: None,
         }
@@ -107,15 +111,18 @@ impl<'a, L: Read + Write> Runner<'a, L> {
     pub(super) fn start_watching(&mut self) -> Result<(), SessionError> {
         self.monitor.reset();
         self.current_move.clear();
+        self.current_move_lost = false;
         self.client
             .start_stream(StreamKind::Raw, self.options.decimation)?;
         Ok(())
     }
 
-    /// Keep the move in progress as finished (the stream stops for a capture).
+    /// Keep the move in progress as finished (the stream stops for a capture), unless samples
+    /// of it were lost on the way.
     pub(super) fn finish_move(&mut self) {
         let samples = std::mem::take(&mut self.current_move);
-        if samples.len() >= 2 {
+        let lost = std::mem::take(&mut self.current_move_lost);
+        if samples.len() >= 2 && !lost {
             self.moves.push(samples);
         }
     }
