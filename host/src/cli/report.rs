@@ -82,7 +82,7 @@ fn from_recording(
         },
     )?;
     bar.inc(1);
-    Ok(from_calibration(&input, &options, &calibration, field))
+    Ok(from_calibration(&input, &calibration, field))
 }
 
 fn default_out(path: &Path, is_session: bool) -> PathBuf {

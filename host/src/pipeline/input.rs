@@ -11,7 +11,7 @@ use crate::recording::{Recording, Sensor};
 use crate::stats::robust::{screen_stream, Screening};
 use crate::still::{find_still, StillOptions, StillReport};
 
-use super::methods::thin;
+use super::methods::thin_indices;
 
 /// How to form the fitting input from a recording. The default keeps every magnetometer sample.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -51,6 +51,15 @@ impl CheckedInput {
     pub fn mag_points(&self) -> &[Vec3] {
         self.mag_points
             .as_slice(self.recording.samples(Sensor::Mag).unwrap_or(&[]))
+    }
+
+    /// Where each of [`Self::mag_points`] is in the recording's magnetometer stream (its time
+    /// and temperature are at that index).
+    pub fn mag_point_indices(&self) -> Vec<usize> {
+        match &self.mag_points {
+            MagPoints::Recorded => (0..self.mag_points().len()).collect(),
+            MagPoints::Selected { indices, .. } => indices.clone(),
+        }
     }
 
     /// Why `sensor` was refused, if it was.
@@ -137,7 +146,10 @@ pub fn check_input_then<T: Send>(
     if let Some(e) = accel_unit {
         unit_refusals.push((Sensor::Accel, e.to_string()));
     }
-    let mut mag_points = MagPoints::Selected(Vec::new());
+    let mut mag_points = MagPoints::Selected {
+        points: Vec::new(),
+        indices: Vec::new(),
+    };
     if let Some(mag) = mag {
         mag_points = mag.points;
         warnings.extend(mag.warnings);
@@ -192,8 +204,11 @@ pub fn check_input_then<T: Send>(
 enum MagPoints {
     /// Every sample recorded (none dropped, none thinned): read from the recording, not copied.
     Recorded,
-    /// The samples kept by the screen or thinning.
-    Selected(Vec<Vec3>),
+    /// The samples kept by the screen or thinning, and their indices in the recording's stream.
+    Selected {
+        points: Vec<Vec3>,
+        indices: Vec<usize>,
+    },
 }
 
 impl MagPoints {
@@ -201,7 +216,7 @@ impl MagPoints {
     fn as_slice<'a>(&'a self, recorded: &'a [Vec3]) -> &'a [Vec3] {
         match self {
             Self::Recorded => recorded,
-            Self::Selected(points) => points,
+            Self::Selected { points, .. } => points,
         }
     }
 }
@@ -234,17 +249,32 @@ fn checked_mag_points(
     if screening.dropped > 0 {
         warnings.push(stream_outliers_sentence(&screening, all.len()));
     }
-    let kept = (screening.dropped > 0).then(|| screening.kept(all));
+    let kept: Option<Vec<usize>> = (screening.dropped > 0).then(|| {
+        (0..all.len())
+            .filter(|&i| screening.keep.get(i).copied().unwrap_or(false))
+            .collect()
+    });
     let kept_len = kept.as_ref().map_or(all.len(), Vec::len);
-    // Every sample kept (the default): the screened vector, or the recording's own samples
-    // when none was dropped, not a copy of either.
-    let points = if options.max_mag_samples == 0 || kept_len <= options.max_mag_samples {
-        kept.map_or(MagPoints::Recorded, MagPoints::Selected)
-    } else {
-        MagPoints::Selected(thin(
-            kept.as_deref().unwrap_or(all),
-            options.max_mag_samples,
-        ))
+    let thin_to = match options.max_mag_samples {
+        0 => kept_len,
+        max => max.min(kept_len),
+    };
+    // Every sample kept (the default) and none dropped: the recording's own samples, not a copy.
+    let points = match (kept, thin_to < kept_len) {
+        (None, false) => MagPoints::Recorded,
+        (kept, thinned) => {
+            let indices: Vec<usize> = match kept {
+                Some(kept) if !thinned => kept,
+                kept => thin_indices(kept_len, thin_to)
+                    .into_iter()
+                    .map(|i| kept.as_ref().map_or(i, |k| k[i]))
+                    .collect(),
+            };
+            MagPoints::Selected {
+                points: indices.iter().map(|&i| all[i]).collect(),
+                indices,
+            }
+        }
     };
     let selected = points.as_slice(all);
     let verdict = match input_checks::check_mag_coverage(selected) {

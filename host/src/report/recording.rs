@@ -5,8 +5,7 @@
 use crate::fit::{Fit, Vec3};
 use crate::geomag::LocalField;
 use crate::pipeline::calibration::once_per_reason;
-use crate::pipeline::methods::thin_indices;
-use crate::pipeline::{CheckedInput, InputOptions, RecordingCalibration, SensorOutcome};
+use crate::pipeline::{CheckedInput, RecordingCalibration, SensorOutcome};
 use crate::recording::Sensor;
 
 use super::{
@@ -31,7 +30,6 @@ fn parameters(name: &str, outcome: &SensorOutcome, fit: &Fit) -> SensorParameter
 /// What the report shows of `calibration`, fitted from `input`.
 pub fn from_calibration(
     input: &CheckedInput,
-    options: &InputOptions,
     calibration: &RecordingCalibration,
     field: Option<&LocalField>,
 ) -> ReportData {
@@ -62,7 +60,7 @@ pub fn from_calibration(
         }
         match outcome.sensor {
             Sensor::Accel => accel_poses(&mut data, input, calibration, fit),
-            Sensor::Mag => mag_samples(&mut data, input, options, outcome, fit),
+            Sensor::Mag => mag_samples(&mut data, input, outcome, fit),
             Sensor::Gyro => gyro_poses(&mut data, input, outcome, fit),
         }
     }
@@ -181,31 +179,59 @@ fn gyro_poses(data: &mut ReportData, input: &CheckedInput, outcome: &SensorOutco
     });
 }
 
-fn mag_samples(
-    data: &mut ReportData,
-    input: &CheckedInput,
-    options: &InputOptions,
-    outcome: &SensorOutcome,
-    fit: &Fit,
-) {
+/// How far past the first or last temperature reading its value still stands, s: a die's
+/// temperature moves over seconds to minutes, so two clocks' ends a sample apart share it.
+const TEMPERATURE_HOLD_S: f64 = 1.0;
+
+/// `values` (at the non-decreasing `times`) linearly interpolated at `t`; the end value within
+/// [`TEMPERATURE_HOLD_S`] past either end, `None` farther out.
+fn interpolate_at(times: &[f64], values: &[f64], t: f64) -> Option<f64> {
+    let after = times.partition_point(|x| *x < t);
+    let end = |i: usize| {
+        let (time, value) = (times.get(i)?, values.get(i)?);
+        ((time - t).abs() <= TEMPERATURE_HOLD_S).then_some(*value)
+    };
+    let Some(before) = after.checked_sub(1) else {
+        return end(0);
+    };
+    let (Some(&t1), Some(&v1)) = (times.get(after), values.get(after)) else {
+        return end(before);
+    };
+    let (&t0, &v0) = (times.get(before)?, values.get(before)?);
+    if t1 == t {
+        return Some(v1);
+    }
+    Some(v0 + (v1 - v0) * (t - t0) / (t1 - t0))
+}
+
+fn mag_samples(data: &mut ReportData, input: &CheckedInput, outcome: &SensorOutcome, fit: &Fit) {
     let Some(mag) = &input.recording.mag else {
         return;
     };
     let points = input.mag_points();
-    let index = thin_indices(mag.samples.len(), options.max_mag_samples);
-    let temps = input
-        .recording
-        .temp_c
-        .as_ref()
-        .filter(|t| t.len() == mag.samples.len());
+    let index = input.mag_point_indices();
+    let time_s: Vec<f64> = index
+        .iter()
+        .filter_map(|i| mag.time.get(*i).copied())
+        .collect();
+    let recording = &input.recording;
+    let temp_c = recording.temp_c.as_ref().and_then(|temps| {
+        if mag.time == recording.time {
+            // The magnetometer's columns are the main file's: its rows' temperatures.
+            index.iter().map(|i| temps.get(*i).copied()).collect()
+        } else {
+            // A file of its own: the main file's temperature at the magnetometer's times.
+            time_s
+                .iter()
+                .map(|t| interpolate_at(&recording.time, temps, *t))
+                .collect()
+        }
+    });
     data.mag = Some(MagSamples {
         raw: points.to_vec(),
         calibrated: points.iter().map(|p| fit.cal.apply(p)).collect(),
-        time_s: index
-            .iter()
-            .filter_map(|i| mag.time.get(*i).copied())
-            .collect(),
-        temp_c: temps.map(|t| index.iter().filter_map(|i| t.get(*i).copied()).collect()),
+        time_s,
+        temp_c,
         field: fit.reference,
         raw_unit: outcome.input_unit.to_string(),
         calibrated_unit: outcome.output_unit.clone(),
@@ -222,6 +248,50 @@ fn mag_samples(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::{check_input, InputOptions};
+    use crate::recording::{LoadOptions, Recording};
+
+    #[test]
+    fn the_main_files_temperature_is_read_at_the_magnetometers_times() {
+        let times = [0.0, 1.0, 2.0];
+        let temps = [20.0, 21.0, 23.0];
+        assert_eq!(interpolate_at(&times, &temps, 1.5), Some(22.0));
+        assert_eq!(interpolate_at(&times, &temps, 1.0), Some(21.0));
+        // Within a second of either end the end's value stands; beyond, nothing was measured.
+        assert_eq!(interpolate_at(&times, &temps, 2.4), Some(23.0));
+        assert_eq!(interpolate_at(&times, &temps, -0.5), Some(20.0));
+        assert_eq!(interpolate_at(&times, &temps, 3.5), None);
+        assert_eq!(interpolate_at(&[], &[], 1.0), None);
+    }
+
+    #[test]
+    fn screened_magnetometer_samples_keep_their_own_times() {
+        let path = std::env::temp_dir().join(format!(
+            "imucal-report-mag-indices-{}.csv",
+            std::process::id()
+        ));
+        let mut text = Vec::new();
+        crate::synthetic::write_long_recording(20_000, &mut text).expect("written to memory");
+        std::fs::write(&path, text).expect("temporary file");
+        let mut recording = Recording::load(&path, &LoadOptions::default()).expect("reads back");
+        let _ = std::fs::remove_file(&path);
+        let mag = recording.mag.as_mut().expect("a magnetometer");
+        mag.samples[5000] *= 40.0;
+        let sensors = recording.sensors();
+        let input = check_input(recording, &sensors, &InputOptions::default(), None);
+        let (points, indices) = (input.mag_points(), input.mag_point_indices());
+        let recorded = &input.recording.mag.as_ref().expect("kept").samples;
+        assert_eq!(
+            points.len(),
+            recorded.len() - 1,
+            "the spike was screened out"
+        );
+        assert_eq!(points.len(), indices.len());
+        assert!(!indices.contains(&5000));
+        // Before, the report paired the kept samples with the first times of the stream, one
+        // sample off after the spike.
+        assert!(indices.iter().zip(points).all(|(&i, p)| recorded[i] == *p));
+    }
 
     #[test]
     fn a_reason_shared_by_two_sensors_is_said_once_naming_both() {
