@@ -245,6 +245,14 @@ fn malformed_headers_and_rows_are_refused_with_the_fix() {
         load_err(&back),
         RecordingError::TimeBackwards { line: 3, .. }
     ));
+    // A clock that never advanced: every hold would last 0 s.
+    let frozen = write(&dir, "f.csv", "t_s,ax,ay,az\n0,1,2,3\n0,1,2,3\n0,1,2,3\n");
+    let error = load_err(&frozen);
+    assert!(
+        matches!(error, RecordingError::TimeConstant { rows: 3, .. }),
+        "{error}"
+    );
+    assert!(error.to_string().contains("--rate"), "{error}");
     let empty = write(&dir, "e.csv", "");
     assert!(matches!(load_err(&empty), RecordingError::Empty { .. }));
     let dup = write(&dir, "d.csv", "ax,ay,az,ax\n1,2,3,4\n");

@@ -141,6 +141,16 @@ pub enum RecordingError {
         /// The previous row's time.
         previous: f64,
     },
+    /// Every row has the same time stamp: the time cannot order or space the samples.
+    #[error("`{path}`: the time column reads {time} s on every one of its {rows} rows, so it says nothing about when each sample was taken; fix the logger's clock, or read the file without it (`--columns` mapping every column but the time to itself) and give the sample rate with --rate")]
+    TimeConstant {
+        /// File concerned.
+        path: String,
+        /// The one time stamp.
+        time: f64,
+        /// Rows read.
+        rows: usize,
+    },
     /// A file holds a header but no data rows.
     #[error("`{path}` has a header but no data rows")]
     NoRows {
@@ -335,6 +345,15 @@ impl Recording {
             Format::Imutk => imutk::load(path, &mut lines, first, options)?,
             _ => csv::load(path, &mut lines, first, options)?,
         };
+        if let (true, [first, .., last]) = (recording.time_from_file, recording.time.as_slice()) {
+            if first == last {
+                return Err(RecordingError::TimeConstant {
+                    path: display(path),
+                    time: *first,
+                    rows: recording.time.len(),
+                });
+            }
+        }
         if recording.mag.is_none() {
             let sibling = || {
                 let ok = !options.no_mag_sibling && path.as_os_str() != lines::STDIN_PATH;
