@@ -501,6 +501,44 @@ fn a_still_detection_flag_out_of_range_is_a_usage_error_naming_the_flag() {
 }
 
 #[test]
+fn still_says_what_fit_refuses_a_sensor_for_and_lists_the_holds_all_the_same() {
+    let dir = scratch("still-one-pose");
+    let path = dir.join("one_pose.csv");
+    // Five seconds lying flat: one hold, one gravity direction.
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let noise = Normal::new(0.0, 0.01).expect("valid");
+    let mut text = String::from("t_s,ax,ay,az,gx,gy,gz\n");
+    for i in 0..500 {
+        let mut value = |mean: f64, scale: f64| mean + scale * noise.sample(&mut rng);
+        text.push_str(&format!(
+            "{:.2},{:.5},{:.5},{:.5},{:.6},{:.6},{:.6}\n",
+            i as f64 * 0.01,
+            value(0.0, 1.0),
+            value(0.0, 1.0),
+            value(9.81, 1.0),
+            value(0.0, 0.1),
+            value(0.0, 0.1),
+            value(0.0, 0.1)
+        ));
+    }
+    std::fs::write(&path, text).expect("written");
+    let path = path.display().to_string();
+    let (fit_ok, _, fit_err) = imucal(&["fit", &path]);
+    assert!(
+        !fit_ok && fit_err.contains("only 1 distinct gravity directions"),
+        "{fit_err}"
+    );
+    let (ok, stdout, stderr) = imucal(&["still", &path]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("1 still intervals detected"), "{stdout}");
+    assert!(
+        stderr.contains("only 1 distinct gravity directions")
+            && stderr.contains("fit, analyze and report refuse the sensor for this"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn a_negative_option_value_written_with_a_space_reaches_the_option_check() {
     let nilspod = real("imucal_nilspod_ferraris.csv");
     // `--min-hold -1` is the option's value, refused by its own range check, not an unknown

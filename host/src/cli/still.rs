@@ -1,9 +1,10 @@
 //! `imucal still`: list the still intervals of a recording and the directions they cover.
 
 use imucal::fit::Vec3;
-use imucal::input_checks;
-use imucal::pipeline::still_intervals;
+use imucal::input_checks::time_stamp_warnings;
+use imucal::pipeline::{check_input, still_intervals, InputOptions};
 use imucal::recording::{Recording, Sensor};
+use imucal::still::StillReport;
 use serde_json::json;
 
 use super::args::StillArgs;
@@ -23,36 +24,74 @@ fn label_name(recording: &Recording, value: i64) -> Option<String> {
         .map(|(_, name)| name.clone())
 }
 
+/// `why` as the command's error, once `warnings` are printed: they may be why nothing was found.
+fn said_then(warnings: &[String], why: String) -> anyhow::Error {
+    for warning in warnings {
+        eprintln!("imucal: warning: {warning}");
+    }
+    anyhow::Error::msg(why)
+}
+
+/// The still intervals of `recording` with the warnings to print, through the checks `fit`,
+/// `analyze` and `report` make (the same pipeline function: the same intervals, screened alike,
+/// the same warnings). A magnetometer-only recording has its holds found from the field's
+/// variance, without the inertial checks.
+fn checked_still(
+    recording: Recording,
+    options: InputOptions,
+) -> anyhow::Result<(Recording, StillReport, Vec<String>)> {
+    let sensors: Vec<Sensor> = [Sensor::Accel, Sensor::Gyro]
+        .into_iter()
+        .filter(|s| recording.has(*s))
+        .collect();
+    if sensors.is_empty() {
+        let mut warnings = if recording.time_from_file {
+            time_stamp_warnings(&recording.time)
+        } else {
+            Vec::new()
+        };
+        let (report, still_warnings) =
+            still_intervals(&recording, &options.still).map_err(|why| said_then(&warnings, why))?;
+        warnings.extend(still_warnings);
+        return Ok((recording, report, warnings));
+    }
+    let input = check_input(recording, &sensors, &options, None);
+    let mut warnings = input.warnings.clone();
+    let Some(report) = input.still.clone() else {
+        let why = input.refusals.iter().find_map(|(_, reason)| {
+            (!input.unit_refusals.iter().any(|(_, u)| u == reason)).then(|| reason.clone())
+        });
+        return Err(said_then(
+            &warnings,
+            why.unwrap_or_else(|| "still intervals could not be found".to_string()),
+        ));
+    };
+    // This command lists the holds all the same, in the declared units, and says what the
+    // other commands refuse a sensor for.
+    for (sensor, problem) in &input.refusals {
+        let unit = input.unit_refusals.iter().any(|(s, _)| s == sensor);
+        warnings.push(format!(
+            "{problem} (fit, analyze and report refuse the sensor for this{})",
+            if unit {
+                "; the figures below are in the declared unit"
+            } else {
+                ""
+            }
+        ));
+    }
+    Ok((input.recording, report, warnings))
+}
+
 /// Run the command.
 pub fn run(args: &StillArgs) -> anyhow::Result<()> {
     let recording = super::load(&args.input)?;
-    // Said before the detection, which may find nothing because of them.
-    if recording.time_from_file {
-        for warning in imucal::input_checks::time_stamp_warnings(&recording.time) {
-            eprintln!("imucal: warning: {warning}");
-        }
-    }
-    // The same intervals, screened alike, as `fit` and `report` use.
-    let (report, warnings) = still_intervals(&recording, &super::still_options(&args.input))
-        .map_err(anyhow::Error::msg)?;
+    let options = InputOptions {
+        still: super::still_options(&args.input),
+        ..InputOptions::default()
+    };
+    let (recording, report, warnings) = checked_still(recording, options)?;
     for warning in &warnings {
         eprintln!("imucal: warning: {warning}");
-    }
-    // The unit checks `fit`, `analyze` and `report` refuse a sensor for: this command lists
-    // the holds all the same, in the declared units, and says so.
-    let accel_unit = recording
-        .accel
-        .as_deref()
-        .and_then(|accel| input_checks::check_accel_unit(accel, recording.units.accel).err());
-    let gyro_unit = recording
-        .gyro
-        .as_ref()
-        .and_then(|_| input_checks::check_gyro_unit(&recording, &report).err());
-    for problem in accel_unit.iter().chain(gyro_unit.iter()) {
-        eprintln!(
-            "imucal: warning: {problem} (fit, analyze and report refuse the sensor for this; \
-             the figures below are in the declared unit)"
-        );
     }
     if args.json {
         let intervals: Vec<_> = report
