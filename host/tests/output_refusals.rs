@@ -58,6 +58,30 @@ fn calibrate_into_an_earlier_session_is_refused_before_the_board_is_opened() {
 }
 
 #[test]
+fn calibrate_checks_gravity_and_field_as_fit_does_before_the_board_is_opened() {
+    let dir = scratch("references");
+    // Before, `calibrate` took any positive value (gravity 5 m/s² ran a whole session and wrote
+    // its result); `fit` refused it.
+    for (flag, value, expected) in [
+        ("--gravity", "5", "--gravity 5 is outside 9.7–9.9 m/s²"),
+        (
+            "--field-ut",
+            "99999",
+            "--field-ut 99999 is outside 1–5000 µT",
+        ),
+    ] {
+        let out = imucal(
+            &["calibrate", "--port", NO_BOARD, "--yes", flag, value],
+            &dir,
+        );
+        refused(&out, &[expected]);
+        let fit = imucal(&["fit", "none.csv", flag, value], &dir);
+        refused(&fit, &[expected]);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn calibrate_into_a_file_is_refused_before_the_board_is_opened_even_with_force() {
     let dir = scratch("keep");
     std::fs::write(dir.join("keep.csv"), "t_s\n").unwrap();

@@ -95,6 +95,22 @@ fn sibling_magnetometer_file_is_found_with_its_own_clock() {
     )
     .expect("reads");
     assert!(without.mag.is_none());
+    // This magnetometer file has no temperature column; the main file's is its own.
+    assert!(mag.temp_c.is_none() && rec.temp_c.is_some());
+}
+
+#[test]
+fn a_magnetometer_file_keeps_its_own_temperature_column() {
+    let dir = scratch("mag-temp");
+    let main = write(&dir, "r.csv", "t_s,ax,ay,az\n0,0,0,9.8\n1,0,0,9.8\n");
+    write(
+        &dir,
+        "r_mag.csv",
+        "t_s,mx,my,mz,temp_c\n0.5,20,0,40,31.5\n1.5,21,0,40,32.0\n",
+    );
+    let rec = Recording::load(&main, &LoadOptions::default()).expect("reads");
+    let mag = rec.mag.as_ref().expect("the sibling");
+    assert_eq!(mag.temp_c.as_deref(), Some(&[31.5, 32.0][..]));
 }
 
 #[test]

@@ -161,9 +161,12 @@ fn hand_turned_full_sphere_recording_has_no_still_interval() {
     // 1.5 °/s per axis does not.
     let rec = load("sf_mpu6050_hmc5883l_full_sphere.csv", g_dps());
     match find_still(&rec, &StillOptions::default()) {
-        Err(StillError::NeverAtRest { quietest_dps, .. }) => {
+        Err(error @ StillError::NeverAtRest { quietest_dps, .. }) => {
             // The quietest window still turns by more than the 1.5 °/s bound.
             assert!(quietest_dps > 1.5, "{quietest_dps}");
+            // Read as °/s already: the other units are suggested, not the one given.
+            let text = error.to_string();
+            assert!(text.contains("--gyro-unit rads or counts"), "{text}");
         }
         other => panic!("expected NeverAtRest, got {other:?}"),
     }

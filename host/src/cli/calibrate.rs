@@ -18,6 +18,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
 use imucal::device::{DeviceClient, ParamsFile};
+use imucal::pipeline::References;
 use imucal::session::{
     load_poses, load_progress, run_session_with, save_session, summary, CapturedPose,
     SessionControl, SessionEvent, SessionOptions, Tapped,
@@ -94,12 +95,7 @@ fn bind_saved_params(path: &std::path::Path, welcome: &Welcome) -> anyhow::Resul
 /// The magnetometer's reference from `--field-ut`, or the World Magnetic Model at
 /// `--location` (announced), or `None`.
 pub(super) fn field_reference(args: &CalibrateArgs) -> anyhow::Result<Option<f64>> {
-    if let Some(field) = args.field_ut {
-        anyhow::ensure!(
-            field.is_finite() && field > 0.0,
-            "--field-ut is {field}, but it must be a positive number of µT"
-        );
-    }
+    checked_references(args)?;
     let modelled = args
         .location
         .as_ref()
@@ -115,16 +111,18 @@ pub(super) fn field_reference(args: &CalibrateArgs) -> anyhow::Result<Option<f64
     Ok(args.field_ut.or(modelled.as_ref().map(|m| m.total_ut)))
 }
 
+/// `--gravity` and `--field-ut` checked as `fit`, `analyze` and `report` check them (gravity on
+/// the Earth's surface, fields a magnetometer can measure).
+fn checked_references(args: &CalibrateArgs) -> anyhow::Result<References> {
+    Ok(References::checked(args.gravity, args.field_ut, None)?)
+}
+
 /// The session's options from the command line.
 pub(super) fn session_options(
     args: &CalibrateArgs,
     field_ut: Option<f64>,
 ) -> anyhow::Result<SessionOptions> {
-    anyhow::ensure!(
-        args.gravity.is_finite() && args.gravity > 0.0,
-        "--gravity is {}, but it must be a positive number of m/s²",
-        args.gravity
-    );
+    checked_references(args)?;
     Ok(SessionOptions {
         gravity_mps2: args.gravity,
         field_ut,
@@ -154,6 +152,8 @@ pub(super) fn checked_session_dir(args: &CalibrateArgs) -> anyhow::Result<PathBu
 /// Run `imucal calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let dir = checked_session_dir(args)?;
+    // Refused before a simulated board starts or a port opens.
+    let given_field = field_reference(args)?;
     let simulated = if args.sim {
         Some(Simulated::start(args)?)
     } else {
@@ -163,7 +163,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         Some(sim) => sim.port(),
         None => given_or_only_board(args.port.first().map(String::as_str))?,
     };
-    let field_ut = field_reference(args)?.or(simulated.as_ref().map(Simulated::field_ut));
+    let field_ut = given_field.or(simulated.as_ref().map(Simulated::field_ut));
     if simulated.is_some() {
         let field_given = args.field_ut.is_some() || args.location.is_some();
         eprintln!(

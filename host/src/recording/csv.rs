@@ -276,6 +276,7 @@ pub(super) fn load(
                     source: path.to_path_buf(),
                     time: recording.time.clone(),
                     samples,
+                    temp_c: None,
                 })
             }
         }
@@ -306,5 +307,6 @@ pub(super) fn load_mag_stream(
         source: path.to_path_buf(),
         time,
         samples,
+        temp_c: table.temp,
     })
 }

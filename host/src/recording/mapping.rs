@@ -309,6 +309,7 @@ pub fn parse(
             source: path.to_path_buf(),
             time: time.clone(),
             samples,
+            temp_c: None,
         }),
         time,
         labels: None,

@@ -255,6 +255,9 @@ pub struct MagStream {
     pub time: Vec<f64>,
     /// Readings in the file's units.
     pub samples: Vec<Vec3>,
+    /// Temperature per sample in °C from a `temp_c` column of the magnetometer's own file, if
+    /// it has one (`None` for magnetometer columns of the main file: theirs is the main file's).
+    pub temp_c: Option<Vec<f64>>,
 }
 
 /// One recording: sensor streams as read, their units and time stamps.

@@ -126,6 +126,7 @@ fn parse_lines(
             source: path.to_path_buf(),
             time: time.clone(),
             samples: mag,
+            temp_c: None,
         }),
         time,
         labels: None,

@@ -116,8 +116,8 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             None => constant = Some(constant_temperature_text("magnetometer samples", &[])),
         }
         body.push_str("</div>");
-        if let Some(text) = constant {
-            body.push_str(&format!("<p class=small>{}</p>", escape(&text)));
+        for text in constant.iter().chain(&mag.temp_note) {
+            body.push_str(&format!("<p class=small>{}</p>", escape(text)));
         }
         body.push_str("<h3>Sphere coverage</h3>");
         let cover = region_coverage(mag);

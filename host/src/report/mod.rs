@@ -162,6 +162,8 @@ pub struct MagSamples {
     pub time_s: Vec<f64>,
     /// Temperature of each sample, °C, when known.
     pub temp_c: Option<Vec<f64>>,
+    /// Where the temperature came from, when not from the magnetometer's own rows.
+    pub temp_note: Option<String>,
     /// Reference field magnitude of the calibrated output.
     pub field: f64,
     /// Unit of the raw samples.

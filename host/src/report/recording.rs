@@ -215,23 +215,34 @@ fn mag_samples(data: &mut ReportData, input: &CheckedInput, outcome: &SensorOutc
         .filter_map(|i| mag.time.get(*i).copied())
         .collect();
     let recording = &input.recording;
-    let temp_c = recording.temp_c.as_ref().and_then(|temps| {
-        if mag.time == recording.time {
-            // The magnetometer's columns are the main file's: its rows' temperatures.
-            index.iter().map(|i| temps.get(*i).copied()).collect()
-        } else {
-            // A file of its own: the main file's temperature at the magnetometer's times.
+    let at_samples = |temps: &Vec<f64>| -> Option<Vec<f64>> {
+        index.iter().map(|i| temps.get(*i).copied()).collect()
+    };
+    let (temp_c, temp_note) = match (&mag.temp_c, &recording.temp_c) {
+        // The magnetometer file's own temperature column.
+        (Some(own), _) => (at_samples(own), None),
+        // The magnetometer's columns are the main file's: its rows' temperatures.
+        (None, Some(temps)) if mag.time == recording.time => (at_samples(temps), None),
+        // A file of its own without one: the main file's temperature at its times.
+        (None, Some(temps)) => (
             time_s
                 .iter()
                 .map(|t| interpolate_at(&recording.time, temps, *t))
-                .collect()
-        }
-    });
+                .collect(),
+            Some(
+                "The magnetometer's file has no temperature column: the temperature shown is \
+                 the main file's (its sensor's die), interpolated at the magnetometer's times."
+                    .to_string(),
+            ),
+        ),
+        (None, None) => (None, None),
+    };
     data.mag = Some(MagSamples {
         raw: points.to_vec(),
         calibrated: points.iter().map(|p| fit.cal.apply(p)).collect(),
         time_s,
         temp_c,
+        temp_note,
         field: fit.reference,
         raw_unit: outcome.input_unit.to_string(),
         calibrated_unit: outcome.output_unit.clone(),

@@ -185,6 +185,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         calibrated: mag_calibrated,
         time_s,
         temp_c: Some(mag_temp),
+        temp_note: None,
         field,
         raw_unit: "µT".to_string(),
         calibrated_unit: "µT".to_string(),

@@ -294,23 +294,48 @@ fn summarise(fit: &Fit, moves: &[Vec<UnitSample>], used: usize) -> GyroScale {
     }
 }
 
-/// Add a reason to the verdict when the scale fit's 3σ exceeds its budgets.
+/// Add a reason to the verdict when the scale fit's 3σ exceeds its budgets, naming the part(s)
+/// over.
 fn judge(fit: &mut SessionFit, scale: &GyroScale, budgets: GyroBudgets) {
+    if let Some(reason) = over_budget(scale, budgets) {
+        fit.verdict.reasons.push(reason);
+        if fit.verdict.level == VerdictLevel::Good {
+            fit.verdict.level = VerdictLevel::Marginal;
+        }
+    }
+}
+
+/// The sentence for the part(s) of the scale fit whose 3σ exceeds its budget; `None` when both
+/// are within.
+fn over_budget(scale: &GyroScale, budgets: GyroBudgets) -> Option<String> {
     let worst_scale = scale.scale_sigma_pct.iter().copied().fold(0.0, f64::max);
-    let within = 3.0 * worst_scale <= budgets.scale_pct
-        && 3.0 * scale.misalignment_sigma_deg <= budgets.misalignment_deg;
-    if within {
-        return;
+    let mut over = Vec::new();
+    if 3.0 * worst_scale > budgets.scale_pct {
+        over.push(format!(
+            "the gyroscope's scale is known to {worst_scale:.3} % (1σ), above a third of its {} % \
+             budget",
+            budgets.scale_pct
+        ));
     }
-    fit.verdict.reasons.push(format!(
-        "the gyroscope's scale is known to {worst_scale:.3} % and its misalignment to {:.3}° \
-         (1σ), above a third of the {} % and {}° budgets; turn the board between the positions \
-         about each of its axes (tilting it, not about the vertical)",
-        scale.misalignment_sigma_deg, budgets.scale_pct, budgets.misalignment_deg
-    ));
-    if fit.verdict.level == VerdictLevel::Good {
-        fit.verdict.level = VerdictLevel::Marginal;
+    if 3.0 * scale.misalignment_sigma_deg > budgets.misalignment_deg {
+        over.push(format!(
+            "{} misalignment is known to {:.3}° (1σ), above a third of its {}° budget",
+            if over.is_empty() {
+                "the gyroscope's"
+            } else {
+                "its"
+            },
+            scale.misalignment_sigma_deg,
+            budgets.misalignment_deg
+        ));
     }
+    (!over.is_empty()).then(|| {
+        format!(
+            "{}; turn the board between the positions about each of its axes (tilting it, not \
+             about the vertical)",
+            over.join(" and ")
+        )
+    })
 }
 
 /// Angle, degrees, of the rotation left after integrating a 360° turn about body `axis`
@@ -342,6 +367,42 @@ pub fn full_turn_error_deg(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn scale_with(scale_sigma_pct: f64, misalignment_sigma_deg: f64) -> GyroScale {
+        GyroScale {
+            scale: [1.0; 3],
+            scale_sigma_pct: [scale_sigma_pct; 3],
+            misalignment_deg: 0.0,
+            misalignment_sigma_deg,
+            moves_recorded: 12,
+            moves_used: 12,
+            rms_deg: 0.03,
+            tilt_deg: [500.0; 3],
+            field_reference: true,
+            field_moves: 12,
+            field_seconds: 20.0,
+            reduced_chi_square: Some(1.0),
+            gravity_only_reason: None,
+        }
+    }
+
+    #[test]
+    fn the_verdict_names_only_the_part_of_the_gyroscope_fit_over_its_budget() {
+        let budgets = GyroBudgets::default();
+        // 0.026 % is within a third of 0.1 %; 0.030° is not within a third of 0.05°.
+        let reason = over_budget(&scale_with(0.026, 0.030), budgets).expect("misalignment over");
+        assert!(
+            reason.starts_with("the gyroscope's misalignment is known to 0.030°"),
+            "{reason}"
+        );
+        assert!(!reason.contains("scale is known"), "{reason}");
+        let both = over_budget(&scale_with(0.05, 0.030), budgets).expect("both over");
+        assert!(
+            both.contains("scale is known to 0.050 %") && both.contains("and its misalignment"),
+            "{both}"
+        );
+        assert_eq!(over_budget(&scale_with(0.02, 0.01), budgets), None);
+    }
 
     #[test]
     fn a_perfect_gyroscope_turns_a_full_turn_back_to_where_it_started() {

@@ -18,7 +18,7 @@ use super::holds::interval;
 use super::intervals::{NoiseFloor, StillReport};
 use super::options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
 use crate::fit::Vec3;
-use crate::recording::{LabelKind, Recording, Sensor};
+use crate::recording::{GyroUnit, LabelKind, Recording, Sensor};
 use crate::stats::descriptive::{
     mean, percentile_of_positive_bits, quantisation_step, window_variances_into,
 };
@@ -302,6 +302,11 @@ pub(super) fn detect(
             path: source,
             quietest_dps: to_dps(quietest_gyro_var),
             unit: recording.units.symbol(Sensor::Gyro),
+            other_units: match recording.units.gyro {
+                GyroUnit::Rads => "dps or counts",
+                GyroUnit::Dps => "rads or counts",
+                GyroUnit::Counts => "rads or dps",
+            },
             bound_dps: MAX_STILL_GYRO_STD_DPS,
         });
     }
