@@ -186,7 +186,29 @@ fn fleet_and_history_commands_list_outliers_and_changes_as_json() {
         let device = &faulty[0].0;
         let mut again = board_record(HEALTHY);
         again.recorded_unix_ms += 1000;
+        // A gyroscope bias change far below the table's old four decimals.
+        again.params.gyro.b[0] += 2e-5;
         store.record(&again).expect("second calibration");
+        // The table lists the largest change, in three significant digits, and says how many
+        // more there are.
+        let table = |shown: &str| {
+            let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+                .args(["history", device, "--db", &db, "--changes", shown])
+                .output()
+                .expect("imucal runs");
+            String::from_utf8_lossy(&out.stdout).into_owned()
+        };
+        let one = table("1");
+        assert!(
+            one.contains("accel.b.y -2.00e0 (")
+                && one.contains("and 1 more (--changes 2 lists them)"),
+            "{one}"
+        );
+        let two = table("2");
+        assert!(
+            two.contains("gyro.b.x +2.00e-5") && !two.contains(" more "),
+            "{two}"
+        );
         let history = imucal(&["history", device, "--db", &db, "--json"]);
         let records = history["records"].as_array().expect("records");
         assert_eq!(records.len(), 2);

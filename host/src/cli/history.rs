@@ -168,16 +168,24 @@ fn print_entry(entry: &RecordChanges, shown: usize) {
     match entry.previous {
         None => println!("       first calibration of this board"),
         Some(previous) => {
-            let listed: Vec<String> = entry
-                .changes
+            let changed: Vec<_> = entry.changes.iter().filter(|c| c.change != 0.0).collect();
+            // Three significant digits whatever the unit: a bias change of 2e-5 rad/s is not
+            // "+0.0000".
+            let mut listed: Vec<String> = changed
                 .iter()
-                .filter(|c| c.change != 0.0)
                 .take(shown)
                 .map(|c| match c.change_sigma {
-                    Some(s) => format!("{} {:+.4} ({:+.1}σ)", c.parameter, c.change, s),
-                    None => format!("{} {:+.4}", c.parameter, c.change),
+                    Some(s) => format!("{} {:+.2e} ({:+.1}σ)", c.parameter, c.change, s),
+                    None => format!("{} {:+.2e}", c.parameter, c.change),
                 })
                 .collect();
+            if changed.len() > shown {
+                listed.push(format!(
+                    "and {} more (--changes {} lists them)",
+                    changed.len() - shown,
+                    changed.len()
+                ));
+            }
             let kinds: Vec<String> = entry.sensor_changes.iter().map(|c| c.sentence()).collect();
             let said: Vec<String> = kinds.into_iter().chain(listed).collect();
             if said.is_empty() {
