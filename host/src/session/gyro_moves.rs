@@ -329,6 +329,18 @@ mod tests {
         }
     }
 
+    /// The move read through identity calibrations, no bias, still below 0.02 rad/s.
+    fn uncalibrated_motion(samples: &[UnitSample]) -> Option<GyroMotion> {
+        motion_of(
+            samples,
+            &Calibration::identity(),
+            &Mat3::identity(),
+            &Vec3::zeros(),
+            0.02,
+            None,
+        )
+    }
+
     /// A 90° turn about body X at 100 Hz between two still stretches of 0.5 s, +Z up at the
     /// start, read by a gyroscope whose X scale is `gain`.
     fn quarter_turn(gain: f64) -> Vec<UnitSample> {
@@ -350,15 +362,7 @@ mod tests {
 
     #[test]
     fn a_quarter_turn_gives_gravity_a_quarter_turn_apart_at_its_still_ends() {
-        let motion = motion_of(
-            &quarter_turn(1.0),
-            &Calibration::identity(),
-            &Mat3::identity(),
-            &Vec3::zeros(),
-            0.02,
-            None,
-        )
-        .expect("a usable move");
+        let motion = uncalibrated_motion(&quarter_turn(1.0)).expect("a usable move");
         let angle = motion
             .gravity_before
             .angle(&motion.gravity_after)
@@ -400,15 +404,7 @@ mod tests {
             samples.windows(2).any(|w| w[1].t_s - w[0].t_s > 0.015),
             "the stream has skipped reads"
         );
-        let motion = motion_of(
-            &samples,
-            &Calibration::identity(),
-            &Mat3::identity(),
-            &Vec3::zeros(),
-            0.02,
-            None,
-        )
-        .expect("a usable move");
+        let motion = uncalibrated_motion(&samples).expect("a usable move");
         // The sensor's period from 200 read stamps that lag their conversions by up to 10 ms.
         assert!((motion.dt / 0.0103 - 1.0).abs() < 2e-3, "{}", motion.dt);
         let turned = integrate_rotation(&Mat3::identity(), &motion.rates, motion.dt)
@@ -422,14 +418,7 @@ mod tests {
     fn a_stream_with_a_lost_batch_is_not_used() {
         let mut samples = quarter_turn(1.0);
         samples.drain(80..100);
-        let used = motion_of(
-            &samples,
-            &Calibration::identity(),
-            &Mat3::identity(),
-            &Vec3::zeros(),
-            0.02,
-            None,
-        );
+        let used = uncalibrated_motion(&samples);
         assert!(used.is_none());
     }
 
