@@ -209,8 +209,11 @@ pub struct Person {
     segment_end_s: f64,
     /// `PoseStats` count when the current hold began; `None` once the hold is ending.
     hold_captures_at_start: Option<u64>,
-    /// When this hold's pose was captured, s, and the `StartStream` count then.
+    /// When this hold's pose was captured, s, and the `StartStream` count before the reply: a
+    /// host may start its next stream (its prompt) before the next sample is taken.
     captured: Option<(f64, u64)>,
+    /// `StartStream` count at the previous observation.
+    stream_starts_seen: u64,
     /// When the person starts to move after seeing the next prompt, s.
     moving_at_s: Option<f64>,
     first_prompt_s: Option<f64>,
@@ -288,6 +291,7 @@ impl Person {
             segment_end_s: OPEN_HOLD_S,
             hold_captures_at_start: None,
             captured: None,
+            stream_starts_seen: 0,
             moving_at_s: None,
             first_prompt_s: None,
             screen: (Screen::Unknown, 0.0),
@@ -313,6 +317,7 @@ impl Person {
         if prompts.capture_requests > 0 && self.first_prompt_s.is_none() {
             self.first_prompt_s = Some(t_s);
         }
+        let starts_before = std::mem::replace(&mut self.stream_starts_seen, prompts.stream_starts);
         self.trace_field(t_s);
         if prompts.screen != self.screen.0 {
             self.screen = (prompts.screen, t_s);
@@ -321,7 +326,7 @@ impl Person {
             (self.phase, self.hold_captures_at_start)
         {
             if self.captured.is_none() && prompts.poses_captured > at_start {
-                self.captured = Some((t_s, prompts.stream_starts));
+                self.captured = Some((t_s, starts_before));
             }
             let prompted = self.captured.is_some_and(|(at_s, starts)| {
                 prompts.stream_starts > starts || t_s - at_s >= NO_PROMPT_MOVE_ON_S
@@ -657,6 +662,21 @@ mod tests {
             t_s += STEP_S;
         }
         None
+    }
+
+    #[test]
+    fn a_person_moves_on_a_reaction_time_after_a_prompt_that_arrives_with_the_capture_reply() {
+        // `drive` captures the first hold at 0.8 s and starts the next stream in the same step,
+        // as a fast host does before the board's next sample.
+        let mut person = guided_person();
+        let turning = drive(&mut person, Screen::Unknown, |p| {
+            p.phase() == PersonPhase::TurnToHold { index: 1 }
+        })
+        .expect("the person turns to the second position");
+        assert!(
+            turning >= 0.8 + REACTION_S && turning < 0.8 + NO_PROMPT_MOVE_ON_S,
+            "turning began at {turning:.2} s, after a capture and prompt at 0.8 s"
+        );
     }
 
     #[test]
