@@ -674,7 +674,7 @@ mod tests {
         })
         .expect("the person turns to the second position");
         assert!(
-            turning >= 0.8 + REACTION_S && turning < 0.8 + NO_PROMPT_MOVE_ON_S,
+            (0.8 + REACTION_S..0.8 + NO_PROMPT_MOVE_ON_S).contains(&turning),
             "turning began at {turning:.2} s, after a capture and prompt at 0.8 s"
         );
     }
