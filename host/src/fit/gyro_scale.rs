@@ -23,6 +23,45 @@ use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution}
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
 
+/// Longest step between two time stamps, in sample periods, of a stream still integrated:
+/// one read the board skipped (two periods) with room for the sensor's rate error.
+const MAX_STEP_PERIODS: f64 = 2.5;
+
+/// Time step of a stream of stamps `times`: the least-squares slope of the stamps against the
+/// sample count.
+///
+/// A sensor converts on its own oscillator, a few per cent off the board's read timer, and the
+/// firmware leaves out a read that finds no new conversion: a stream from a sensor slower than
+/// the timer jumps by two read periods now and then, while its samples are evenly spaced on the
+/// sensor's clock. The slope is that clock's period (each stamp lags its conversion by less than
+/// a read period, which averages out over the stream); the mean interval of the two ends would
+/// carry the lag of both, up to a period per motion. `None` when there are fewer than two
+/// stamps, they do not increase, or a step exceeds [`MAX_STEP_PERIODS`] periods (samples lost:
+/// the rotation over the gap is unknown).
+pub fn sample_step_s(times: impl Iterator<Item = f64> + Clone) -> Option<f64> {
+    let n = times.clone().count();
+    if n < 2 {
+        return None;
+    }
+    let mean_k = (n - 1) as f64 / 2.0;
+    let t0 = times.clone().next()?;
+    let mean_t = times.clone().map(|t| t - t0).sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (k, t) in times.clone().enumerate() {
+        let dk = k as f64 - mean_k;
+        sxy += dk * (t - t0 - mean_t);
+        sxx += dk * dk;
+    }
+    let dt = sxy / sxx;
+    let mut previous = t0;
+    let even = times.skip(1).all(|t| {
+        let step = t - previous;
+        previous = t;
+        step > 0.0 && step <= MAX_STEP_PERIODS * dt
+    });
+    (dt.is_finite() && dt > 0.0 && even).then_some(dt)
+}
+
 /// One motion between two still poses.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GyroMotion {
@@ -306,4 +345,43 @@ fn check_observability(jtj: &DMatrix<f64>) -> bool {
 /// Refuse when an entry's uncertainty shows the motions do not determine it.
 fn check_precision(cov: &DMatrix<f64>) -> bool {
     (0..9).all(|i| cov[(i, i)].max(0.0).sqrt() <= MAX_ENTRY_STD)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sample_step_s;
+
+    /// Stamps of a sensor converting every `period` read on a timer of `read` (> period is
+    /// slower): each conversion is stamped at the first read after it.
+    fn read_stamps(period: f64, read: f64, count: usize) -> Vec<f64> {
+        let mut stamps: Vec<f64> = Vec::new();
+        for k in 0..count {
+            let t = ((k as f64 * period) / read).ceil() * read;
+            if stamps.last().is_none_or(|last| t > *last) {
+                stamps.push(t);
+            }
+        }
+        stamps
+    }
+
+    #[test]
+    fn the_step_of_a_sensor_slower_than_the_read_timer_is_its_own_period() {
+        let (period, read) = (1.0 / 119.0 * 1.02, 1.0 / 119.0);
+        let stamps = read_stamps(period, read, 300);
+        let step = sample_step_s(stamps.iter().copied()).expect("a step");
+        // The stamps lag by less than a read period, spread over ~300 samples.
+        assert!(
+            (step / period - 1.0).abs() < 1e-3,
+            "{step} against {period}"
+        );
+    }
+
+    #[test]
+    fn a_stream_with_a_gap_of_samples_has_no_step() {
+        let mut stamps: Vec<f64> = (0..100).map(|k| k as f64 * 0.01).collect();
+        stamps.drain(40..43);
+        assert!(sample_step_s(stamps.iter().copied()).is_none());
+        assert!(sample_step_s([0.0].into_iter()).is_none());
+        assert!(sample_step_s([0.0, 0.0, 0.0].into_iter()).is_none());
+    }
 }

@@ -16,7 +16,7 @@
 use nalgebra::UnitQuaternion;
 
 use crate::device::UnitSample;
-use crate::fit::gyro_scale::{integrate_rotation, GyroMotion};
+use crate::fit::gyro_scale::{integrate_rotation, sample_step_s, GyroMotion};
 use crate::fit::{Calibration, Mat3, Vec3};
 
 /// Moves needed before the session comments on which axis lacks rotation.
@@ -37,41 +37,6 @@ const EDGE_MIN_SAMPLES: usize = 5;
 /// vertical, so it understates a lack: on the simulated sessions Z at 0.41–0.46 of the others
 /// had 3–4 times X's σ.)
 pub const LACKING_FRACTION: f64 = 0.5;
-
-/// Longest step between two time stamps, in sample periods, of a stream still integrated:
-/// one read the board skipped (two periods) with room for the sensor's rate error.
-const MAX_STEP_PERIODS: f64 = 2.5;
-
-/// Time step of a stream: the least-squares slope of the time stamps against the sample count.
-///
-/// A sensor converts on its own oscillator, a few per cent off the board's read timer, and the
-/// firmware leaves out a read that finds no new conversion: a stream from a sensor slower than
-/// the timer jumps by two read periods now and then, while its samples are evenly spaced on the
-/// sensor's clock. The slope is that clock's period (each stamp lags its conversion by less than
-/// a read period, which averages out over the stream); the mean interval of the two ends would
-/// carry the lag of both, up to a period per move. Samples lost in transport are not this
-/// case: the session drops a move whose stream index has a gap ([`super::runner`]). `None` when
-/// the stamps do not increase or a step exceeds [`MAX_STEP_PERIODS`] periods.
-pub(super) fn sample_step_s(samples: &[UnitSample]) -> Option<f64> {
-    let n = samples.len();
-    if n < 2 {
-        return None;
-    }
-    let mean_k = (n - 1) as f64 / 2.0;
-    let t0 = samples[0].t_s;
-    let mean_t = samples.iter().map(|s| s.t_s - t0).sum::<f64>() / n as f64;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (k, s) in samples.iter().enumerate() {
-        let dk = k as f64 - mean_k;
-        sxy += dk * (s.t_s - t0 - mean_t);
-        sxx += dk * dk;
-    }
-    let dt = sxy / sxx;
-    let even = samples
-        .windows(2)
-        .all(|w| w[1].t_s > w[0].t_s && w[1].t_s - w[0].t_s <= MAX_STEP_PERIODS * dt);
-    (dt.is_finite() && dt > 0.0 && even).then_some(dt)
-}
 
 /// Rotation from each sample's body frame to the first sample's (`R₀←ⱼ`), integrating `a·rates`.
 fn prefix_rotations(a: &Mat3, rates: &[Vec3], dt: f64) -> Vec<UnitQuaternion<f64>> {
@@ -213,7 +178,7 @@ pub(super) fn move_ends(
     bias: &Vec3,
     still_rate: f64,
 ) -> Option<MoveEnds> {
-    let dt = sample_step_s(samples)?;
+    let dt = sample_step_s(samples.iter().map(|s| s.t_s))?;
     let rates: Vec<Vec3> = samples.iter().map(|s| Vec3::from(s.gyro) - bias).collect();
     let edge = ((EDGE_MAX_S / dt).round() as usize).max(EDGE_MIN_SAMPLES);
     let head = still_run(rates.iter().copied(), still_rate, edge);
@@ -276,7 +241,10 @@ pub fn motions_of(
 pub fn tilt_per_axis_deg(moves: &[Vec<UnitSample>]) -> [f64; 3] {
     let mut total = Vec3::zeros();
     for samples in moves {
-        let (Some(dt), Some(first)) = (sample_step_s(samples), samples.first()) else {
+        let (Some(dt), Some(first)) = (
+            sample_step_s(samples.iter().map(|s| s.t_s)),
+            samples.first(),
+        ) else {
             continue;
         };
         let rates: Vec<Vec3> = samples.iter().map(|s| Vec3::from(s.gyro)).collect();
@@ -288,6 +256,16 @@ pub fn tilt_per_axis_deg(moves: &[Vec<UnitSample>]) -> [f64; 3] {
         total += tilting.abs();
     }
     [total.x, total.y, total.z].map(f64::to_degrees)
+}
+
+/// Name of body `axis` (0 = X) and a turn between two of the twelve positions that tilts the
+/// board about it.
+pub(super) fn axis_turn_example(axis: usize) -> (char, &'static str) {
+    match axis {
+        0 => ('X', "from +Y up to +Z up"),
+        1 => ('Y', "from +Z up to +X up"),
+        _ => ('Z', "from +X up to +Y up"),
+    }
 }
 
 /// The axis (0 = X) that still lacks tilting rotation and a sentence naming a turn that supplies
@@ -302,11 +280,7 @@ pub fn missing_rotation_advice(tilt_deg: &[f64; 3]) -> Option<(usize, String)> {
     if others <= 0.0 || least >= LACKING_FRACTION * others {
         return None;
     }
-    let (name, example) = match axis {
-        0 => ('X', "from +Y up to +Z up"),
-        1 => ('Y', "from +Z up to +X up"),
-        _ => ('Z', "from +X up to +Y up"),
-    };
+    let (name, example) = axis_turn_example(axis);
     let text = format!(
         "the turns so far have tilted the board {least:.0}° about its {name} axis against \
          {others:.0}° on average about the others; the gyroscope's scale needs turns about \

@@ -4,7 +4,7 @@
 
 use super::intervals::StillReport;
 use crate::fit::gyro_bias::fit_gyro_bias;
-use crate::fit::gyro_scale::{fit_gyro_scale, GyroMotion};
+use crate::fit::gyro_scale::{fit_gyro_scale, sample_step_s, GyroMotion};
 use crate::fit::{Calibration, CalibrationStd, Fit, FitError, Vec3};
 use crate::recording::{Recording, Sensor};
 
@@ -59,11 +59,10 @@ pub fn motions_between_holds(
         let (Some(rows), Some(times)) = (gyro.get(first..=last), time.get(first..=last)) else {
             continue;
         };
-        if rows.len() < 2 {
+        // A motion with a gap in its stamps (samples lost) cannot be integrated.
+        let Some(dt) = sample_step_s(times.iter().copied()) else {
             continue;
-        }
-        // Evenly spaced samples are assumed; the mean interval keeps the total time exact.
-        let dt = (times[times.len() - 1] - times[0]) / (times.len() - 1) as f64;
+        };
         motions.push(GyroMotion {
             gravity_before: accel.apply(&before.mean),
             gravity_after: accel.apply(&after.mean),
