@@ -1,22 +1,31 @@
 //! Tilting turns for the gyroscope: Tedaldi's method (2014, §IV-B) sees a rotation only through
-//! the change of the gravity direction, so each body axis needs tilting rotation about it. When
-//! the moves between the positions (and the accelerometer's corners) leave one axis with less
-//! than [`super::gyro_moves::LACKING_FRACTION`] of the others' tilting rotation (the advice the
-//! person is shown, [`super::gyro_moves::missing_rotation_advice`]), the host asks for the
-//! corner position whose shortest turn from the current position tilts the board most about
-//! that axis, up to [`super::options::SessionOptions::max_gyro_moves`] of them. On the twelve
-//! positions the lacking axis is usually body Z.
+//! the change of the gravity direction, so each body axis needs tilting rotation about it. After
+//! the positions, the host fits the gyroscope's `A` to the moves so far against gravity alone
+//! (the accelerometer fitted on the positions, the bias from the holds' means) and, while an
+//! entry's σ from that fit's own residuals is over a third of its budget (the verdict's 3σ),
+//! asks for the corner position whose shortest turn from the current position tilts the board
+//! most about the axis that entry's column needs, up to
+//! [`super::options::SessionOptions::max_gyro_moves`] of them. The final fit adds the field and
+//! the rest's bias, so this is a guide, not its σ. When the fit fails the host falls back on the
+//! tilt each axis got ([`super::gyro_moves::missing_rotation_advice`]). On the twelve positions
+//! the weak axis is usually body Z; four turns cost ≈ 15 s of a ≈ 60 s session.
 
 use std::io::{Read, Write};
 
 use super::capture::CaptureGoal;
 use super::error::SessionError;
 use super::events::SessionEvent;
-use super::gyro_moves::{missing_rotation_advice, tilt_per_axis_deg};
+use super::gyro_fit::GyroBudgets;
+use super::gyro_moves::{
+    axis_turn_example, missing_rotation_advice, motions_of, tilt_per_axis_deg,
+};
 use super::runner::Runner;
 use super::solve::{self, CapturedPose};
 use super::targets::{self, Target};
-use crate::fit::Vec3;
+use crate::device::UnitSample;
+use crate::fit::gyro_scale::fit_gyro_scale;
+use crate::fit::norm_lm::fit_accel_lm;
+use crate::fit::{Mat3, Vec3};
 
 impl<L: Read + Write> Runner<'_, L> {
     /// Ask for tilting turns about the axis the moves lack (see the module documentation);
@@ -37,18 +46,44 @@ impl<L: Read + Write> Runner<'_, L> {
                     self.moves.len()
                 ));
             }
-            let Some((axis, advice)) = missing_rotation_advice(&tilt) else {
-                return Ok(format!(
-                    "the moves tilted the board {:.0}°, {:.0}° and {:.0}° about its X, Y and Z \
-                     axes: every axis turned enough for the gyroscope's scale{}",
-                    tilt[0],
-                    tilt[1],
-                    tilt[2],
-                    match added {
-                        0 => String::new(),
-                        n => format!(" after {n} extra turns"),
+            let relative = predicted_relative_sigma(
+                captured,
+                &self.moves,
+                self.options.gravity_mps2,
+                f64::from(self.options.thresholds.gyro_std_rads),
+            );
+            let lacking = match &relative {
+                Some(relative) => lacking_rotation(relative, &self.options.gyro_budgets),
+                None => missing_rotation_advice(&tilt),
+            };
+            let Some((axis, advice)) = lacking else {
+                let after = match added {
+                    0 => String::new(),
+                    n => format!(" after {n} extra turns"),
+                };
+                let [x, y, z] = tilt;
+                return Ok(match relative {
+                    Some(relative) => {
+                        let scale = [0, 1, 2].map(|i| relative[(i, i)] * 100.0);
+                        let angle = (0..9)
+                            .filter(|k| k / 3 != k % 3)
+                            .map(|k| relative[(k / 3, k % 3)])
+                            .fold(0.0, f64::max)
+                            .to_degrees();
+                        format!(
+                            "the moves tilted the board {x:.0}°, {y:.0}° and {z:.0}° about its X, \
+                             Y and Z axes{after}: against gravity alone they give the \
+                             gyroscope's scale ±{:.3}, ±{:.3} and ±{:.3} % and its \
+                             misalignment ±{angle:.3}° at most (1σ), within a third of the \
+                             budgets",
+                            scale[0], scale[1], scale[2]
+                        )
                     }
-                ));
+                    None => format!(
+                        "the moves tilted the board {x:.0}°, {y:.0}° and {z:.0}° about its X, Y \
+                         and Z axes: every axis turned enough for the gyroscope's scale{after}"
+                    ),
+                });
             };
             if added >= most {
                 return Ok(format!("{advice} ({added} extra turns were asked for)."));
@@ -97,6 +132,84 @@ impl<L: Read + Write> Runner<'_, L> {
             added += 1;
         }
     }
+}
+
+/// 1σ of the gyroscope's `A` relative to its diagonal (`σ(A_rc)/|A_cc|`: the scale error on the
+/// diagonal, the misalignment angle in radians off it) from Tedaldi's fit of the moves so far
+/// against gravity alone, with the accelerometer fitted on `captured` and the gyroscope's bias
+/// from the holds' means, its covariance from the fit's own residuals. `None` when a fit fails.
+fn predicted_relative_sigma(
+    captured: &[CapturedPose],
+    moves: &[Vec<UnitSample>],
+    gravity: f64,
+    still_rate: f64,
+) -> Option<Mat3> {
+    let poses: Vec<_> = captured
+        .iter()
+        .map(|p| solve::pose_of(&p.stats, solve::accel_of))
+        .collect();
+    let accel = fit_accel_lm(&poses, gravity).ok()?;
+    let bias = captured
+        .iter()
+        .map(|p| solve::pose_of(&p.stats, solve::gyro_of).mean)
+        .sum::<Vec3>()
+        / captured.len().max(1) as f64;
+    // Twice, as the final fit does: each end's samples are turned into the frame next to the
+    // move with the gyroscope, so the first pass's unit scale blurs them.
+    let first = motions_of(
+        moves,
+        &accel.cal,
+        &Mat3::identity(),
+        &bias,
+        still_rate,
+        None,
+    );
+    let rough = fit_gyro_scale(&first, None).ok()?;
+    let motions = motions_of(moves, &accel.cal, &rough.cal.a, &bias, still_rate, None);
+    let fit = fit_gyro_scale(&motions, Some(&rough.cal.a)).ok()?;
+    let std = fit.std?;
+    let relative = Mat3::from_fn(|r, c| std.a[(r, c)] / fit.cal.a[(c, c)].abs());
+    relative.iter().all(|s| s.is_finite()).then_some(relative)
+}
+
+/// The body axis whose rotation the fit most needs, with a sentence naming a turn that supplies
+/// it; `None` when every entry of `relative` ([`predicted_relative_sigma`]) is within a third
+/// of its budget (the verdict's 3σ). Rotation about axis `c` is what pins column `c` of `A`:
+/// its scale and the misalignments of the other outputs to it.
+fn lacking_rotation(relative: &Mat3, budgets: &GyroBudgets) -> Option<(usize, String)> {
+    let scale_allowed = budgets.scale_pct / 100.0 / 3.0;
+    let angle_allowed = budgets.misalignment_deg.to_radians() / 3.0;
+    let need =
+        |r: usize, c: usize| relative[(r, c)] / if r == c { scale_allowed } else { angle_allowed };
+    let (r, c) = (0..9)
+        .map(|k| (k / 3, k % 3))
+        .max_by(|a, b| need(a.0, a.1).total_cmp(&need(b.0, b.1)))?;
+    if need(r, c) <= 1.0 {
+        return None;
+    }
+    let (name, example) = axis_turn_example(c);
+    let what = if r == c {
+        format!(
+            "{name} scale at ±{:.3} % (1σ), over the {:.3} %",
+            relative[(r, c)] * 100.0,
+            scale_allowed * 100.0
+        )
+    } else {
+        format!(
+            "misalignment of its {} axis to {name} at ±{:.3}° (1σ), over the {:.3}°",
+            ['X', 'Y', 'Z'][r],
+            relative[(r, c)].to_degrees(),
+            angle_allowed.to_degrees()
+        )
+    };
+    Some((
+        c,
+        format!(
+            "against gravity alone, the moves so far leave the gyroscope's {what} its budget \
+             allows at 3σ; turns that tilt the board about {name} help (e.g. {example}); a turn \
+             about the vertical does not count"
+        ),
+    ))
 }
 
 /// The measured up direction of a captured pose (unit).
@@ -160,6 +273,23 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn turns_are_asked_about_the_axis_whose_column_most_exceeds_its_share_of_the_budgets() {
+        let budgets = GyroBudgets::default();
+        // Z's scale at 0.045 % against 0.033 % allowed; X's misalignment to Y at 1.3× its share.
+        let mut relative = Mat3::from_diagonal(&Vec3::new(0.0001, 0.0002, 0.00045));
+        relative[(0, 1)] = (0.05_f64 / 3.0 * 1.3).to_radians();
+        let (axis, text) = lacking_rotation(&relative, &budgets).expect("an axis lacks");
+        assert_eq!(axis, 2, "{text}");
+        assert!(text.contains("Z scale at ±0.045 %"), "{text}");
+        relative[(2, 2)] = 0.0003;
+        let (axis, text) = lacking_rotation(&relative, &budgets).expect("Y's column lacks");
+        assert_eq!(axis, 1, "{text}");
+        assert!(text.contains("misalignment of its X axis to Y"), "{text}");
+        relative[(0, 1)] = 0.0;
+        assert!(lacking_rotation(&relative, &budgets).is_none());
     }
 
     #[test]

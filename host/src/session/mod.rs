@@ -13,9 +13,9 @@
 //!    [`SessionOptions::rounds`] above 1 the twelve are captured that many times over. Afterwards, if the
 //!    covariance of the accelerometer fit says the expected `|a|` error exceeds a quarter of the
 //!    budget, corner positions are asked for as well ([`targets::corner_positions`]), until it
-//!    meets that target or four are in. Then, if the moves have tilted the board about one axis
-//!    much less than about the others, up to two corners that tilt it about that axis
-//!    ([`gyro_phase`]).
+//!    meets that target or four are in. Then, while a fit of the moves against gravity says an
+//!    entry of the gyroscope's `A` is over a third of its budget, up to four corners whose turn
+//!    tilts the board about the axis that entry needs ([`gyro_phase`]).
 //! 2. Magnetometer ([`mag_phase`]): raw samples while the user turns the board, until every one
 //!    of 26 direction regions holds enough samples ([`coverage`]); the moves between the
 //!    positions count, so this only fills in what they left empty.

@@ -38,8 +38,8 @@ pub struct SessionOptions {
     pub rounds: usize,
     /// Most extra positions asked for when the covariance says they help (0 = never).
     pub max_extra_poses: usize,
-    /// Most corner positions asked for to tilt the board about an axis the moves lack
-    /// (0 = none; see `gyro_phase`).
+    /// Most corner positions asked for to tilt the board about an axis the gyroscope's fit
+    /// needs (0 = none; see `gyro_phase`).
     pub max_gyro_moves: usize,
     /// Longest wait for the extra positions before going on without them.
     pub extra_pose_timeout: Duration,
@@ -95,7 +95,7 @@ impl Default for SessionOptions {
             pose_timeout: Duration::from_secs(180),
             rounds: 1,
             max_extra_poses: 4,
-            max_gyro_moves: 2,
+            max_gyro_moves: 4,
             extra_pose_timeout: Duration::from_secs(30),
             budgets: Budgets {
                 accel_mg: 2.0,
