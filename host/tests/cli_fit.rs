@@ -405,6 +405,17 @@ fn errors_are_sentences_with_a_failing_exit_code() {
 }
 
 #[test]
+fn still_on_a_magnetometer_only_recording_lists_the_field_means() {
+    let (ok, stdout, stderr) = imucal(&["still", &real("tsm_qmc5883l_mag_rotation.csv")]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("mag mean ("), "{stdout}");
+    assert!(!stdout.contains("accel mean"), "{stdout}");
+    // Every hold row shows a mean triple, not "-".
+    let rows: Vec<&str> = stdout.lines().filter(|l| l.contains(" [")).collect();
+    assert!(rows.len() >= 10, "{stdout}");
+}
+
+#[test]
 fn help_of_every_command_has_an_example() {
     for command in ["fit", "still"] {
         let (ok, stdout, _) = imucal(&[command, "--help"]);

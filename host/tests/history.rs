@@ -220,6 +220,29 @@ fn failed_opens_and_writes_say_what_and_how_to_fix() {
     }
 }
 
+#[test]
+fn reading_a_history_that_does_not_exist_says_so_and_creates_nothing() {
+    let dir = history_support::scratch_dir("missing");
+    let path = dir.join("typo").join("history.sqlite");
+    let url = format!("sqlite://{}", path.display());
+    let error = HistoryStore::open_existing_url(Some(&url))
+        .err()
+        .expect("a missing file refused");
+    let text = error.to_string();
+    assert!(
+        matches!(error, HistoryError::Missing { .. }) && text.contains("--db"),
+        "{text}"
+    );
+    assert!(!path.exists() && !dir.join("typo").exists());
+    // Once something is recorded there, reading works.
+    HistoryStore::open_url(Some(&url))
+        .expect("open to record")
+        .record(&board_record(1))
+        .expect("recorded");
+    let mut store = HistoryStore::open_existing_url(Some(&url)).expect("now it exists");
+    assert_eq!(store.records(None).expect("read").len(), 1);
+}
+
 /// Records each writer process adds.
 const PER_WRITER: u64 = 25;
 /// Writer processes.

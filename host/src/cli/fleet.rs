@@ -39,7 +39,7 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         false_alarm_per_board: args.false_alarm,
         min_spread_values: args.min_spread_values,
     };
-    let mut store = HistoryStore::open_url(args.db.as_deref())?;
+    let mut store = HistoryStore::open_existing_url(args.db.as_deref())?;
     let report = fleet_report(&mut store, &options)?;
     if args.json {
         let mut out = serde_json::to_value(&report)?;

@@ -108,7 +108,7 @@ pub fn firmware_text(version: &imucal_protocol::FirmwareVersion) -> String {
 
 /// Run `imucal history`.
 pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
-    let mut store = HistoryStore::open_url(args.db.as_deref())?;
+    let mut store = HistoryStore::open_existing_url(args.db.as_deref())?;
     let records = store.records(args.device.as_deref())?;
     let history = device_changes(records);
     if args.json {

@@ -105,7 +105,7 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
                     "accel_mean": i.accel.as_ref().map(|p| triple(&p.mean)),
                     "gyro_mean": i.gyro.as_ref().map(|p| triple(&p.mean)),
                     "mag_mean": i.mag.as_ref().map(|p| triple(&p.mean)),
-                    "n": i.accel.as_ref().or(i.gyro.as_ref()).map(|p| p.n),
+                    "n": i.accel.as_ref().or(i.gyro.as_ref()).or(i.mag.as_ref()).map(|p| p.n),
                     "temp_c": i.temp.map(|t| json!({"mean": t.mean, "min": t.min, "max": t.max})),
                 })
             })
@@ -137,22 +137,33 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             n.margin
         );
     }
+    // The mean shown is the accelerometer's, or the first sensor the recording has.
+    let shown = [Sensor::Accel, Sensor::Mag, Sensor::Gyro]
+        .into_iter()
+        .find(|s| recording.samples(*s).is_some())
+        .unwrap_or(Sensor::Accel);
     println!(
-        "{:>3} {:>9} {:>9} {:>6} {:>6} {:>4}  accel mean ({})",
+        "{:>3} {:>9} {:>9} {:>6} {:>6} {:>4}  {} mean ({})",
         "#",
         "t_start",
         "t_end",
         "dur",
         "label",
         "dir",
-        recording.units.symbol(Sensor::Accel)
+        shown.name(),
+        recording.units.symbol(shown)
     );
     for (k, i) in report.intervals.iter().enumerate() {
         let label = i.label.map_or("-".to_string(), |l| {
             label_name(&recording, l).unwrap_or_else(|| l.to_string())
         });
         let dir = i.direction.map_or("-".to_string(), |d| d.to_string());
-        let mean = i.accel.as_ref().map_or("-".to_string(), |p| {
+        let pose = match shown {
+            Sensor::Accel => i.accel.as_ref(),
+            Sensor::Mag => i.mag.as_ref(),
+            Sensor::Gyro => i.gyro.as_ref(),
+        };
+        let mean = pose.map_or("-".to_string(), |p| {
             format!("[{:.4}, {:.4}, {:.4}]", p.mean.x, p.mean.y, p.mean.z)
         });
         println!(

@@ -67,6 +67,12 @@ pub enum HistoryError {
         /// The database's message.
         cause: String,
     },
+    /// A command that only reads found no SQLite file where the history should be.
+    #[error("there is no history database at `{path}`: nothing has been recorded there yet (`imucal calibrate` and `imucal fit --params-out` record into it); pass --db, or set IMUCAL_DB, to name the database your station records into")]
+    Missing {
+        /// The file looked for.
+        path: String,
+    },
     /// The database was created by a newer imucal.
     #[error("the history database {location} has schema version {found}, this imucal knows up to {known}; update imucal on this station")]
     NewerSchema {

@@ -76,6 +76,21 @@ impl HistoryStore {
         Self::open(&DbLocation::resolve(url)?)
     }
 
+    /// Open `--db URL` (or `$IMUCAL_DB`, or the default file) to read it: a SQLite file that
+    /// does not exist is refused ([`HistoryError::Missing`]), not created empty, so a mistyped
+    /// path says so instead of showing an empty history and leaving a stray file behind.
+    pub fn open_existing_url(url: Option<&str>) -> Result<Self, HistoryError> {
+        let location = DbLocation::resolve(url)?;
+        if let DbLocation::Sqlite(path) = &location {
+            if !path.exists() {
+                return Err(HistoryError::Missing {
+                    path: path.display().to_string(),
+                });
+            }
+        }
+        Self::open(&location)
+    }
+
     /// Where this store is.
     pub fn location(&self) -> &DbLocation {
         &self.location
