@@ -372,19 +372,31 @@ fn parse_row(
                 line: line_no,
                 column: layout.names[col].clone(),
                 text: text.trim().to_string(),
-            })?;
-        store_value(layout, *role, col, value, line_no, &mut readings, part)?;
+            });
+        // A row cut short (a truncated last line, `55.`) is named as such, not by what its
+        // first fields happen to say.
+        let stored =
+            value.and_then(|v| store_value(layout, *role, col, v, line_no, &mut readings, part));
+        if let Err(error) = stored {
+            let count = fields(body).count();
+            return Err(field_count_error(layout, line_no, count).unwrap_or(error));
+        }
     }
-    if found != layout.names.len() {
-        return Err(RecordingError::FieldCount {
-            path: layout.path.to_string(),
-            line: line_no,
-            expected: layout.names.len(),
-            found,
-        });
+    if let Some(error) = field_count_error(layout, line_no, found) {
+        return Err(error);
     }
     finish_row(&readings, part);
     Ok(())
+}
+
+/// The error for a row of `found` fields, when the header names another number of columns.
+fn field_count_error(layout: &Layout<'_>, line_no: usize, found: usize) -> Option<RecordingError> {
+    (found != layout.names.len()).then(|| RecordingError::FieldCount {
+        path: layout.path.to_string(),
+        line: line_no,
+        expected: layout.names.len(),
+        found,
+    })
 }
 
 /// Keep `value`, read from column `col` (of role `role`) of line `line_no`: a time (checked
@@ -577,6 +589,28 @@ mod tests {
             second - 1
         );
         assert!(err.contains(&expected), "{err}");
+    }
+
+    #[test]
+    fn a_row_cut_short_is_named_by_its_field_count_not_by_its_time() {
+        let (mut lines, _) = rows(20);
+        // A truncated last line whose time reads as earlier than the row before it.
+        lines.push("1.".into());
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains("line 22: 1 fields but the header names"),
+            "{err}"
+        );
+        lines.pop();
+        lines.push("25,1.5,x".into());
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(err.contains("line 22: 3 fields"), "{err}");
     }
 
     #[test]
