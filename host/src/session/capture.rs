@@ -63,6 +63,14 @@ impl<L: Read + Write> Runner<'_, L> {
                     .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
                     .count(),
             );
+        // Every target in, `most` of them, or enough by the goal's own measure.
+        let finished = |captured: &[CapturedPose]| {
+            captured.len() >= total
+                || targets
+                    .iter()
+                    .all(|t| captured.iter().any(|c| c.target.index == t.index))
+                || enough(captured)
+        };
         self.start_watching()?;
         let mut last_progress = Instant::now();
         let mut prompted = None;
@@ -75,7 +83,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 .iter()
                 .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
                 .collect();
-            if needed.is_empty() || captured.len() >= total || enough(captured) {
+            if finished(captured) {
                 return Ok(true);
             }
             if choice.is_none_or(|(count, _)| count != captured.len()) {
@@ -163,6 +171,9 @@ impl<L: Read + Write> Runner<'_, L> {
                     hold_s,
                 });
             });
+            // The next prompt is the stream starting again: it starts before the journal and
+            // the screen are updated, so the person is not kept waiting on them.
+            let mut restarted = false;
             match result {
                 Ok(stats) => {
                     let up = Vec3::from(stats.accel_mean.map(f64::from));
@@ -175,6 +186,10 @@ impl<L: Read + Write> Runner<'_, L> {
                                 stats,
                                 t_s: last_sample_s + 0.5 * f64::from(stats.duration_ms) * 1e-3,
                             });
+                            if !finished(captured) {
+                                self.start_watching()?;
+                                restarted = true;
+                            }
                             last_progress = Instant::now();
                             if let Some(pose) = captured.last() {
                                 self.journal.pose(pose)?;
@@ -214,7 +229,9 @@ impl<L: Read + Write> Runner<'_, L> {
                 }
                 Err(other) => return Err(other.into()),
             }
-            self.start_watching()?;
+            if !restarted && !finished(captured) {
+                self.start_watching()?;
+            }
         }
     }
 
