@@ -11,16 +11,25 @@ use clap::{CommandFactory, FromArgMatches};
 
 use cli::args::{Cli, Command};
 
-/// `command` and its subcommands with every option value allowed to be a negative number:
-/// `--min-hold -1` then reaches the option's own check ("must be ≥ 0"), instead of clap reading
-/// `-1` as a flag and suggesting `-- -1`, which passes it as a file name.
+/// `command` and its subcommands with every option value allowed to be a negative number (and
+/// real-number or listed-choice values to start with a hyphen): `--min-hold -1` then reaches the
+/// option's own check ("must be ≥ 0"), instead of clap reading `-1` as a flag and suggesting
+/// `-- -1`, which passes it as a file name.
 fn negative_values_allowed(command: clap::Command) -> clap::Command {
+    let real = std::any::TypeId::of::<f64>();
     command
         .mut_args(|arg| {
-            if arg.get_action().takes_values() && !arg.is_positional() {
-                arg.allow_negative_numbers(true)
+            if !arg.get_action().takes_values() || arg.is_positional() {
+                return arg;
+            }
+            // A real number (`-.5`, `-inf`) or a choice from a list (`--sensor -x`) reaches its
+            // own check, which names the option and what it takes; clap would only suggest
+            // `-- -x`, which passes the value as a file name. Free text keeps clap's rule, so
+            // `--out --json` is not taken for a file named `--json`.
+            if arg.get_value_parser().type_id() == real || !arg.get_possible_values().is_empty() {
+                arg.allow_hyphen_values(true)
             } else {
-                arg
+                arg.allow_negative_numbers(true)
             }
         })
         .mut_subcommands(negative_values_allowed)

@@ -564,6 +564,20 @@ fn a_negative_option_value_written_with_a_space_reaches_the_option_check() {
     // A negative value where one makes sense is read as a number.
     let (_, _, stderr) = imucal(&["fit", &nilspod, "--gyro-unit", "dps", "--field-ut", "-3"]);
     assert!(stderr.contains("--field-ut -3 is outside"), "{stderr}");
+    // Numbers clap does not take for negative (`-.5`, `-inf`) and a choice from a list reach
+    // their own checks too.
+    for (args, expected) in [
+        (["--window", "-.5"], "-0.5 is not a positive number"),
+        (["--gravity", "-inf"], "--gravity -inf is outside"),
+        (["--sensor", "-x"], "possible values: accel, gyro, mag, all"),
+    ] {
+        let mut all = vec!["fit", nilspod.as_str(), "--gyro-unit", "dps"];
+        all.extend(args);
+        let (ok, _, stderr) = imucal(&all);
+        assert!(!ok, "{args:?}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!stderr.contains("use '-- "), "{args:?}: {stderr}");
+    }
 }
 
 #[test]
