@@ -125,4 +125,7 @@ fn calibrate_location_writes_the_modelled_field_as_the_reference() {
         "wrote {written} µT, model {field} µT"
     );
     assert_eq!(json["verified"], true);
+    // The fit's description names the field as the reference it was given, not as the user's.
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("µT (reference)"), "{stderr}");
 }

@@ -275,9 +275,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
                     .and_then(Option::as_ref)
             )
         );
+        // The stream's measured rate: a sensor off its nominal rate shows here first.
+        let stream = match (outcome.stream_rate_hz, outcome.lost_samples) {
+            (rate, _) if rate <= 0.0 => String::new(),
+            (rate, 0) => format!(", stream {rate:.1} Hz with no sample lost"),
+            (rate, lost) => format!(", stream {rate:.1} Hz with {lost} samples lost in transit"),
+        };
         println!(
             "Session: {:.1} s {} ({:.1} s wall), {} positions, {} of 26 magnetometer \
-             directions; verified: {}",
+             directions{stream}; verified: {}",
             outcome.session_seconds,
             if args.sim {
                 "simulated"

@@ -245,7 +245,7 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
     let gyro_b = [0, 1, 2].map(|i| fit.gyro.cal.b[i].to_degrees());
     let mag_b = [0, 1, 2].map(|i| fit.mag.cal.b[i]);
     let source = match fit.field_source {
-        imucal::session::FieldSource::Given => "given",
+        imucal::session::FieldSource::Given => "reference",
         imucal::session::FieldSource::MeanRadius => "the sensor's mean radius",
     };
     let mut lines = vec![

@@ -55,7 +55,8 @@ pub struct CapturedPose {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FieldSource {
-    /// Given by the user (`--field-ut`).
+    /// A reference magnitude was given to the session (`--field-ut`, the field model of
+    /// `--location`, or the simulated site's field).
     Given,
     /// The geometric mean radius of the raw readings: keeps the sensor's mean sensitivity, since
     /// without a reference the field's magnitude is not observable.
