@@ -34,11 +34,13 @@ import numpy as np
 print("seed | session s | moves | gyro scale err % (1σ) | misalign err ° (1σ)")
 for run in sorted(glob.glob(os.path.join(sys.argv[1], "*")), key=lambda d: int(os.path.basename(d))):
     sessions = glob.glob(os.path.join(run, "imucal-session-*"))
-    if not sessions:
+    try:
+        truth = json.load(open(os.path.join(sessions[0], "truth.json")))
+        params = json.load(open(os.path.join(sessions[0], "params.json")))
+        result = json.load(open(os.path.join(run, "result.json")))
+    except (IndexError, OSError, ValueError) as error:
+        print(f"{os.path.basename(run)} | no result ({error})")
         continue
-    truth = json.load(open(os.path.join(sessions[0], "truth.json")))
-    params = json.load(open(os.path.join(sessions[0], "params.json")))
-    result = json.load(open(os.path.join(run, "result.json")))
     q, r = np.linalg.qr(np.array(truth["imu"]["accel"]["a_true"]))
     q = q * np.sign(np.diag(r))
     expected = q.T @ np.array(truth["imu"]["gyro"]["a_true"])

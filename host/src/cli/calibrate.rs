@@ -276,10 +276,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             )
         );
         // The stream's measured rate: a sensor off its nominal rate shows here first.
-        let stream = match (outcome.stream_rate_hz, outcome.lost_samples) {
-            (rate, _) if rate <= 0.0 => String::new(),
-            (rate, 0) => format!(", stream {rate:.1} Hz with no sample lost"),
-            (rate, lost) => format!(", stream {rate:.1} Hz with {lost} samples lost in transit"),
+        let lost = match outcome.lost_samples {
+            0 => "no sample lost".to_string(),
+            1 => "1 sample lost in transit".to_string(),
+            n => format!("{n} samples lost in transit"),
+        };
+        let stream = match outcome.stream_rate_hz {
+            rate if rate > 0.0 => format!(", stream {rate:.1} Hz with {lost}"),
+            _ if outcome.lost_samples > 0 => format!(", {lost}"),
+            _ => String::new(),
         };
         println!(
             "Session: {:.1} s {} ({:.1} s wall), {} positions, {} of 26 magnetometer \

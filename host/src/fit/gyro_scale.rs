@@ -27,6 +27,27 @@ use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
 /// one read the board skipped (two periods) with room for the sensor's rate error.
 const MAX_STEP_PERIODS: f64 = 2.5;
 
+/// Least-squares slope of the stamps `times` against the sample count, s per sample, whatever
+/// the steps between them; `None` for fewer than two stamps or a slope that is not a positive
+/// finite number.
+pub fn stamp_slope_s(times: impl Iterator<Item = f64> + Clone) -> Option<f64> {
+    let n = times.clone().count();
+    if n < 2 {
+        return None;
+    }
+    let mean_k = (n - 1) as f64 / 2.0;
+    let t0 = times.clone().next()?;
+    let mean_t = times.clone().map(|t| t - t0).sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (k, t) in times.enumerate() {
+        let dk = k as f64 - mean_k;
+        sxy += dk * (t - t0 - mean_t);
+        sxx += dk * dk;
+    }
+    let dt = sxy / sxx;
+    (dt.is_finite() && dt > 0.0).then_some(dt)
+}
+
 /// Time step of a stream of stamps `times`: the least-squares slope of the stamps against the
 /// sample count.
 ///
@@ -39,20 +60,8 @@ const MAX_STEP_PERIODS: f64 = 2.5;
 /// stamps, they do not increase, or a step exceeds [`MAX_STEP_PERIODS`] periods (samples lost:
 /// the rotation over the gap is unknown).
 pub fn sample_step_s(times: impl Iterator<Item = f64> + Clone) -> Option<f64> {
-    let n = times.clone().count();
-    if n < 2 {
-        return None;
-    }
-    let mean_k = (n - 1) as f64 / 2.0;
+    let dt = stamp_slope_s(times.clone())?;
     let t0 = times.clone().next()?;
-    let mean_t = times.clone().map(|t| t - t0).sum::<f64>() / n as f64;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (k, t) in times.clone().enumerate() {
-        let dk = k as f64 - mean_k;
-        sxy += dk * (t - t0 - mean_t);
-        sxx += dk * dk;
-    }
-    let dt = sxy / sxx;
     let mut previous = t0;
     let even = times.skip(1).all(|t| {
         let step = t - previous;

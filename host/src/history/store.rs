@@ -82,7 +82,8 @@ impl HistoryStore {
     pub fn open_existing_url(url: Option<&str>) -> Result<Self, HistoryError> {
         let location = DbLocation::resolve(url)?;
         if let DbLocation::Sqlite(path) = &location {
-            if !path.exists() {
+            // A path that cannot be checked (permissions) goes on to `open`, which names why.
+            if matches!(path.try_exists(), Ok(false)) {
                 return Err(HistoryError::Missing {
                     path: path.display().to_string(),
                 });

@@ -4,7 +4,7 @@
 
 use super::intervals::StillReport;
 use crate::fit::gyro_bias::fit_gyro_bias;
-use crate::fit::gyro_scale::{fit_gyro_scale, sample_step_s, GyroMotion};
+use crate::fit::gyro_scale::{fit_gyro_scale, stamp_slope_s, GyroMotion};
 use crate::fit::{Calibration, CalibrationStd, Fit, FitError, Vec3};
 use crate::recording::{Recording, Sensor};
 
@@ -59,8 +59,10 @@ pub fn motions_between_holds(
         let (Some(rows), Some(times)) = (gyro.get(first..=last), time.get(first..=last)) else {
             continue;
         };
-        // A motion with a gap in its stamps (samples lost) cannot be integrated.
-        let Some(dt) = sample_step_s(times.iter().copied()) else {
+        // Evenly spaced samples are assumed; the slope of the stamps keeps the jitter of the two
+        // ends out of the step. A file's stamps may repeat or come in bursts (taken on a host),
+        // so no step is refused here; only stamps that never advance give no step.
+        let Some(dt) = stamp_slope_s(times.iter().copied()) else {
             continue;
         };
         motions.push(GyroMotion {

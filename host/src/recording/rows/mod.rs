@@ -247,9 +247,16 @@ fn join(
     part: &mut Part,
     out: &mut Columns,
 ) -> Result<(), RecordingError> {
-    if let (Some((line, time)), Some(&previous)) =
-        (part.first_time, out.time.as_ref().and_then(|t| t.last()))
-    {
+    // A first row cut short is named by its field count, as within a part.
+    let first_row_short = matches!(
+        (&part.error, part.first_time),
+        (Some(RecordingError::FieldCount { line, .. }), Some((first, _))) if *line == first
+    );
+    if let (Some((line, time)), Some(&previous), false) = (
+        part.first_time,
+        out.time.as_ref().and_then(|t| t.last()),
+        first_row_short,
+    ) {
         if time < previous {
             return Err(RecordingError::TimeBackwards {
                 path: path.to_string(),
@@ -611,6 +618,20 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(err.contains("line 22: 3 fields"), "{err}");
+    }
+
+    #[test]
+    fn a_row_cut_short_at_the_start_of_the_second_half_is_named_by_its_field_count() {
+        let (mut lines, second) = rows(8000);
+        lines[second] = "1.".into();
+        let err = parse(&lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            err.contains(&format!("line {}: 1 fields", second + 2)),
+            "{err}"
+        );
     }
 
     #[test]
