@@ -61,14 +61,13 @@ pub fn stamp_slope_s(times: impl Iterator<Item = f64> + Clone) -> Option<f64> {
 /// the rotation over the gap is unknown).
 pub fn sample_step_s(times: impl Iterator<Item = f64> + Clone) -> Option<f64> {
     let dt = stamp_slope_s(times.clone())?;
-    let t0 = times.clone().next()?;
-    let mut previous = t0;
+    let mut previous = times.clone().next()?;
     let even = times.skip(1).all(|t| {
         let step = t - previous;
         previous = t;
         step > 0.0 && step <= MAX_STEP_PERIODS * dt
     });
-    (dt.is_finite() && dt > 0.0 && even).then_some(dt)
+    even.then_some(dt)
 }
 
 /// One motion between two still poses.

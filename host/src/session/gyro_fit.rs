@@ -223,27 +223,51 @@ pub fn complete_gyro(
     Ok(summary)
 }
 
-/// Tedaldi's fit on the usable moves, twice (see the module documentation), its covariance
-/// Tedaldi's fit on the usable moves, twice (see the module documentation), its covariance
-/// including what it inherits from `nuisance`; `reason` says why the field is not used.
+/// Tedaldi's fit of the usable moves against gravity alone, twice (see the module
+/// documentation), with the calibrated accelerometer `accel`, the gyroscope's `bias` and its
+/// per-sample `rate_noise`; its covariance is the fit's own. Also returns the motions used.
+pub(super) fn fit_against_gravity(
+    moves: &[Vec<UnitSample>],
+    accel: &Calibration,
+    bias: &Vec3,
+    still_rate: f64,
+    rate_noise: Option<f64>,
+) -> Result<(Fit, usize), FitError> {
+    let first = motions_of(
+        moves,
+        accel,
+        &Mat3::identity(),
+        bias,
+        still_rate,
+        rate_noise,
+    );
+    let rough = fit_gyro_scale(&first, None)?;
+    let motions = motions_of(moves, accel, &rough.cal.a, bias, still_rate, rate_noise);
+    let fit = fit_gyro_scale(&motions, Some(&rough.cal.a))?;
+    Ok((fit, motions.len()))
+}
+
+/// [`fit_against_gravity`] with the covariance including what it inherits from `nuisance`;
+/// `reason` says why the field is not used.
 fn fit_scale(
     moves: &[Vec<UnitSample>],
     nuisance: &Nuisance<'_>,
     still_rate: f64,
     reason: String,
 ) -> Result<(Fit, GyroScale), FitError> {
-    let (accel, bias) = (&nuisance.accel.cal, &nuisance.bias);
-    let noise = nuisance.rate_noise;
-    let first = motions_of(moves, accel, &Mat3::identity(), bias, still_rate, noise);
-    let rough = fit_gyro_scale(&first, None)?;
-    let motions = motions_of(moves, accel, &rough.cal.a, bias, still_rate, noise);
-    let mut fit = fit_gyro_scale(&motions, Some(&rough.cal.a))?;
+    let (mut fit, used) = fit_against_gravity(
+        moves,
+        &nuisance.accel.cal,
+        &nuisance.bias,
+        still_rate,
+        nuisance.rate_noise,
+    )?;
     let inherited = inherited_covariance(moves, &fit.cal.a, nuisance, still_rate);
     if let (Some(own), Some(inherited)) = (fit.covariance.as_mut(), inherited) {
         *own += inherited;
         fit.std = Some(calibration_std(own, &FULL_MATRIX_LAYOUT));
     }
-    let mut summary = summarise(&fit, moves, motions.len());
+    let mut summary = summarise(&fit, moves, used);
     summary.gravity_only_reason = Some(reason);
     Ok((fit, summary))
 }

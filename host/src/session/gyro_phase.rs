@@ -15,15 +15,12 @@ use std::io::{Read, Write};
 use super::capture::CaptureGoal;
 use super::error::SessionError;
 use super::events::SessionEvent;
-use super::gyro_fit::GyroBudgets;
-use super::gyro_moves::{
-    axis_turn_example, missing_rotation_advice, motions_of, tilt_per_axis_deg,
-};
+use super::gyro_fit::{fit_against_gravity, GyroBudgets};
+use super::gyro_moves::{axis_turn_example, missing_rotation_advice, tilt_per_axis_deg};
 use super::runner::Runner;
 use super::solve::{self, CapturedPose};
 use super::targets::{self, Target};
 use crate::device::UnitSample;
-use crate::fit::gyro_scale::fit_gyro_scale;
 use crate::fit::norm_lm::fit_accel_lm;
 use crate::fit::{Mat3, Vec3};
 
@@ -135,8 +132,8 @@ impl<L: Read + Write> Runner<'_, L> {
 }
 
 /// 1σ of the gyroscope's `A` relative to its diagonal (`σ(A_rc)/|A_cc|`: the scale error on the
-/// diagonal, the misalignment angle in radians off it) from Tedaldi's fit of the moves so far
-/// against gravity alone, with the accelerometer fitted on `captured` and the gyroscope's bias
+/// diagonal, the misalignment angle in radians off it) from the session's fit of the moves so
+/// far against gravity alone ([`fit_against_gravity`]), with the accelerometer fitted on `captured` and the gyroscope's bias
 /// from the holds' means, its covariance from the fit's own residuals. `None` when a fit fails.
 fn predicted_relative_sigma(
     captured: &[CapturedPose],
@@ -154,19 +151,7 @@ fn predicted_relative_sigma(
         .map(|p| solve::pose_of(&p.stats, solve::gyro_of).mean)
         .sum::<Vec3>()
         / captured.len().max(1) as f64;
-    // Twice, as the final fit does: each end's samples are turned into the frame next to the
-    // move with the gyroscope, so the first pass's unit scale blurs them.
-    let first = motions_of(
-        moves,
-        &accel.cal,
-        &Mat3::identity(),
-        &bias,
-        still_rate,
-        None,
-    );
-    let rough = fit_gyro_scale(&first, None).ok()?;
-    let motions = motions_of(moves, &accel.cal, &rough.cal.a, &bias, still_rate, None);
-    let fit = fit_gyro_scale(&motions, Some(&rough.cal.a)).ok()?;
+    let (fit, _) = fit_against_gravity(moves, &accel.cal, &bias, still_rate, None).ok()?;
     let std = fit.std?;
     let relative = Mat3::from_fn(|r, c| std.a[(r, c)] / fit.cal.a[(c, c)].abs());
     relative.iter().all(|s| s.is_finite()).then_some(relative)

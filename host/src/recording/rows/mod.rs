@@ -579,15 +579,20 @@ mod tests {
         Ok(out)
     }
 
+    /// The error `parse` gives for `lines`, as text (empty when they parse).
+    fn error_of(lines: &[String]) -> String {
+        parse(lines)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
+    }
+
     #[test]
     fn time_going_back_at_the_first_row_of_the_second_half_is_refused_there() {
         let (mut lines, second) = rows(8000);
         assert!(second > 1000, "the block is parsed in two halves");
         lines[second] = format!("{},1.5,-2,3,a", second - 2);
-        let err = parse(&lines)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let err = error_of(&lines);
         // Line numbers count from the block's first line, 2.
         let expected = format!(
             "line {}: time {} s is earlier than the previous row's {} s",
@@ -603,20 +608,14 @@ mod tests {
         let (mut lines, _) = rows(20);
         // A truncated last line whose time reads as earlier than the row before it.
         lines.push("1.".into());
-        let err = parse(&lines)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let err = error_of(&lines);
         assert!(
             err.contains("line 22: 1 fields but the header names"),
             "{err}"
         );
         lines.pop();
         lines.push("25,1.5,x".into());
-        let err = parse(&lines)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let err = error_of(&lines);
         assert!(err.contains("line 22: 3 fields"), "{err}");
     }
 
@@ -624,10 +623,7 @@ mod tests {
     fn a_row_cut_short_at_the_start_of_the_second_half_is_named_by_its_field_count() {
         let (mut lines, second) = rows(8000);
         lines[second] = "1.".into();
-        let err = parse(&lines)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let err = error_of(&lines);
         assert!(
             err.contains(&format!("line {}: 1 fields", second + 2)),
             "{err}"
@@ -638,20 +634,14 @@ mod tests {
     fn errors_of_the_second_half_name_their_line_in_the_whole_file() {
         let (mut lines, second) = rows(8000);
         lines[second + 10] = format!("{},1.5,oops,3,a", second + 10);
-        let err = parse(&lines)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let err = error_of(&lines);
         assert!(
             err.contains(&format!("line {}, column `ay`: `oops`", second + 12)),
             "{err}"
         );
         // An error in the first half comes first, whatever the second half holds.
         lines[second - 3] = format!("{},1.5,-2,3", second - 3);
-        let err = parse(&lines)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let err = error_of(&lines);
         assert!(
             err.contains(&format!("line {}: 4 fields", second - 1)),
             "{err}"
