@@ -92,13 +92,30 @@ fn design(points: &[Vec3]) -> Result<Design, FitError> {
 /// `hᵢ = xᵢᵀ(XᵀX)⁻¹xᵢ` (Sherman–Morrison). The model is invariant under the centring and scaling,
 /// so the whole set's normalisation serves every fold. One fit in all instead of N.
 fn leave_one_out_axis_aligned(poses: &[Pose], means: &[Vec3], reference: f64) -> Option<f64> {
+    held_out_rms(poses, reference, calibrations_without(means, reference)?)
+}
+
+/// The axis-aligned calibration of `means` without point `i`, for any `i`, by the rank-one
+/// downdate above: the least-squares solution of the other points up to rounding, without the
+/// coverage rule that [`fit_axis_aligned`] applies. `None` when there are six points or fewer,
+/// or the full problem is singular.
+pub fn calibrations_without(
+    means: &[Vec3],
+    reference: f64,
+) -> Option<impl Fn(usize) -> Result<Calibration, FitError>> {
     if means.len() <= 6 {
         return None;
     }
     let d = design(means).ok()?;
     let gram_inv = inverse_spd(&(d.x.transpose() * &d.x))?;
     let beta = &gram_inv * (d.x.transpose() * &d.y);
-    held_out_rms(poses, reference, |i| {
+    Some(move |i: usize| {
+        if i >= d.x.nrows() {
+            return Err(FitError::Underdetermined(format!(
+                "point {i} does not exist ({} points)",
+                d.x.nrows()
+            )));
+        }
         let xi = d.x.row(i).transpose();
         let gx = &gram_inv * &xi;
         let leverage = xi.dot(&gx);

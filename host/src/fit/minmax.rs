@@ -201,10 +201,27 @@ impl MediansWithoutOne {
 /// Leave-one-pose-out RMS of the min/max fit, equal to refitting without each pose (see the
 /// module comment).
 fn leave_one_out_minmax(poses: &[Pose], reference: f64) -> Option<f64> {
+    held_out_rms(poses, reference, calibrations_without(poses, reference))
+}
+
+/// The min/max calibration of `poses` without pose `i`, for any `i`: equal to
+/// [`minmax_calibration`] of the other poses (see the module comment), at the cost of one fit
+/// for all of them.
+pub fn calibrations_without(
+    poses: &[Pose],
+    reference: f64,
+) -> impl FnMut(usize) -> Result<Calibration, FitError> + '_ {
     let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
     let medians = MediansWithoutOne::new(&means);
     let mut rankings: Vec<FaceRanking> = Vec::new();
-    held_out_rms(poses, reference, |i| {
+    move |i| {
+        check_reference(reference)?;
+        if i >= poses.len() {
+            return Err(FitError::Underdetermined(format!(
+                "pose {i} does not exist ({} poses)",
+                poses.len()
+            )));
+        }
         let centre = medians.centre_without(i);
         let k = match rankings.iter().position(|r| r.centre == centre) {
             Some(k) => k,
@@ -217,7 +234,7 @@ fn leave_one_out_minmax(poses: &[Pose], reference: f64) -> Option<f64> {
             .faces_without(i)
             .ok_or_else(|| FitError::Underdetermined("a face has no pose left".into()))?;
         calibration_from_faces(poses, &faces, reference)
-    })
+    }
 }
 
 #[cfg(test)]

@@ -27,7 +27,7 @@ pub mod merayo;
 pub mod minmax;
 pub(crate) mod norm_jacobian;
 pub mod norm_lm;
-mod norm_loo;
+pub mod norm_loo;
 pub mod six_position;
 pub mod uncertainty;
 pub mod validate;

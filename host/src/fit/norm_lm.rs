@@ -43,12 +43,12 @@ use super::li::li_start;
 use super::li::{fit_li_start, LiOptions};
 use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
-use super::loo::leave_one_out_rms;
+use super::loo::{held_out_rms, leave_one_out_rms, UPDATED_FOLDS_MIN_POSES};
 use super::norm_jacobian::{
     hessian_stride, in_two_halves, jacobian_row, norm_residual, residuals_and_normal_equations,
     NormSamples, ITERATION_SAMPLES, LANES,
 };
-use super::norm_loo::first_order_loo_rms;
+use super::norm_loo::{first_order_loo_rms, FoldUpdate, FOLD_UPDATE_MAX_POINTS};
 use super::six_position::fit_six_position;
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::validate::{check_finite_points, check_finite_poses};
@@ -159,6 +159,9 @@ pub struct NormLmOutcome {
     /// Leave-one-out RMS of the relative norm residual to first order, from the leverages of
     /// the final normal matrix ([`super::norm_loo`]): one pass, not one refit per point.
     pub first_order_loo_rms: Option<f64>,
+    /// The fit without any one point, to first order ([`FoldUpdate`]); kept for fits of up
+    /// to a few thousand points (poses), `None` for clouds of samples.
+    pub fold_update: Option<FoldUpdate>,
 }
 
 /// The weighted norm residual in centred, scaled coordinates.
@@ -597,10 +600,29 @@ pub fn refine_lm_detailed(
         problem.samples(),
         &sol.jtj,
     );
+    let fold_update = (n <= FOLD_UPDATE_MAX_POINTS)
+        .then(|| {
+            let NormProblem {
+                points,
+                weights,
+                tangential,
+                ..
+            } = problem;
+            FoldUpdate::new(
+                &params,
+                (points, weights, tangential),
+                &sol.jtj,
+                centre,
+                s,
+                reference,
+            )
+        })
+        .flatten();
     Ok(NormLmOutcome {
         fit,
         reduced_chi_square: chi2_red,
         first_order_loo_rms,
+        fold_update,
     })
 }
 
@@ -644,9 +666,14 @@ fn guard_outcome(
     hint: CoverageHint,
     start: Option<&Calibration>,
 ) -> Result<NormLmOutcome, FitError> {
-    let (fit, chi2, loo) = match outcome {
-        Ok(o) => (Ok(o.fit), o.reduced_chi_square, o.first_order_loo_rms),
-        Err(e) => (Err(e), None, None),
+    let (fit, chi2, loo, update) = match outcome {
+        Ok(o) => (
+            Ok(o.fit),
+            o.reduced_chi_square,
+            o.first_order_loo_rms,
+            o.fold_update,
+        ),
+        Err(e) => (Err(e), None, None, None),
     };
     guard_fit(
         fit,
@@ -666,6 +693,7 @@ fn guard_outcome(
         fit,
         reduced_chi_square: chi2,
         first_order_loo_rms: loo,
+        fold_update: update,
     })
 }
 
@@ -725,11 +753,18 @@ fn accel_lm_from_start(
 /// The default accelerometer fit: LM on the norm model over static poses, weighted by each
 /// pose's noise, with the leave-one-pose-out RMS.
 pub fn fit_accel_lm(poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
-    let mut fit = accel_lm_without_loo(poses, reference)?.fit;
+    let outcome = accel_lm_without_loo(poses, reference)?;
+    let mut fit = outcome.fit;
     let all = fit.cal;
-    fit.loo_rms = leave_one_out_rms(poses, reference, |rest| {
-        refit_accel_lm_from(rest, reference, &all).map(|o| o.fit.cal)
-    });
+    fit.loo_rms = match outcome
+        .fold_update
+        .filter(|_| poses.len() >= UPDATED_FOLDS_MIN_POSES)
+    {
+        Some(update) => held_out_rms(poses, reference, |i| update.calibration_without(i)),
+        None => leave_one_out_rms(poses, reference, |rest| {
+            refit_accel_lm_from(rest, reference, &all).map(|o| o.fit.cal)
+        }),
+    };
     Ok(fit)
 }
 

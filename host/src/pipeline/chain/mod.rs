@@ -59,10 +59,11 @@
 pub mod mean;
 pub mod pair;
 
-use crate::fit::axis_aligned::{fit_axis_aligned, fit_axis_aligned_poses};
-use crate::fit::loo::{self, rms_of_all};
-use crate::fit::minmax::{fit_minmax, minmax_calibration};
+use crate::fit::axis_aligned::{self, fit_axis_aligned, fit_axis_aligned_poses};
+use crate::fit::loo::{self, rms_of_all, UPDATED_FOLDS_MIN_POSES};
+use crate::fit::minmax::{self, fit_minmax, minmax_calibration};
 use crate::fit::norm_lm::{fit_accel_lm_detailed, refit_accel_lm_from};
+use crate::fit::norm_loo::FoldUpdate;
 use crate::fit::six_position::{fit_six_position, nearest_axes, six_position_calibration};
 use crate::fit::{Calibration, Fit, FitError, Method, Pose, Vec3};
 use mean::{mean_calibration, mean_fit};
@@ -151,11 +152,8 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
     for method in CANDIDATES {
         match fit_full(method, poses, reference) {
             Err(e) => outcomes.push((method, Some(CandidateOutcome::Refused(e.to_string())))),
-            Ok(mut fit) => {
-                let all = fit.cal;
-                let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
-                    refit(method, rest, rest_faces, reference, Some(&all))
-                });
+            Ok((mut fit, update)) => {
+                let errors = candidate_errors(method, poses, &faces, reference, &fit, update);
                 if method == Method::Lm {
                     // The same held-out residuals `fit_accel_lm` would compute for itself.
                     fit.loo_rms = rms_of_all(errors.clone());
@@ -196,13 +194,7 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
             contest.retain(|&m| m != worse);
         }
         Some(_) => {
-            let errors = held_out_errors(poses, &faces, reference, |rest, rest_faces| {
-                let members = TIED_PAIR
-                    .iter()
-                    .map(|&m| refit(m, rest, rest_faces, reference, None))
-                    .collect::<Result<Vec<Calibration>, FitError>>()?;
-                mean_calibration(&members)
-            });
+            let errors = pair_mean_errors(poses, &faces, reference);
             candidates.push(Candidate {
                 method: Method::MinMaxAxisAlignedMean,
                 outcome: score(&errors, &common),
@@ -298,15 +290,85 @@ fn compare_pair(
     paired_t(&squares(TIED_PAIR[0])?, &squares(TIED_PAIR[1])?)
 }
 
-/// The full fit of one candidate, with its refusals.
-fn fit_full(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, FitError> {
+/// The full fit of one candidate, with its refusals, and for the norm model the update that
+/// gives it without one pose.
+fn fit_full(
+    method: Method,
+    poses: &[Pose],
+    reference: f64,
+) -> Result<(Fit, Option<FoldUpdate>), FitError> {
     match method {
-        Method::MinMax => fit_minmax(poses, reference),
-        Method::AxisAligned => fit_axis_aligned_poses(poses, reference),
-        // Its leave-one-out RMS comes from the chain's own held-out refits.
-        Method::Lm => fit_accel_lm_detailed(poses, reference).map(|o| o.fit),
-        _ => fit_six_position(poses, None, reference),
+        Method::MinMax => fit_minmax(poses, reference).map(|f| (f, None)),
+        Method::AxisAligned => fit_axis_aligned_poses(poses, reference).map(|f| (f, None)),
+        // Its leave-one-out RMS comes from the chain's own held-out errors.
+        Method::Lm => fit_accel_lm_detailed(poses, reference).map(|o| (o.fit, o.fold_update)),
+        _ => fit_six_position(poses, None, reference).map(|f| (f, None)),
     }
+}
+
+/// The held-out error of every pose under `method` (`fit` on every pose, `update` its norm-model
+/// update): from [`UPDATED_FOLDS_MIN_POSES`] on, each fold from the full fit where the method
+/// has a closed form (min/max: exact), a rank-one downdate (axis-aligned: exact up to rounding)
+/// or a first-order update (the norm model, [`FoldUpdate`]), without the coverage rule of a
+/// refit; otherwise, and for six-position, a refit per pose.
+fn candidate_errors(
+    method: Method,
+    poses: &[Pose],
+    faces: &[Vec3],
+    reference: f64,
+    fit: &Fit,
+    update: Option<FoldUpdate>,
+) -> Vec<Option<f64>> {
+    let updated = (poses.len() >= UPDATED_FOLDS_MIN_POSES)
+        .then(|| match method {
+            Method::MinMax => loo::held_out_errors(
+                poses,
+                reference,
+                minmax::calibrations_without(poses, reference),
+            ),
+            Method::AxisAligned => {
+                let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
+                let fold = axis_aligned::calibrations_without(&means, reference)?;
+                loo::held_out_errors(poses, reference, fold)
+            }
+            Method::Lm => {
+                let update = update?;
+                loo::held_out_errors(poses, reference, |i| update.calibration_without(i))
+            }
+            _ => None,
+        })
+        .flatten();
+    updated.unwrap_or_else(|| {
+        let all = fit.cal;
+        held_out_errors(poses, faces, reference, |rest, rest_faces| {
+            refit(method, rest, rest_faces, reference, Some(&all))
+        })
+    })
+}
+
+/// The held-out error of every pose under the mean of the [`TIED_PAIR`] models, each fold the
+/// mean of the two members' folds (from their full fits from [`UPDATED_FOLDS_MIN_POSES`] on, as
+/// in [`candidate_errors`]).
+fn pair_mean_errors(poses: &[Pose], faces: &[Vec3], reference: f64) -> Vec<Option<f64>> {
+    if poses.len() >= UPDATED_FOLDS_MIN_POSES {
+        let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
+        let mut minmax_fold = minmax::calibrations_without(poses, reference);
+        if let Some(aligned_fold) = axis_aligned::calibrations_without(&means, reference) {
+            let errors = loo::held_out_errors(poses, reference, |i| {
+                mean_calibration(&[minmax_fold(i)?, aligned_fold(i)?])
+            });
+            if let Some(errors) = errors {
+                return errors;
+            }
+        }
+    }
+    held_out_errors(poses, faces, reference, |rest, rest_faces| {
+        let members = TIED_PAIR
+            .iter()
+            .map(|&m| refit(m, rest, rest_faces, reference, None))
+            .collect::<Result<Vec<Calibration>, FitError>>()?;
+        mean_calibration(&members)
+    })
 }
 
 /// A refit of one candidate on the poses without one (the solver and its refusals, without the

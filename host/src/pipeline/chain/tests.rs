@@ -261,7 +261,7 @@ fn held_out_errors_on_two_threads_equal_refitting_each_pose_in_turn() {
     let faces = face_labels(&poses);
     let reference = 9.81;
     for method in CANDIDATES {
-        let all = fit_full(method, &poses, reference).ok().map(|f| f.cal);
+        let all = fit_full(method, &poses, reference).ok().map(|(f, _)| f.cal);
         let threaded = held_out_errors(&poses, &faces, reference, |rest, rest_faces| {
             refit(method, rest, rest_faces, reference, all.as_ref())
         });
@@ -297,7 +297,7 @@ fn norm_model_refits_started_from_the_full_fit_reach_the_refits_from_their_own_s
     let poses = diagonal_poses(&tilted_directions(), 0.02);
     let faces = face_labels(&poses);
     let reference = 9.81;
-    let all = fit_full(Method::Lm, &poses, reference).unwrap().cal;
+    let all = fit_full(Method::Lm, &poses, reference).unwrap().0.cal;
     let warm = held_out_errors(&poses, &faces, reference, |rest, rest_faces| {
         refit(Method::Lm, rest, rest_faces, reference, Some(&all))
     });
@@ -311,5 +311,82 @@ fn norm_model_refits_started_from_the_full_fit_reach_the_refits_from_their_own_s
             (w - c).abs() <= 1e-5 * c.abs().max(1e-6),
             "pose {i}: held-out error {w:.6e} started from the full fit, {c:.6e} from its own"
         );
+    }
+}
+
+/// `copies` copies of the 26 tilted directions, each copy turned a little, on the sensor with
+/// 2 % cross-axis terms: many poses, none on a face alone.
+fn many_tilted_poses(copies: usize) -> Vec<Pose> {
+    let a_inv = Mat3::new(1.02, 0.02, -0.015, 0.0, 0.98, 0.02, 0.0, 0.0, 1.01);
+    let dirs: Vec<Vec3> = (0..copies)
+        .flat_map(|c| {
+            let turn = nalgebra::Rotation3::new(Vec3::new(0.03, -0.02, 0.04) * c as f64);
+            tilted_directions().into_iter().map(move |d| turn * d)
+        })
+        .collect();
+    poses(&a_inv, &offset(), &dirs, 2e-3)
+}
+
+#[test]
+fn from_a_hundred_poses_the_folds_come_from_the_full_fits_and_agree_with_refits() {
+    let set = many_tilted_poses(5);
+    assert!(set.len() >= UPDATED_FOLDS_MIN_POSES);
+    let faces = face_labels(&set);
+    let reference = 9.81;
+    for method in [Method::MinMax, Method::AxisAligned, Method::Lm] {
+        let (fit, update) = fit_full(method, &set, reference).expect("fits");
+        assert_eq!(update.is_some(), method == Method::Lm, "{method:?}");
+        let all = fit.cal;
+        let updated = candidate_errors(method, &set, &faces, reference, &fit, update);
+        let refitted = held_out_errors(&set, &faces, reference, |rest, rest_faces| {
+            refit(method, rest, rest_faces, reference, Some(&all))
+        });
+        assert_eq!(updated.len(), set.len(), "{method:?}");
+        for (i, (u, r)) in updated.iter().zip(&refitted).enumerate() {
+            let (u, r) = (u.expect("updated fold"), r.expect("refit"));
+            let in_sample = (all.apply(&set[i].mean).norm() - reference) / reference;
+            // min/max: the same faces, so the same numbers; axis-aligned: the same linear
+            // solution up to rounding; the norm model: exact to first order in the leverage
+            // (≈ p/N), so it misses at most that fraction of how far the pose's residual moves.
+            let bound = match method {
+                Method::MinMax => 0.0,
+                Method::AxisAligned => 1e-9 * r.abs().max(1e-9),
+                _ => 9.0 / set.len() as f64 * (r - in_sample).abs() + 1e-12,
+            };
+            assert!(
+                (u - r).abs() <= bound,
+                "{method:?}, pose {i}: from the full fit {u:.9e}, refit {r:.9e}"
+            );
+        }
+    }
+    // The mean of the tied pair, fold by fold.
+    let updated = pair_mean_errors(&set, &faces, reference);
+    let refitted = held_out_errors(&set, &faces, reference, |rest, rest_faces| {
+        let members = TIED_PAIR
+            .iter()
+            .map(|&m| refit(m, rest, rest_faces, reference, None))
+            .collect::<Result<Vec<Calibration>, FitError>>()?;
+        mean_calibration(&members)
+    });
+    for (u, r) in updated.iter().zip(&refitted) {
+        let (u, r) = (u.expect("updated fold"), r.expect("refit"));
+        assert!(
+            (u - r).abs() <= 1e-9 * r.abs().max(1e-9),
+            "{u:.9e} against {r:.9e}"
+        );
+    }
+}
+
+#[test]
+fn the_chain_chooses_alike_by_updated_folds_and_by_refits() {
+    // The same poses once just below the update's pose count (refits) and once above.
+    let below = many_tilted_poses(3);
+    let above = many_tilted_poses(5);
+    assert!(below.len() < UPDATED_FOLDS_MIN_POSES && above.len() >= UPDATED_FOLDS_MIN_POSES);
+    for set in [below, above] {
+        let choice = default_accel_chain(&set, 9.81).expect("fits");
+        assert_eq!(choice.fit.method, Method::Lm, "{}", choice.reason);
+        let loo = choice.fit.loo_rms.expect("held-out RMS");
+        assert!(loo >= choice.fit.rms, "{loo} < {}", choice.fit.rms);
     }
 }
