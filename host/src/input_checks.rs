@@ -99,6 +99,19 @@ pub enum InputError {
         /// Larger over smaller.
         factor: f64,
     },
+    /// No still interval was found, and the time column advances too slowly to show one.
+    #[error(
+        "no still interval in `{path}`: its time column advances {step_s:.4} s per row, so no \
+             hold of a few seconds can show in it; the time is most likely in milliseconds or \
+             microseconds: write it in seconds, or read the file as it is with --columns mapping \
+             `t_ms=t_s` and each sensor column to itself (`t_us`, `t_ns` for finer units)"
+    )]
+    NoStillSlowClock {
+        /// File concerned.
+        path: String,
+        /// Median step of the time column, seconds.
+        step_s: f64,
+    },
     /// No still interval was found.
     #[error("no still interval in `{path}` ({duration:.1} s long): the board was never still for {min_hold_s} s (--min-hold); hold it still for 2–3 s in each orientation, or lower --min-hold")]
     NoStill {
@@ -535,6 +548,18 @@ pub fn require_still(
 ) -> Result<(), InputError> {
     if !still.intervals.is_empty() {
         return Ok(());
+    }
+    // A clock in ms or µs read as seconds makes every hold too long and every move too slow to
+    // see: that, not the holds, is then the cause to name.
+    if recording.time_from_file {
+        if let Some(rate) = crate::recording::median_rate(&recording.time) {
+            if rate < SLOWEST_PLAUSIBLE_RATE_HZ {
+                return Err(InputError::NoStillSlowClock {
+                    path: recording.source.display().to_string(),
+                    step_s: 1.0 / rate,
+                });
+            }
+        }
     }
     let duration = match (recording.time.first(), recording.time.last()) {
         (Some(first), Some(last)) if !recording.time_is_index => last - first,

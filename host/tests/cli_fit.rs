@@ -578,6 +578,26 @@ fn a_negative_option_value_written_with_a_space_reaches_the_option_check() {
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
         assert!(!stderr.contains("use '-- "), "{args:?}: {stderr}");
     }
+    // Counts and seeds say what they take, not the integer parser's "invalid digit".
+    for (args, expected) in [
+        (
+            vec!["calibrate", "--sim", "--sim-seed", "-1"],
+            "`-1` is not a whole number of 0 or more",
+        ),
+        (
+            vec!["history", "--changes", "-2"],
+            "`-2` is not a whole number of 0 or more",
+        ),
+        (
+            vec!["fleet", "--min-spread-values", "99999999999999999999999"],
+            "is larger than the largest value allowed",
+        ),
+    ] {
+        let (ok, _, stderr) = imucal(&args);
+        assert!(!ok, "{args:?}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!stderr.contains("invalid digit"), "{args:?}: {stderr}");
+    }
 }
 
 #[test]

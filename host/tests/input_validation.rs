@@ -238,6 +238,19 @@ fn milliseconds_in_the_seconds_column_are_named_before_the_detection_finds_no_ho
             outcome.stderr
         );
         assert!(outcome.stderr.contains("`t_ms=t_s`"), "{}", outcome.stderr);
+        // The refusal names the clock too, not holds that are too short.
+        assert!(
+            outcome
+                .stderr
+                .contains("the time is most likely in milliseconds or microseconds"),
+            "{command}: {}",
+            outcome.stderr
+        );
+        assert!(
+            !outcome.stderr.contains("lower --min-hold"),
+            "{command}: {}",
+            outcome.stderr
+        );
     }
     // Read as milliseconds, the same file fits.
     let columns = "t_ms=t_s,ax=ax,ay=ay,az=az,gx=gx,gy=gy,gz=gz";
@@ -554,5 +567,75 @@ fn a_magnetometer_that_was_never_turned_is_refused_as_such_not_as_a_unit_mix_up(
         !outcome.stderr.contains("--mag-unit counts"),
         "{}",
         outcome.stderr
+    );
+}
+
+/// A recording of `rows` rows whose `ax` field is `ax(i)` in row `i`.
+fn with_ax(name: &str, rows: usize, ax: impl Fn(usize) -> String) -> String {
+    let mut text = String::from("t_s,ax,ay,az\n");
+    for i in 0..rows {
+        text += &format!("{:.2},{},0.01,9.81\n", i as f64 * 0.01, ax(i));
+    }
+    write(name, text.as_bytes())
+}
+
+#[test]
+fn a_value_that_is_not_a_number_gets_advice_from_how_much_of_its_column_is_like_it() {
+    // Every row: the sensor was not recorded. The file is longer than one read block, so the
+    // count goes on past the block the first value was in.
+    let empty = with_ax("empty_column.csv", 60_000, |_| "NaN".into());
+    assert_refused(
+        &imucal(&["fit", &empty]),
+        &[
+            "line 2, column `ax`: `NaN` is not a finite number",
+            "no row holds a number there (all 60000 rows from there to the end)",
+            "the column holds no readings",
+        ],
+    );
+    // From row 200 on: the sensor stopped.
+    let stopped = with_ax("stopped.csv", 500, |i| {
+        if i < 200 {
+            "0.1".into()
+        } else {
+            "nan".into()
+        }
+    });
+    assert_refused(
+        &imucal(&["fit", &stopped]),
+        &[
+            "line 202",
+            "from line 202 on (all 300 rows",
+            "cut the file before line 202",
+        ],
+    );
+    // A few rows: mend them.
+    let few = with_ax("few.csv", 500, |i| {
+        if [100, 300, 301].contains(&i) {
+            "x".into()
+        } else {
+            "0.1".into()
+        }
+    });
+    assert_refused(
+        &imucal(&["fit", &few]),
+        &[
+            "line 102",
+            "3 of the 400 rows from there on",
+            "correct or delete those rows",
+        ],
+    );
+    let one = with_ax("one.csv", 500, |i| {
+        if i == 100 {
+            "x".into()
+        } else {
+            "0.1".into()
+        }
+    });
+    assert_refused(
+        &imucal(&["fit", &one]),
+        &[
+            "line 102",
+            "is not a finite number; correct or delete that row",
+        ],
     );
 }

@@ -16,7 +16,11 @@ pub struct FleetArgs {
     pub false_alarm: f64,
     /// Fewest values a parameter's spread may rest on: its own (one per board), or in a small
     /// fleet those of its sensor's axes of the same kind pooled.
-    #[arg(long, default_value_t = FleetOptions::default().min_spread_values)]
+    #[arg(
+        long,
+        default_value_t = FleetOptions::default().min_spread_values,
+        value_parser = super::args::whole_number::<usize>
+    )]
     pub min_spread_values: usize,
     /// Print JSON instead of tables.
     #[arg(long)]

@@ -8,7 +8,10 @@ use std::path::Path;
 
 use super::lines::LineReader;
 use super::mapping;
-use super::rows::{content, parse_block, Block, Columns, LabelInterner, Layout, Part, Role};
+use super::rows::{
+    content, parse_block, rows_without_a_number, Block, Columns, LabelInterner, Layout, Part, Role,
+    ONE_ROW_ADVICE,
+};
 use super::{
     display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError, Sensor,
 };
@@ -200,7 +203,38 @@ fn read_table(
             offset,
         };
         let block_len = bytes.len();
-        let count = parse_block(&layout, &block, &mut parts, &mut columns)?;
+        let count = match parse_block(&layout, &block, &mut parts, &mut columns) {
+            Err(RecordingError::BadNumber {
+                path,
+                line,
+                column,
+                text,
+                ..
+            }) => {
+                // How much of the column is like that value decides the advice: a row to mend,
+                // or a column that holds no readings at all.
+                let skip = line.saturating_sub(first_line);
+                let rest = bytes
+                    .split_inclusive(|&b| b == b'\n')
+                    .skip(skip)
+                    .flatten()
+                    .copied()
+                    .collect::<Vec<u8>>();
+                let index = header.names.iter().position(|n| *n == column);
+                let advice = match index {
+                    Some(index) => bad_number_advice(lines, &rest, index, columns.rows == 0, line)?,
+                    None => ONE_ROW_ADVICE.to_string(),
+                };
+                return Err(RecordingError::BadNumber {
+                    path,
+                    line,
+                    column,
+                    text,
+                    advice,
+                });
+            }
+            other => other?,
+        };
         lines.count_lines(count);
         if !reserved && columns.rows > 0 {
             // Rows of a file are alike in length: reserve for all of them at once (from the
@@ -231,6 +265,51 @@ fn read_table(
         labels: columns.labels.map(LabelInterner::finish),
         sensors,
         rows: columns.rows,
+    })
+}
+
+/// Rows past a value that is not a number read to judge its column: enough to tell a column
+/// that holds nothing from a few bad rows, without reading a huge file to its end.
+const BAD_COLUMN_SCAN_ROWS: usize = 1_000_000;
+
+/// The advice for a value that is not a number at line `line` in column `index`: `rest` is its
+/// block from that line on, `lines` the rest of the input; `first_row` when no row before it
+/// was read.
+fn bad_number_advice(
+    lines: &mut LineReader<'_>,
+    rest: &[u8],
+    index: usize,
+    first_row: bool,
+    line: usize,
+) -> Result<String, RecordingError> {
+    let (mut rows, mut bad) = rows_without_a_number(rest, index, BAD_COLUMN_SCAN_ROWS);
+    while rows < BAD_COLUMN_SCAN_ROWS {
+        let Some((_, bytes)) = lines.next_block(BLOCK_BYTES)? else {
+            break;
+        };
+        let (r, b) = rows_without_a_number(bytes, index, BAD_COLUMN_SCAN_ROWS - rows);
+        rows += r;
+        bad += b;
+    }
+    let whole = if rows >= BAD_COLUMN_SCAN_ROWS {
+        format!("the {rows} rows read from there on")
+    } else {
+        format!("all {rows} rows from there to the end")
+    };
+    Ok(match (bad == rows && rows > 1, first_row) {
+        (true, true) => format!(
+            "no row holds a number there ({whole}): the column holds no readings; leave it out \
+             of the file, or read the file with --columns mapping only the columns that do"
+        ),
+        (true, false) => format!(
+            "no row holds a number there from line {line} on ({whole}): the sensor stopped \
+             recording; cut the file before line {line}"
+        ),
+        _ if bad > 1 => format!(
+            "{bad} of the {rows} rows from there on hold no number in that column; correct or \
+             delete those rows"
+        ),
+        _ => ONE_ROW_ADVICE.to_string(),
     })
 }
 

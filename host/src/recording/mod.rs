@@ -106,7 +106,7 @@ pub enum RecordingError {
         mapping: String,
     },
     /// A field is not a finite number.
-    #[error("`{path}` line {line}, column `{column}`: `{text}` is not a finite number; correct or delete that row")]
+    #[error("`{path}` line {line}, column `{column}`: `{text}` is not a finite number; {advice}")]
     BadNumber {
         /// File concerned.
         path: String,
@@ -116,6 +116,8 @@ pub enum RecordingError {
         column: String,
         /// The offending text.
         text: String,
+        /// What to do, from how many rows of the column are like it.
+        advice: String,
     },
     /// A row has a different number of fields than the header.
     #[error("`{path}` line {line}: {found} fields but the header names {expected} columns; every row needs one value per column")]

@@ -337,6 +337,31 @@ fn line_text<'t>(path: &str, line: &'t [u8], offset: u64) -> Result<&'t str, Rec
 }
 
 /// A field as a finite number.
+/// The advice for a value that is not a number, until the rest of its column is known.
+pub(super) const ONE_ROW_ADVICE: &str = "correct or delete that row";
+
+/// Rows of `text` (skipped lines left out), and how many of them hold no finite number in
+/// field `column` (or have no such field), for at most `limit` rows.
+pub(super) fn rows_without_a_number(text: &[u8], column: usize, limit: usize) -> (usize, usize) {
+    let (mut rows, mut bad) = (0, 0);
+    for line in text.split(|&b| b == b'\n') {
+        if rows >= limit {
+            break;
+        }
+        let line = String::from_utf8_lossy(line);
+        let body = content(&line);
+        if body.is_empty() || body.starts_with('#') {
+            continue;
+        }
+        rows += 1;
+        let number = fields(body).nth(column).and_then(|text| {
+            parse_number(text.trim()).or_else(|| parse_number(text.trim().trim_matches('"').trim()))
+        });
+        bad += usize::from(number.is_none());
+    }
+    (rows, bad)
+}
+
 fn parse_number(text: &str) -> Option<f64> {
     super::decimal::parse_finite(text)
 }
@@ -379,6 +404,7 @@ fn parse_row(
                 line: line_no,
                 column: layout.names[col].clone(),
                 text: text.trim().to_string(),
+                advice: ONE_ROW_ADVICE.to_string(),
             });
         // A row cut short (a truncated last line, `55.`) is named as such, not by what its
         // first fields happen to say.
