@@ -95,17 +95,18 @@ const UPPER_ENTRIES: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 
 /// step, like a Gauss–Newton one, gains a factor of order σ (the residual's curvature term).
 /// The iteration stops once a step's length in the metric of `jtj`, `δᵀ(JᵀJ)δ`, is at most
 /// `negligible_step2` (the caller's square of a negligible fraction of a standard error), or
-/// relative to the parameters at rounding level. `None` when the iteration does not settle.
+/// relative to the parameters at rounding level. Returns the root and the number of steps;
+/// `None` when the iteration does not settle.
 pub(super) fn solve_corrected_score(
     samples: NormSamples<'_>,
     jtj: &DMatrix<f64>,
     start: &DVector<f64>,
     noise_var: &(impl Fn(usize) -> f64 + Sync),
     negligible_step2: f64,
-) -> Option<DVector<f64>> {
+) -> Option<(DVector<f64>, usize)> {
     let factor = jtj.clone().cholesky()?;
     let mut p = start.clone();
-    for _ in 0..30 {
+    for steps in 1..=30 {
         let step = factor.solve(&(-corrected_score(samples, &p, noise_var)));
         if !step.iter().all(|v| v.is_finite()) {
             return None;
@@ -113,7 +114,7 @@ pub(super) fn solve_corrected_score(
         p += &step;
         if step.dot(&(jtj * &step)) <= negligible_step2 || step.norm() <= 1e-12 * (p.norm() + 1e-12)
         {
-            return Some(p);
+            return Some((p, steps));
         }
     }
     None
