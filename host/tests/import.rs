@@ -138,3 +138,38 @@ fn mapping_errors_name_the_problem_and_the_available_columns() {
         "{error}"
     );
 }
+
+#[test]
+fn a_mapped_pose_or_segment_column_labels_the_rows() {
+    let text = "\
+Time;Label;AccX;AccY;AccZ
+0.00;up;0.0;0.0;9.81
+0.01;up;0.0;0.0;9.80
+0.02;-;3.0;1.0;7.0
+0.03;\"down\";0.0;0.0;-9.81
+";
+    let mapping: ColumnMapping = "t_s=Time,pose=Label,ax=AccX,ay=AccY,az=AccZ"
+        .parse()
+        .unwrap();
+    let recording =
+        mapping::parse(text, Path::new("p.csv"), &mapping, Units::default(), None).expect("reads");
+    let labels = recording.labels.expect("a pose column");
+    assert_eq!(labels.kind, imucal::recording::LabelKind::Pose);
+    assert_eq!(labels.names, ["up", "down"]);
+    // `-` is no label; quotes are not part of one.
+    assert_eq!(labels.per_row, [Some(0), Some(0), None, Some(1)]);
+
+    let segments: ColumnMapping = "t_s=Time,segment=Label,ax=AccX,ay=AccY,az=AccZ"
+        .parse()
+        .unwrap();
+    let recording =
+        mapping::parse(text, Path::new("p.csv"), &segments, Units::default(), None).expect("reads");
+    let labels = recording.labels.expect("a segment column");
+    assert_eq!(labels.kind, imucal::recording::LabelKind::Segment);
+
+    let twice = "pose=Label,segment=Label,ax=AccX,ay=AccY,az=AccZ"
+        .parse::<ColumnMapping>()
+        .unwrap_err()
+        .to_string();
+    assert!(twice.contains("two label columns"), "{twice}");
+}

@@ -159,7 +159,8 @@ pub struct InputArgs {
     #[arg(long, value_enum, default_value = "auto")]
     pub format: FormatArg,
     /// Read any delimited file through a column mapping, imucal column = file column, e.g.
-    /// `t_ms=Timestamp,ax=AccX,ay=AccY,az=AccZ` (time keys t_s, t_ms, t_us, t_ns; units by the unit flags).
+    /// `t_ms=Timestamp,ax=AccX,ay=AccY,az=AccZ` (time keys t_s, t_ms, t_us, t_ns; labels
+    /// `pose=Label` for static holds or `segment=Phase` for sections; units by the unit flags).
     #[arg(long)]
     pub columns: Option<String>,
     /// IMU-TK: the gyroscope file paired row by row with the accelerometer file.

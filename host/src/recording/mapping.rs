@@ -2,8 +2,10 @@
 //! `ax=AccX,ay=AccY,az=AccZ,gx=GyrX,gy=GyrY,gz=GyrZ,t_ms=Timestamp`: each imucal column named
 //! on the left is read from the file's column named on the right.
 //!
-//! Targets are the recording columns `ax ay az gx gy gz mx my mz temp_c` and one time column,
-//! `t_s`, `t_ms`, `t_us` or `t_ns` (the suffix gives the file's time unit). A sensor needs all
+//! Targets are the recording columns `ax ay az gx gy gz mx my mz temp_c`, one time column,
+//! `t_s`, `t_ms`, `t_us` or `t_ns` (the suffix gives the file's time unit), and one label
+//! column, `pose` (rows labelled alike are one static hold) or `segment` (sections still
+//! intervals are detected within). A sensor needs all
 //! three of its columns. The delimiter (comma, semicolon or tab) is the one the header uses
 //! most. Columns not mapped are ignored; the units of the sensor columns are given separately.
 //! Also holds [`ImportError`], the error of both importers in this module's siblings.
@@ -11,7 +13,8 @@
 use std::path::Path;
 use std::str::FromStr;
 
-use super::{MagStream, Recording, Sensor, Units};
+use super::rows::LabelInterner;
+use super::{LabelKind, MagStream, Recording, Sensor, Units};
 use crate::fit::Vec3;
 
 /// Why an imported file (a mapped CSV or a MotionCal log) could not be read.
@@ -114,13 +117,21 @@ pub struct ColumnMapping {
     pub temp_c: Option<String>,
     /// Time column and seconds per unit of it.
     pub time: Option<(String, f64)>,
+    /// Label column (`pose` or `segment`) and what its labels mean.
+    pub labels: Option<(String, LabelKind)>,
 }
 
 const TIME_KEYS: [(&str, f64); 4] = [("t_s", 1.0), ("t_ms", 1e-3), ("t_us", 1e-6), ("t_ns", 1e-9)];
 
-/// Whether `name` is an imucal column a mapping can name (`ax` … `mz`, `temp_c`, a time key).
+/// The label targets of a mapping and what their labels mean.
+const LABEL_KEYS: [(&str, LabelKind); 2] =
+    [("pose", LabelKind::Pose), ("segment", LabelKind::Segment)];
+
+/// Whether `name` is an imucal column a mapping can name (`ax` … `mz`, `temp_c`, a time key,
+/// `pose` or `segment`).
 pub(super) fn is_target(name: &str) -> bool {
     TIME_KEYS.iter().any(|(key, _)| *key == name)
+        || LABEL_KEYS.iter().any(|(key, _)| *key == name)
         || name == "temp_c"
         || Sensor::ALL.iter().any(|s| s.columns().contains(&name))
 }
@@ -156,6 +167,16 @@ impl FromStr for ColumnMapping {
                 mapping.temp_c = Some(column);
                 continue;
             }
+            if let Some((_, kind)) = LABEL_KEYS.iter().find(|(key, _)| *key == target) {
+                if mapping.labels.is_some() {
+                    return Err(bad(
+                        "two label columns are mapped (`pose` or `segment`, one of them)"
+                            .to_string(),
+                    ));
+                }
+                mapping.labels = Some((column, *kind));
+                continue;
+            }
             let slot = Sensor::ALL.iter().enumerate().find_map(|(s, sensor)| {
                 sensor
                     .columns()
@@ -165,7 +186,7 @@ impl FromStr for ColumnMapping {
             });
             let Some((s, axis)) = slot else {
                 return Err(bad(format!(
-                    "`{target}` is not an imucal column (use ax ay az gx gy gz mx my mz temp_c, and t_s, t_ms, t_us or t_ns for time)"
+                    "`{target}` is not an imucal column (use ax ay az gx gy gz mx my mz temp_c, t_s, t_ms, t_us or t_ns for time, and pose or segment for labels)"
                 )));
             };
             if axes[s][axis].replace(column).is_some() {
@@ -251,6 +272,10 @@ pub fn parse(
         Some((name, scale)) => Some((index_of(name)?, *scale)),
         None => None,
     };
+    let mut labels = match &mapping.labels {
+        Some((name, kind)) => Some((index_of(name)?, LabelInterner::new(*kind))),
+        None => None,
+    };
 
     let mut samples: [Vec<Vec3>; 3] = Default::default();
     let mut temp = Vec::new();
@@ -276,6 +301,9 @@ pub fn parse(
         }
         if let Some(column) = temp_column {
             temp.push(number(column)?);
+        }
+        if let Some((column, interner)) = labels.as_mut() {
+            interner.push(fields.get(*column).copied().unwrap_or(""));
         }
         let t = match time_column {
             Some((column, scale)) => number(column)? * scale,
@@ -312,7 +340,7 @@ pub fn parse(
             temp_c: None,
         }),
         time,
-        labels: None,
+        labels: labels.map(|(_, interner)| interner.finish()),
         ignored_columns: Vec::new(),
         units,
     })

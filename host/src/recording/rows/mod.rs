@@ -502,7 +502,8 @@ pub(super) struct LabelInterner {
 }
 
 impl LabelInterner {
-    fn new(kind: LabelKind) -> Self {
+    /// No labels yet, of `kind`.
+    pub(super) fn new(kind: LabelKind) -> Self {
         Self {
             kind,
             names: Vec::new(),
@@ -527,7 +528,8 @@ impl LabelInterner {
         self.names.len() - 1
     }
 
-    fn push(&mut self, text: &str) {
+    /// The next row's label (`-` or empty: none).
+    pub(super) fn push(&mut self, text: &str) {
         // A label in quotes (spreadsheet exports quote every field) is the same label.
         let text = text.trim_matches('"').trim();
         let label = (!(text.is_empty() || text == "-")).then(|| self.intern(text));
