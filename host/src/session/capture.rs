@@ -30,6 +30,9 @@ pub(super) struct CaptureGoal<'e> {
     /// Index of the target prompted for while it is needed; otherwise the prompt names the
     /// one that helps the accelerometer fit most ([`plan`]). Any needed target counts.
     pub prompt_first: Option<usize>,
+    /// The count of positions the prompts show as their total, when the phase asks for one
+    /// position at a time up to more (the gyroscope's turns); otherwise this call's own.
+    pub shown_total: Option<usize>,
 }
 
 impl CaptureGoal<'_> {
@@ -39,6 +42,7 @@ impl CaptureGoal<'_> {
             most,
             enough: &|_| false,
             prompt_first: None,
+            shown_total: None,
         }
     }
 }
@@ -63,6 +67,8 @@ impl<L: Read + Write> Runner<'_, L> {
                     .filter(|t| !captured.iter().any(|c| c.target.index == t.index))
                     .count(),
             );
+        // What the prompts count to: never below the position being asked for.
+        let shown_total = goal.shown_total.unwrap_or(total).max(total);
         // Every target in, `most` of them, or enough by the goal's own measure.
         let finished = |captured: &[CapturedPose]| {
             captured.len() >= total
@@ -107,7 +113,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 self.observer.event(&SessionEvent::Prompt {
                     target: next,
                     captured: captured.len(),
-                    total,
+                    total: shown_total,
                 });
                 prompted = Some(next.index);
             }
@@ -198,7 +204,7 @@ impl<L: Read + Write> Runner<'_, L> {
                                 target: actual,
                                 samples: stats.n,
                                 captured: captured.len(),
-                                total,
+                                total: shown_total,
                             });
                             self.tell_missing_rotation(captured);
                         }
@@ -286,6 +292,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 most,
                 enough: &enough,
                 prompt_first: None,
+                shown_total: None,
             },
         )?;
         if complete {

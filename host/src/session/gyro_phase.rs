@@ -33,6 +33,8 @@ impl<L: Read + Write> Runner<'_, L> {
     ) -> Result<String, SessionError> {
         let most = self.options.max_gyro_moves;
         let mut added = 0;
+        // The prompts count to every turn the phase may ask for, not one more at a time.
+        let phase_total = captured.len() + most;
         loop {
             let tilt = tilt_per_axis_deg(&self.moves);
             if tilt.iter().sum::<f64>() <= 0.0 {
@@ -116,6 +118,7 @@ impl<L: Read + Write> Runner<'_, L> {
                 true,
                 &CaptureGoal {
                     prompt_first: Some(target.index),
+                    shown_total: Some(phase_total),
                     ..CaptureGoal::up_to(1)
                 },
             )?;
