@@ -12,7 +12,7 @@ use imucal::fit::norm_lm::{
     cramer_rao_bound, fit_accel_lm, fit_accel_lm_detailed, fit_mag_lm, refine_lm, NormLmOptions,
     NormObservations,
 };
-use imucal::fit::{Calibration, FitError, Mat3, Vec3};
+use imucal::fit::{Calibration, FitError, Mat3, Method, Pose, Vec3};
 use imucal::synthetic::{
     accel_poses, cap_directions, directions, mag_samples, random_calibration, rng,
     sphere_directions, PoseSet, TruthSpec,
@@ -610,4 +610,143 @@ fn tedaldi_gyro_fit_refuses_too_few_motions() {
         fit_gyro_scale(&motions, None),
         Err(FitError::Underdetermined(_))
     ));
+}
+
+#[test]
+fn twelve_positions_fitted_to_their_noise_converge_where_round_off_exceeds_the_tolerances() {
+    // The twelve positions a simulated session (seed 1, 5x speed) captured: accelerometer means
+    // (m/s^2), per-axis variances and sample counts. Weighted by the noise of their means the
+    // fit leaves a cost of 0.29 for 3 degrees of freedom, and the cost's round-off (weights of
+    // thousands) is above ftol = 1e-12 relative to it: every step was rejected and the fit
+    // failed with damping_overflow, which sent the chain to min/max at 30x the held-out error.
+    // The Gauss-Newton step left there is 1e-6 of a standard error: a minimum.
+    let raw = [
+        (
+            [-0.39119231700897217, 0.6926025152206421, 10.259757041931152],
+            [
+                0.0006619694759137928,
+                0.00044141680700704455,
+                0.0005251634865999222,
+            ],
+            70,
+        ),
+        (
+            [-0.05973241105675697, 0.6924702525138855, -9.76911449432373],
+            [
+                0.0003966270014643669,
+                0.0004323100729379803,
+                0.0004163780831731856,
+            ],
+            95,
+        ),
+        (
+            [9.608709335327148, 0.39674100279808044, 0.3161138594150543],
+            [
+                0.00042881048284471035,
+                0.0006197748007252812,
+                0.0004856915329582989,
+            ],
+            87,
+        ),
+        (
+            [-9.87153148651123, 0.6970700621604919, 0.5559227466583252],
+            [
+                0.00045125867472961545,
+                0.000674048496875912,
+                0.0004574196063913405,
+            ],
+            82,
+        ),
+        (
+            [-0.29927563667297363, 9.976980209350586, 0.2656298875808716],
+            [
+                0.0005401544622145593,
+                0.0004884658847004175,
+                0.0005024367710575461,
+            ],
+            90,
+        ),
+        (
+            [
+                -0.08381815254688263,
+                -9.385205268859863,
+                0.22345149517059326,
+            ],
+            [
+                0.00033283772063441575,
+                0.0004769753140863031,
+                0.00045523341395892203,
+            ],
+            69,
+        ),
+        (
+            [6.6667704582214355, 7.131306171417236, -0.008046831004321575],
+            [
+                0.00045389877050183713,
+                0.0005617915885522962,
+                0.0005190664669498801,
+            ],
+            62,
+        ),
+        (
+            [-7.056742191314697, 7.205440521240234, 0.25013288855552673],
+            [
+                0.0004166992730461061,
+                0.0005129429046064615,
+                0.0005134791717864573,
+            ],
+            101,
+        ),
+        (
+            [-0.15723605453968048, 7.296360492706299, 7.152285099029541],
+            [
+                0.00071235146606341,
+                0.0003543395141605288,
+                0.0004560639208648354,
+            ],
+            52,
+        ),
+        (
+            [-0.24970553815364838, -6.531118869781494, 7.370600700378418],
+            [
+                0.00032220882712863386,
+                0.00038296825368888676,
+                0.0003508461522869766,
+            ],
+            66,
+        ),
+        (
+            [6.725956439971924, 0.42553049325942993, 7.373648166656494],
+            [
+                0.0005520203267224133,
+                0.0005013610934838653,
+                0.0005122628062963486,
+            ],
+            58,
+        ),
+        (
+            [-7.083353042602539, 0.21387048065662384, 7.261618614196777],
+            [
+                0.0005098820547573268,
+                0.0005574398091994226,
+                0.0005264226929284632,
+            ],
+            100,
+        ),
+    ];
+    let poses: Vec<Pose> = raw
+        .iter()
+        .map(|(m, v, n)| Pose {
+            mean: Vec3::from(*m),
+            var: Vec3::from(*v),
+            n: *n,
+            label: None,
+        })
+        .collect();
+    let fit = fit_accel_lm(&poses, 9.80665).expect("the norm model fits twelve positions");
+    assert!(fit.termination.is_some_and(|t| t.is_converged()));
+    // At the noise floor: the relative norm residual is a few 1e-5 (pose noise ≈ 3e-4 m/s²).
+    assert!(fit.rms < 1e-4, "rms {}", fit.rms);
+    let chain = imucal::pipeline::chain::default_accel_chain(&poses, 9.80665).expect("fits");
+    assert_eq!(chain.fit.method, Method::Lm, "{}", chain.reason);
 }

@@ -58,6 +58,10 @@ pub struct LmOptions {
     pub initial_lambda: f64,
 }
 
+/// A Gauss–Newton step under this fraction of a standard error is negligible
+/// ([`Termination::StepNegligible`]).
+pub const NEGLIGIBLE_STEP_SE: f64 = 1e-3;
+
 impl Default for LmOptions {
     fn default() -> Self {
         Self {
@@ -85,6 +89,13 @@ pub enum Termination {
     CostAndStepConverged,
     /// The residual is orthogonal to every Jacobian column to within `gtol` (info 4).
     GradientConverged,
+    /// No step lowered the cost, and the Gauss–Newton step left is under
+    /// [`NEGLIGIBLE_STEP_SE`] of a standard error (`δᵀJᵀJδ` against the residual variance
+    /// `cost/(m − n)`): a minimum to within the round-off of the residuals. On a small,
+    /// well-fitted problem the cost's round-off can exceed `ftol` relative to it (a cost of
+    /// order 1 from weights of thousands), so no step lowers it measurably although the point is
+    /// a minimum for every statistical purpose.
+    StepNegligible,
     /// The evaluation budget ran out while the cost was still falling (info 5). A failure.
     EvaluationBudget,
     /// No step lowered the cost although no convergence test held, until λ passed 10¹⁶: the
@@ -107,6 +118,7 @@ impl Termination {
                 | Termination::StepConverged
                 | Termination::CostAndStepConverged
                 | Termination::GradientConverged
+                | Termination::StepNegligible
         )
     }
 
@@ -118,6 +130,7 @@ impl Termination {
             Termination::StepConverged => "step_converged",
             Termination::CostAndStepConverged => "cost_and_step_converged",
             Termination::GradientConverged => "gradient_converged",
+            Termination::StepNegligible => "step_negligible",
             Termination::EvaluationBudget => "evaluation_budget",
             Termination::DampingOverflow => "damping_overflow",
             Termination::SingularSystem => "singular_system",
@@ -350,6 +363,22 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             return Ok(finish(problem, p, r, cost, evaluations, t, current));
         }
         if lambda > 1e16 {
+            // Rejected steps leave `p` where the Gauss–Newton step was taken, so the test is on
+            // the current point.
+            let dof = r.len().saturating_sub(p.len());
+            if !accepted && dof > 0 && best_predicted_rel * dof as f64 <= NEGLIGIBLE_STEP_SE.powi(2)
+            {
+                let current = (!need_jacobian).then_some(jtj);
+                return Ok(finish(
+                    problem,
+                    p,
+                    r,
+                    cost,
+                    evaluations,
+                    Termination::StepNegligible,
+                    current,
+                ));
+            }
             return Err(LmFailure::new(
                 evaluations,
                 Termination::DampingOverflow,
