@@ -103,8 +103,9 @@ pub enum InputError {
     #[error(
         "no still interval in `{path}`: its time column advances {step_s:.4} s per row, so no \
              hold of a few seconds can show in it; the time is most likely in milliseconds or \
-             microseconds: write it in seconds, or read the file as it is with --columns mapping \
-             `t_ms=t_s` and each sensor column to itself (`t_us`, `t_ns` for finer units)"
+             microseconds: write it in seconds, or declare its unit (with --columns, map the \
+             time column as `t_ms=…`, `t_us=…` or `t_ns=…`; a CSV read as it is can map \
+             `t_ms=t_s` and each sensor column to itself; IMU-TK files take --imutk-time-unit)"
     )]
     NoStillSlowClock {
         /// File concerned.

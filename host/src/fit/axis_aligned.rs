@@ -92,7 +92,8 @@ fn design(points: &[Vec3]) -> Result<Design, FitError> {
 /// `hᵢ = xᵢᵀ(XᵀX)⁻¹xᵢ` (Sherman–Morrison). The model is invariant under the centring and scaling,
 /// so the whole set's normalisation serves every fold. One fit in all instead of N.
 fn leave_one_out_axis_aligned(poses: &[Pose], means: &[Vec3], reference: f64) -> Option<f64> {
-    held_out_rms(poses, reference, calibrations_without(means, reference)?)
+    let fold = folds_without(means, reference)?;
+    held_out_rms(poses, reference, |i| fold(i).map(|(cal, _)| cal))
 }
 
 /// The axis-aligned calibration of `means` without point `i`, for any `i`, by the rank-one
@@ -103,6 +104,15 @@ pub fn calibrations_without(
     means: &[Vec3],
     reference: f64,
 ) -> Option<impl Fn(usize) -> Result<Calibration, FitError>> {
+    let fold = folds_without(means, reference)?;
+    Some(move |i: usize| fold(i).map(|(cal, _)| cal))
+}
+
+/// As [`calibrations_without`], with point `i`'s leverage in the design.
+pub fn folds_without(
+    means: &[Vec3],
+    reference: f64,
+) -> Option<impl Fn(usize) -> Result<(Calibration, f64), FitError>> {
     if means.len() <= 6 {
         return None;
     }
@@ -129,7 +139,7 @@ pub fn calibrations_without(
         let e = d.y[(i, 0)] - xi.dot(&beta.column(0));
         let fold = beta.column(0) - gx * (e / (1.0 - leverage));
         let v = [fold[0], fold[1], fold[2], fold[3], fold[4], fold[5]];
-        calibration_from_coefficients(&v, &d, reference)
+        calibration_from_coefficients(&v, &d, reference).map(|cal| (cal, leverage))
     })
 }
 

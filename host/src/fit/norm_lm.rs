@@ -24,8 +24,9 @@
 //!
 //! Passes over large data: the first pass only sets the weights, so it stops a tenth of a
 //! standard error from its optimum and, from twice [`NormLmOptions::iteration_samples`] on, is
-//! fitted on those samples alone (its noise scale is then taken over every sample); the
-//! second pass steers its steps with `JᵀJ` summed over the same samples but solves the full
+//! fitted on a quarter as many samples spread evenly over the data (every `LANES·stride`-th;
+//! its noise scale is then taken over every sample); the second pass steers its steps with
+//! `JᵀJ` summed over `iteration_samples` of them (every `stride`-th block) but solves the full
 //! `Jᵀr = 0`, or, when it ends in the corrected score, solves that score straight from the
 //! first pass's solution (its least-squares root would only start that iteration); the
 //! corrected score stops at a hundredth of a standard error; the covariance and leverages are
@@ -133,7 +134,8 @@ pub struct NormLmOptions {
     pub correct_norm_bias: bool,
     /// On a problem of at least twice this many samples (`None`: never), about this many
     /// spread evenly over the data steer the iterations: the first (weighting) pass is fitted
-    /// on them alone, and the second pass's iterations sum `JᵀJ` over them. The solution is
+    /// on a quarter as many (every `LANES`-th of their blocks' samples), and the second pass's
+    /// iterations sum `JᵀJ` over them. The solution is
     /// the root of the second pass's exact `Jᵀr` over every sample, and its covariance and
     /// leverages are summed over every sample at the solution. See
     /// [`super::norm_jacobian::hessian_stride`] and the module comment.
@@ -161,8 +163,8 @@ pub struct NormLmOutcome {
     /// Leave-one-out RMS of the relative norm residual to first order, from the leverages of
     /// the final normal matrix ([`super::norm_loo`]): one pass, not one refit per point.
     pub first_order_loo_rms: Option<f64>,
-    /// The fit without any one point, to first order ([`FoldUpdate`]); kept for fits of up
-    /// to a few thousand points (poses), `None` for clouds of samples.
+    /// The fit without any one point, to first order ([`FoldUpdate`]); kept for fits of pose
+    /// means (a noise per point) and of up to 10 000 samples, `None` for larger clouds.
     pub fold_update: Option<FoldUpdate>,
 }
 
@@ -668,7 +670,9 @@ pub fn refine_lm_detailed(
         problem.samples(),
         &sol.jtj,
     );
-    let fold_update = (n <= FOLD_UPDATE_MAX_POINTS)
+    // Pose means (a noise per point) always; clouds of samples only when small.
+    let poses = matches!(obs.sigma, NormNoise::PerPoint(_));
+    let fold_update = (poses || n <= FOLD_UPDATE_MAX_POINTS)
         .then(|| {
             let NormProblem {
                 points,

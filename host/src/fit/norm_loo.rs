@@ -2,7 +2,7 @@
 //! the leverages of its final Gauss–Newton system instead of one refit per sample.
 //!
 //! For weighted least squares with Jacobian `J` (rows `gᵢ`) and residual `r`, removing sample
-//! `i` moves the parameters by `δθ ≈ −(JᵀJ − gᵢgᵢᵀ)⁻¹gᵢrᵢ`, and its residual becomes
+//! `i` moves the parameters by `δθ ≈ (JᵀJ − gᵢgᵢᵀ)⁻¹gᵢrᵢ`, and its residual becomes
 //! `rᵢ/(1 − hᵢᵢ)` with the leverage `hᵢᵢ = gᵢᵀ(JᵀJ)⁻¹gᵢ` (Sherman–Morrison; Cook & Weisberg,
 //! "Residuals and Influence in Regression", 1982, §2.2). This is exact for a linear model and
 //! first-order for the nonlinear norm model: the neglected terms are the change of `J` over
@@ -13,7 +13,9 @@
 //! [`FoldUpdate`] gives the calibration itself without one point: the same Gauss–Newton
 //! downdate `θ₋ᵢ = θ + (JᵀJ)⁻¹gᵢrᵢ/(1 − hᵢᵢ)` (the step that returns the gradient of the other
 //! points, `−gᵢrᵢ`, to zero), after which the held-out point's residual is evaluated on the
-//! nonlinear model. Its error is second order in the step, `O(hᵢᵢ²)`.
+//! nonlinear model. Its error is second order in the step, `O(hᵢᵢ²)`. The fit's root is that of
+//! the corrected score, whose per-point term differs from `gᵢrᵢ` by the noise correction, of
+//! relative size the noise itself (≈ 10⁻⁴ for pose means): neglected here.
 
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
@@ -97,8 +99,8 @@ fn held_out_sum_of_squares(
     all_predicted.then_some(total)
 }
 
-/// Points up to which a fit keeps what [`FoldUpdate`] needs (a copy of its scaled points,
-/// weights and corrections): pose fits, not clouds of samples.
+/// Samples up to which a fit of a cloud keeps what [`FoldUpdate`] needs (its scaled points,
+/// weights and corrections); fits of pose means always keep it.
 pub(super) const FOLD_UPDATE_MAX_POINTS: usize = 10_000;
 
 /// A norm-model fit that can give its calibration without any one of its points, to first
@@ -167,6 +169,12 @@ impl FoldUpdate {
     /// not exist or carries all the leverage (the others cannot determine the fit without it),
     /// and when the result is degenerate.
     pub fn calibration_without(&self, i: usize) -> Result<Calibration, FitError> {
+        self.without(i).map(|(cal, _)| cal)
+    }
+
+    /// As [`Self::calibration_without`], with point `i`'s leverage `hᵢᵢ` (the update's error
+    /// grows with it: a caller may refit where it is high).
+    pub fn without(&self, i: usize) -> Result<(Calibration, f64), FitError> {
         let (Some(x), Some(&w), Some(&k)) = (
             self.points.get(i),
             self.weights.get(i),
@@ -210,7 +218,7 @@ impl FoldUpdate {
                 "the fit without this point is degenerate".into(),
             ));
         }
-        Ok(cal)
+        Ok((cal, leverage))
     }
 }
 

@@ -222,7 +222,7 @@ fn read_table(
                     .collect::<Vec<u8>>();
                 let index = header.names.iter().position(|n| *n == column);
                 let advice = match index {
-                    Some(index) => bad_number_advice(lines, &rest, index, columns.rows == 0, line)?,
+                    Some(index) => bad_number_advice(lines, &rest, index, columns.rows == 0, line),
                     None => ONE_ROW_ADVICE.to_string(),
                 };
                 return Err(RecordingError::BadNumber {
@@ -274,17 +274,18 @@ const BAD_COLUMN_SCAN_ROWS: usize = 1_000_000;
 
 /// The advice for a value that is not a number at line `line` in column `index`: `rest` is its
 /// block from that line on, `lines` the rest of the input; `first_row` when no row before it
-/// was read.
+/// was read. The count stops at a later fault of the input (an unreadable block, a line too
+/// long): the value's own error is the one to report.
 fn bad_number_advice(
     lines: &mut LineReader<'_>,
     rest: &[u8],
     index: usize,
     first_row: bool,
     line: usize,
-) -> Result<String, RecordingError> {
+) -> String {
     let (mut rows, mut bad) = rows_without_a_number(rest, index, BAD_COLUMN_SCAN_ROWS);
     while rows < BAD_COLUMN_SCAN_ROWS {
-        let Some((_, bytes)) = lines.next_block(BLOCK_BYTES)? else {
+        let Ok(Some((_, bytes))) = lines.next_block(BLOCK_BYTES) else {
             break;
         };
         let (r, b) = rows_without_a_number(bytes, index, BAD_COLUMN_SCAN_ROWS - rows);
@@ -296,7 +297,7 @@ fn bad_number_advice(
     } else {
         format!("all {rows} rows from there to the end")
     };
-    Ok(match (bad == rows && rows > 1, first_row) {
+    match (bad == rows && rows > 1, first_row) {
         (true, true) => format!(
             "no row holds a number there ({whole}): the column holds no readings; leave it out \
              of the file, or read the file with --columns mapping only the columns that do"
@@ -310,7 +311,7 @@ fn bad_number_advice(
              delete those rows"
         ),
         _ => ONE_ROW_ADVICE.to_string(),
-    })
+    }
 }
 
 /// Row times: `t_s`, or index / rate, or the index itself.

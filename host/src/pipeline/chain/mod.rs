@@ -145,6 +145,16 @@ pub struct ChainChoice {
 
 /// Fit `poses` with the default chain (see the module comment) to gravity `reference`.
 pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice, FitError> {
+    accel_chain(poses, reference, UPDATED_FOLDS_MIN_POSES)
+}
+
+/// The chain, its held-out folds from the full fits from `updated_from` poses on (see
+/// [`candidate_errors`]).
+fn accel_chain(
+    poses: &[Pose],
+    reference: f64,
+    updated_from: usize,
+) -> Result<ChainChoice, FitError> {
     let faces = face_labels(poses);
     let mut fits: Vec<(Method, Fit)> = Vec::new();
     let mut outcomes: Vec<(Method, Option<CandidateOutcome>)> = Vec::new();
@@ -153,7 +163,8 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
         match fit_full(method, poses, reference) {
             Err(e) => outcomes.push((method, Some(CandidateOutcome::Refused(e.to_string())))),
             Ok((mut fit, update)) => {
-                let errors = candidate_errors(method, poses, &faces, reference, &fit, update);
+                let errors =
+                    candidate_errors(method, poses, &faces, reference, &fit, update, updated_from);
                 if method == Method::Lm {
                     // The same held-out residuals `fit_accel_lm` would compute for itself.
                     fit.loo_rms = rms_of_all(errors.clone());
@@ -194,7 +205,7 @@ pub fn default_accel_chain(poses: &[Pose], reference: f64) -> Result<ChainChoice
             contest.retain(|&m| m != worse);
         }
         Some(_) => {
-            let errors = pair_mean_errors(poses, &faces, reference);
+            let errors = pair_mean_errors(poses, &faces, reference, updated_from);
             candidates.push(Candidate {
                 method: Method::MinMaxAxisAlignedMean,
                 outcome: score(&errors, &common),
@@ -307,10 +318,13 @@ fn fit_full(
 }
 
 /// The held-out error of every pose under `method` (`fit` on every pose, `update` its norm-model
-/// update): from [`UPDATED_FOLDS_MIN_POSES`] on, each fold from the full fit where the method
-/// has a closed form (min/max: exact), a rank-one downdate (axis-aligned: exact up to rounding)
-/// or a first-order update (the norm model, [`FoldUpdate`]), without the coverage rule of a
-/// refit; otherwise, and for six-position, a refit per pose.
+/// update). From `updated_from` poses on ([`UPDATED_FOLDS_MIN_POSES`] in the default chain),
+/// each fold comes from the full fit where the method has a closed form (min/max: exact), a
+/// rank-one downdate (axis-aligned: exact up to rounding) or a first-order update (the norm
+/// model, [`FoldUpdate`]), without the coverage rule of a refit; a pose of high leverage
+/// ([`high_leverage`]) is refitted all the same, since the update's error grows with its
+/// leverage and its fold is the one the coverage rule may refuse. Otherwise, and for
+/// six-position, a refit per pose.
 fn candidate_errors(
     method: Method,
     poses: &[Pose],
@@ -318,8 +332,20 @@ fn candidate_errors(
     reference: f64,
     fit: &Fit,
     update: Option<FoldUpdate>,
+    updated_from: usize,
 ) -> Vec<Option<f64>> {
-    let updated = (poses.len() >= UPDATED_FOLDS_MIN_POSES)
+    let all = fit.cal;
+    let refit_fold = |i: usize| {
+        refit(
+            method,
+            &loo::without(poses, i),
+            &loo::without(faces, i),
+            reference,
+            Some(&all),
+        )
+    };
+    let high = high_leverage(method, poses.len());
+    let updated = (poses.len() >= updated_from)
         .then(|| match method {
             Method::MinMax => loo::held_out_errors(
                 poses,
@@ -328,47 +354,67 @@ fn candidate_errors(
             ),
             Method::AxisAligned => {
                 let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
-                let fold = axis_aligned::calibrations_without(&means, reference)?;
-                loo::held_out_errors(poses, reference, fold)
+                let fold = axis_aligned::folds_without(&means, reference)?;
+                loo::held_out_errors(poses, reference, |i| match fold(i) {
+                    Ok((cal, h)) if h <= high => Ok(cal),
+                    _ => refit_fold(i),
+                })
             }
             Method::Lm => {
                 let update = update?;
-                loo::held_out_errors(poses, reference, |i| update.calibration_without(i))
+                loo::held_out_errors(poses, reference, |i| match update.without(i) {
+                    Ok((cal, h)) if h <= high => Ok(cal),
+                    _ => refit_fold(i),
+                })
             }
             _ => None,
         })
         .flatten();
     updated.unwrap_or_else(|| {
-        let all = fit.cal;
         held_out_errors(poses, faces, reference, |rest, rest_faces| {
             refit(method, rest, rest_faces, reference, Some(&all))
         })
     })
 }
 
+/// Leverage above which a fold is refitted rather than updated: `3p/N` for `p` unknowns and
+/// `N` poses, the mark of a high-leverage point (Belsley, Kuh & Welsch, *Regression
+/// Diagnostics*, 1980; the mean leverage is `p/N`).
+fn high_leverage(method: Method, poses: usize) -> f64 {
+    3.0 * unknowns(method) as f64 / poses.max(1) as f64
+}
+
 /// The held-out error of every pose under the mean of the [`TIED_PAIR`] models, each fold the
-/// mean of the two members' folds (from their full fits from [`UPDATED_FOLDS_MIN_POSES`] on, as
-/// in [`candidate_errors`]).
-fn pair_mean_errors(poses: &[Pose], faces: &[Vec3], reference: f64) -> Vec<Option<f64>> {
-    if poses.len() >= UPDATED_FOLDS_MIN_POSES {
+/// mean of the two members' folds (from their full fits from `updated_from` poses on, as in
+/// [`candidate_errors`]).
+fn pair_mean_errors(
+    poses: &[Pose],
+    faces: &[Vec3],
+    reference: f64,
+    updated_from: usize,
+) -> Vec<Option<f64>> {
+    let refit_members = |rest: &[Pose], rest_faces: &[Vec3]| {
+        let members = TIED_PAIR
+            .iter()
+            .map(|&m| refit(m, rest, rest_faces, reference, None))
+            .collect::<Result<Vec<Calibration>, FitError>>()?;
+        mean_calibration(&members)
+    };
+    if poses.len() >= updated_from {
         let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
         let mut minmax_fold = minmax::calibrations_without(poses, reference);
-        if let Some(aligned_fold) = axis_aligned::calibrations_without(&means, reference) {
-            let errors = loo::held_out_errors(poses, reference, |i| {
-                mean_calibration(&[minmax_fold(i)?, aligned_fold(i)?])
+        let high = high_leverage(Method::AxisAligned, poses.len());
+        if let Some(aligned_fold) = axis_aligned::folds_without(&means, reference) {
+            let errors = loo::held_out_errors(poses, reference, |i| match aligned_fold(i) {
+                Ok((aligned, h)) if h <= high => mean_calibration(&[minmax_fold(i)?, aligned]),
+                _ => refit_members(&loo::without(poses, i), &loo::without(faces, i)),
             });
             if let Some(errors) = errors {
                 return errors;
             }
         }
     }
-    held_out_errors(poses, faces, reference, |rest, rest_faces| {
-        let members = TIED_PAIR
-            .iter()
-            .map(|&m| refit(m, rest, rest_faces, reference, None))
-            .collect::<Result<Vec<Calibration>, FitError>>()?;
-        mean_calibration(&members)
-    })
+    held_out_errors(poses, faces, reference, refit_members)
 }
 
 /// A refit of one candidate on the poses without one (the solver and its refusals, without the

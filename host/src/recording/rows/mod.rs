@@ -336,7 +336,6 @@ fn line_text<'t>(path: &str, line: &'t [u8], offset: u64) -> Result<&'t str, Rec
     })
 }
 
-/// A field as a finite number.
 /// The advice for a value that is not a number, until the rest of its column is known.
 pub(super) const ONE_ROW_ADVICE: &str = "correct or delete that row";
 
@@ -362,6 +361,7 @@ pub(super) fn rows_without_a_number(text: &[u8], column: usize, limit: usize) ->
     (rows, bad)
 }
 
+/// A field as a finite number.
 fn parse_number(text: &str) -> Option<f64> {
     super::decimal::parse_finite(text)
 }
