@@ -570,6 +570,9 @@ fn a_magnetometer_that_was_never_turned_is_refused_as_such_not_as_a_unit_mix_up(
     );
 }
 
+/// A file name, which rows hold no number, and the phrases of the refusal.
+type BadRows = (&'static str, fn(usize) -> bool, &'static [&'static str]);
+
 /// A recording of `rows` rows whose `ax` field is `ax(i)` in row `i`.
 fn with_ax(name: &str, rows: usize, ax: impl Fn(usize) -> String) -> String {
     let mut text = String::from("t_s,ax,ay,az\n");
@@ -592,50 +595,42 @@ fn a_value_that_is_not_a_number_gets_advice_from_how_much_of_its_column_is_like_
             "the column holds no readings",
         ],
     );
-    // From row 200 on: the sensor stopped.
-    let stopped = with_ax("stopped.csv", 500, |i| {
-        if i < 200 {
-            "0.1".into()
-        } else {
-            "nan".into()
-        }
-    });
-    assert_refused(
-        &imucal(&["fit", &stopped]),
-        &[
-            "line 202",
-            "from line 202 on (all 300 rows",
-            "cut the file before line 202",
-        ],
-    );
-    // A few rows: mend them.
-    let few = with_ax("few.csv", 500, |i| {
-        if [100, 300, 301].contains(&i) {
-            "x".into()
-        } else {
-            "0.1".into()
-        }
-    });
-    assert_refused(
-        &imucal(&["fit", &few]),
-        &[
-            "line 102",
-            "3 of the 400 rows from there on",
-            "correct or delete those rows",
-        ],
-    );
-    let one = with_ax("one.csv", 500, |i| {
-        if i == 100 {
-            "x".into()
-        } else {
-            "0.1".into()
-        }
-    });
-    assert_refused(
-        &imucal(&["fit", &one]),
-        &[
-            "line 102",
-            "is not a finite number; correct or delete that row",
-        ],
-    );
+    // Which rows of 500 hold `x`: from row 200 on (the sensor stopped), three rows (mend
+    // them), one row (mend it).
+    let cases: [BadRows; 3] = [
+        (
+            "stopped.csv",
+            |i| i >= 200,
+            &[
+                "line 202",
+                "from line 202 on (all 300 rows",
+                "cut the file before line 202",
+            ],
+        ),
+        (
+            "few.csv",
+            |i| [100, 300, 301].contains(&i),
+            &[
+                "line 102",
+                "3 of the 400 rows from there on",
+                "correct or delete those rows",
+            ],
+        ),
+        (
+            "one.csv",
+            |i| i == 100,
+            &[
+                "line 102",
+                "is not a finite number; correct or delete that row",
+            ],
+        ),
+    ];
+    for (name, bad, phrases) in cases {
+        let path = with_ax(
+            name,
+            500,
+            |i| if bad(i) { "x".into() } else { "0.1".into() },
+        );
+        assert_refused(&imucal(&["fit", &path]), phrases);
+    }
 }

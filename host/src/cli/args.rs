@@ -209,40 +209,6 @@ fn at_least_one(text: &str) -> Result<f64, String> {
     number_that(text, |v| v >= 1.0, "at least 1")
 }
 
-/// A count or seed: a whole number of 0 or more, refused with the option's own words (the
-/// standard parser says "invalid digit found in string" for `-1`).
-pub(super) fn whole_number<T>(text: &str) -> Result<T, String>
-where
-    T: std::str::FromStr + std::fmt::Display + Bounded,
-{
-    let trimmed = text.trim();
-    if let Ok(value) = trimmed.parse::<T>() {
-        return Ok(value);
-    }
-    let digits = trimmed.strip_prefix('+').unwrap_or(trimmed);
-    if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) {
-        return Err(format!(
-            "`{text}` is larger than the largest value allowed ({})",
-            T::MAX_VALUE
-        ));
-    }
-    Err(format!("`{text}` is not a whole number of 0 or more"))
-}
-
-/// The largest value of an unsigned integer type, for [`whole_number`]'s message.
-pub(super) trait Bounded {
-    /// The type's largest value.
-    const MAX_VALUE: Self;
-}
-
-impl Bounded for usize {
-    const MAX_VALUE: Self = usize::MAX;
-}
-
-impl Bounded for u64 {
-    const MAX_VALUE: Self = u64::MAX;
-}
-
 /// `--max-mag-samples`: 0 (every sample) or enough for an ellipsoid fit. A smaller cap would
 /// only ever refuse the fit, and its refusal would read as a recording that is too short.
 fn sample_cap(text: &str) -> Result<usize, String> {
@@ -441,7 +407,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub accept_outlier: bool,
     /// Simulator: seed of the board's errors, noise and the simulated person.
-    #[arg(long, default_value_t = 1, requires = "simulated", value_parser = whole_number::<u64>)]
+    #[arg(long, default_value_t = 1, requires = "simulated", value_parser = super::values::whole_number::<u64>)]
     pub sim_seed: u64,
     /// Simulator: switch a hidden effect on (repeatable), `[sensor.]name[=size]`.
     #[arg(long = "sim-effect", requires = "simulated")]

@@ -32,7 +32,7 @@ pub struct PortArgs {
     #[arg(long)]
     pub sim: bool,
     /// Simulator: seed of the board's sensor errors, noise and device id.
-    #[arg(long, default_value_t = 1, requires = "sim", value_parser = super::args::whole_number::<u64>)]
+    #[arg(long, default_value_t = 1, requires = "sim", value_parser = super::values::whole_number::<u64>)]
     pub sim_seed: u64,
 }
 

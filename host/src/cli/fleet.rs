@@ -19,7 +19,7 @@ pub struct FleetArgs {
     #[arg(
         long,
         default_value_t = FleetOptions::default().min_spread_values,
-        value_parser = super::args::whole_number::<usize>
+        value_parser = super::values::whole_number::<usize>
     )]
     pub min_spread_values: usize,
     /// Print JSON instead of tables.

@@ -21,7 +21,7 @@ pub struct HistoryArgs {
     #[arg(long, value_name = "URL")]
     pub db: Option<String>,
     /// Changes listed per calibration in the table (all are in `--json`).
-    #[arg(long, default_value_t = 4, value_parser = super::args::whole_number::<usize>)]
+    #[arg(long, default_value_t = 4, value_parser = super::values::whole_number::<usize>)]
     pub changes: usize,
     /// Print JSON instead of a table.
     #[arg(long)]

@@ -19,6 +19,7 @@ pub mod import;
 pub mod params;
 pub mod report;
 pub mod still;
+mod values;
 mod write_policy;
 
 use std::path::PathBuf;
