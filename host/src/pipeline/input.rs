@@ -104,45 +104,39 @@ pub fn check_input_then<T: Send>(
 ) -> (CheckedInput, Option<T>) {
     let mut refusals: Vec<(Sensor, String)> = Vec::new();
     let mut unit_refusals: Vec<(Sensor, String)> = Vec::new();
-    let mut warnings: Vec<String> = if recording.time_from_file {
-        input_checks::time_stamp_warnings(&recording.time)
-    } else {
-        Vec::new()
-    };
     let inertial: Vec<Sensor> = sensors
         .iter()
         .copied()
         .filter(|s| *s != Sensor::Mag)
         .collect();
-    // The accelerometer's unit check, then the magnetometer's checks, and the still-interval
-    // detection read the recording independently: on a long one they run side by side (the
-    // detection takes longest).
-    let (mag, accel_unit, still, mag_next) = std::thread::scope(|scope| {
+    // The magnetometer's checks and fit read the recording independently of the rest: on a
+    // long one they run on their own thread while this one checks the time stamps and the
+    // accelerometer's unit and detects the still intervals (the two sides take about as long).
+    let (time_warnings, mag, accel_unit, still) = std::thread::scope(|scope| {
         let side = scope.spawn(|| {
-            let accel_unit = match (sensors.contains(&Sensor::Accel), &recording.accel) {
-                (true, Some(accel)) => {
-                    input_checks::check_accel_unit(accel, recording.units.accel).err()
-                }
-                _ => None,
-            };
-            let mag = sensors
+            sensors
                 .contains(&Sensor::Mag)
-                .then(|| checked_mag_points(&recording, options, stated_field_ut));
-            let mag_next = match &mag {
-                Some(checked) if matches!(checked.verdict, MagVerdict::Usable) => {
-                    let recorded = recording.samples(Sensor::Mag).unwrap_or(&[]);
-                    Some(then_mag(&recording, checked.points.as_slice(recorded)))
-                }
-                _ => None,
-            };
-            (mag, accel_unit, mag_next)
+                .then(|| checked_mag_points(&recording, options, stated_field_ut, then_mag))
         });
+        let time_warnings = if recording.time_from_file {
+            input_checks::time_stamp_warnings(&recording.time)
+        } else {
+            Vec::new()
+        };
+        let accel_unit = match (sensors.contains(&Sensor::Accel), &recording.accel) {
+            (true, Some(accel)) => {
+                input_checks::check_accel_unit(accel, recording.units.accel).err()
+            }
+            _ => None,
+        };
         let still = (!inertial.is_empty()).then(|| still_intervals(&recording, &options.still));
-        let (mag, accel_unit, mag_next) = side
+        let mag = side
             .join()
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-        (mag, accel_unit, still, mag_next)
+        (time_warnings, mag, accel_unit, still)
     });
+    let mut warnings = time_warnings;
+    let mut mag_next = None;
     if let Some(e) = accel_unit {
         unit_refusals.push((Sensor::Accel, e.to_string()));
     }
@@ -150,7 +144,8 @@ pub fn check_input_then<T: Send>(
         points: Vec::new(),
         indices: Vec::new(),
     };
-    if let Some(mag) = mag {
+    if let Some((mag, next)) = mag {
+        mag_next = next;
         mag_points = mag.points;
         warnings.extend(mag.warnings);
         match mag.verdict {
@@ -237,12 +232,15 @@ enum MagVerdict {
     UnitRefused(String),
 }
 
-/// The (thinned) magnetometer samples and the coverage and field checks on them.
-fn checked_mag_points(
+/// The magnetometer's samples screened (and thinned when asked), checked for coverage and
+/// field, and `then_mag` on them when the checks pass. `then_mag` runs beside the coverage and
+/// field checks, which it does not depend on; its result is dropped when they refuse.
+fn checked_mag_points<T: Send>(
     recording: &Recording,
     options: &InputOptions,
     stated_field_ut: Option<f64>,
-) -> CheckedMag {
+    then_mag: impl FnOnce(&Recording, &[Vec3]) -> T + Send,
+) -> (CheckedMag, Option<T>) {
     let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
     let screening = screen_stream(all);
     let mut warnings = Vec::new();
@@ -277,23 +275,32 @@ fn checked_mag_points(
         }
     };
     let selected = points.as_slice(all);
-    let verdict = match input_checks::check_mag_coverage(selected) {
-        Err(e) => MagVerdict::Refused(e.to_string()),
-        Ok(radius) => {
-            match input_checks::check_mag_field(radius, recording.units.mag, stated_field_ut) {
-                Ok(w) => {
-                    warnings.extend(w);
-                    MagVerdict::Usable
+    let (verdict, fitted) = std::thread::scope(|scope| {
+        let fit = scope.spawn(|| then_mag(recording, selected));
+        let verdict = match input_checks::check_mag_coverage(selected) {
+            Err(e) => MagVerdict::Refused(e.to_string()),
+            Ok(radius) => {
+                match input_checks::check_mag_field(radius, recording.units.mag, stated_field_ut) {
+                    Ok(w) => {
+                        warnings.extend(w);
+                        MagVerdict::Usable
+                    }
+                    Err(e) => MagVerdict::UnitRefused(e.to_string()),
                 }
-                Err(e) => MagVerdict::UnitRefused(e.to_string()),
             }
-        }
-    };
-    CheckedMag {
+        };
+        let fitted = fit
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (verdict, fitted)
+    });
+    let next = matches!(verdict, MagVerdict::Usable).then_some(fitted);
+    let checked = CheckedMag {
         points,
         verdict,
         warnings,
-    }
+    };
+    (checked, next)
 }
 
 /// The warning for magnetometer samples dropped from the fit's stream of `total`.

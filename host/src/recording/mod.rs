@@ -437,21 +437,24 @@ const PAUSE_MIN_S: f64 = 1.0;
 
 /// Median rate in Hz of a time series (robust to the bursty host time stamps of some loggers).
 pub fn median_rate(time: &[f64]) -> Option<f64> {
-    let steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
-    let mut dt: Vec<f64> = steps.iter().copied().filter(|d| *d > 0.0).collect();
+    // The steps are computed again for each pass rather than kept: one buffer of a long
+    // recording's length instead of three.
+    let steps = || time.windows(2).map(|w| w[1] - w[0]);
+    let mut dt: Vec<f64> = steps().filter(|d| *d > 0.0).collect();
     if dt.is_empty() {
         return None;
     }
     let middle = dt.len() / 2;
     let median = *dt.select_nth_unstable_by(middle, f64::total_cmp).1;
+    drop(dt);
     // Bursty loggers (many near-zero steps then a long gap) make the median step misleading;
     // the mean rate is the honest figure then, over the sampling only: pauses are left out, or
     // one long pause would read as a slow rate.
     let pause = (PAUSE_STEPS * median).max(PAUSE_MIN_S);
-    let sampled: Vec<f64> = steps.into_iter().filter(|d| *d <= pause).collect();
-    let span: f64 = sampled.iter().sum();
+    let sampled = || steps().filter(move |d| *d <= pause);
+    let span: f64 = sampled().sum();
     let mean_rate = if span > 0.0 {
-        sampled.len() as f64 / span
+        sampled().count() as f64 / span
     } else {
         (time.len() - 1) as f64 / (time.last()? - time.first()?)
     };
