@@ -357,12 +357,13 @@ fn dip_poses(
 #[test]
 fn iterations_steered_by_a_sample_of_the_data_reach_the_full_solution() {
     // 300 000 samples: above twice the default 2¹⁶ iteration samples, so by default the first
-    // (weighting) pass is fitted on every 4th block of samples and the second pass's
-    // iterations sum `JᵀJ` over them. The first pass's solution is then about √(N/m) ≈ 2
-    // standard errors off the full one, which moves the second pass's weights by ~10⁻⁴
-    // relative and its solution by a small fraction of a standard error (measured 1.5·10⁻³ σ;
-    // the noise scale comes from every sample in both): a fiftieth of σ is the bound. The
-    // covariance (a full sum at the solution in both) agrees to 10⁻³ relative.
+    // (weighting) pass is fitted on every 4th block of samples and the second pass solves the
+    // corrected score straight from that solution, steered by the first pass's `JᵀJ` (no
+    // least-squares iterations over every sample); without iteration samples both passes
+    // iterate over every sample. The first pass's solution is then about √(N/m) ≈ 2 standard
+    // errors off the full one, which moves the second pass's weights by ~10⁻⁴ relative, and
+    // either iteration stops within a hundredth of σ of its root: a fiftieth of σ is the
+    // bound. The covariance (a full sum at the solution in both) agrees to 10⁻³ relative.
     let points = imucal::synthetic::hard_and_soft_iron_cloud(300_000, 31);
     let start = fit_mag_lm(&points[..2000], FIELD).unwrap().cal;
     let obs = NormObservations::uniform(points, 1.0);

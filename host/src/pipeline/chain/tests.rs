@@ -420,3 +420,71 @@ fn the_chain_chooses_alike_by_updated_folds_and_by_refits() {
         );
     }
 }
+
+#[test]
+fn a_pose_of_high_leverage_is_refitted_and_the_others_updated() {
+    // 182 tilted poses, of which those turned towards −Z are dropped, and one added there:
+    // that lone pose alone pins the bottom of the ellipsoid, so its leverage is far above the
+    // mean p/N.
+    let mut set: Vec<Pose> = many_tilted_poses(7)
+        .into_iter()
+        .filter(|p| p.mean.z > -2.0)
+        .collect();
+    let bottom = poses(
+        &Mat3::new(1.02, 0.02, -0.015, 0.0, 0.98, 0.02, 0.0, 0.0, 1.01),
+        &offset(),
+        &[Vec3::new(0.1, -0.05, -1.0)],
+        0.0,
+    );
+    set.extend(bottom);
+    let lone = set.len() - 1;
+    assert!(set.len() >= UPDATED_FOLDS_MIN_POSES, "{} poses", set.len());
+    let faces = face_labels(&set);
+    let reference = 9.81;
+    let (fit, update) = fit_full(Method::Lm, &set, reference).expect("fits");
+    let update = update.expect("the norm model's update");
+    let high = high_leverage(Method::Lm, set.len());
+    let leverage = |i: usize| update.without(i).map(|(_, h)| h).unwrap_or(f64::INFINITY);
+    assert!(
+        leverage(lone) > high,
+        "lone pose leverage {}",
+        leverage(lone)
+    );
+    let updated = candidate_errors(
+        Method::Lm,
+        &set,
+        &faces,
+        reference,
+        &fit,
+        Some(update.clone()),
+        UPDATED_FOLDS_MIN_POSES,
+    );
+    let all = fit.cal;
+    let refitted = held_out_errors(&set, &faces, reference, |rest, rest_faces| {
+        refit(Method::Lm, rest, rest_faces, reference, Some(&all))
+    });
+    let mut updated_folds = 0;
+    for (i, (u, r)) in updated.iter().zip(&refitted).enumerate() {
+        let (u, r) = (u.expect("fold"), r.expect("refit"));
+        if leverage(i) > high {
+            // Refitted: the very same refit, so the very same number.
+            assert_eq!(
+                u.to_bits(),
+                r.to_bits(),
+                "pose {i}: {u:.9e} against {r:.9e}"
+            );
+        } else {
+            // Updated: first order in the leverage, not the refit's bits.
+            updated_folds += 1;
+            let in_sample = (all.apply(&set[i].mean).norm() - reference) / reference;
+            assert!(
+                (u - r).abs() <= 3.0 * high * (r - in_sample).abs() + 1e-12,
+                "pose {i}: updated {u:.9e}, refit {r:.9e}"
+            );
+        }
+    }
+    assert!(
+        updated_folds >= set.len() / 2,
+        "{updated_folds} folds updated"
+    );
+}
