@@ -613,15 +613,22 @@ pub fn screen_holds(
             if rows.len() < 2 {
                 continue;
             }
+            // Samples at each axis's largest and smallest value, counted in one pass.
+            let mut at_rails = [[0usize; 2]; 3];
+            for v in rows.iter().filter_map(|&r| samples.get(r)) {
+                for (k, counts) in at_rails.iter_mut().enumerate() {
+                    counts[0] += usize::from(v[k] == hi[k]);
+                    counts[1] += usize::from(v[k] == lo[k]);
+                }
+            }
             for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
                 if !(hi[k] > lo[k] && typical_var[k] > 0.0) {
                     continue;
                 }
-                for (rail, which) in [(hi[k], "largest"), (lo[k], "smallest")] {
-                    let at_rail = rows
-                        .iter()
-                        .filter(|&&r| samples.get(r).is_some_and(|v| v[k] == rail))
-                        .count();
+                for ((rail, which), at_rail) in [(hi[k], "largest"), (lo[k], "smallest")]
+                    .into_iter()
+                    .zip(at_rails[k])
+                {
                     let fraction = at_rail as f64 / rows.len() as f64;
                     if reason.is_none() && fraction >= SATURATED_FRACTION {
                         *reason = Some(format!(

@@ -223,15 +223,17 @@ pub fn screen_stream(samples: &[Vec3]) -> Screening {
     let mut screen = AxisScreen::new(3, n);
     let mut deviations = Vec::with_capacity(n);
     for (k, floor) in [step.x, step.y, step.z].into_iter().enumerate() {
-        stream_deviations(samples, k, &mut deviations);
+        // The screen's selection buffer holds the axis's keys until its medians need it.
+        stream_deviations(samples, k, &mut screen.scratch, &mut deviations);
         screen.add_axis(|| deviations.iter().copied(), floor);
     }
     screen.finish()
 }
 
 /// Each sample's deviation on axis `k` from the median of its neighbours (see
-/// [`screen_stream`]), into `out` (its old contents dropped). The axis is read in place.
-fn stream_deviations(samples: &[Vec3], k: usize, out: &mut Vec<f64>) {
+/// [`screen_stream`]), into `out` (its old contents dropped); `keys` is scratch space for the
+/// axis's [`total_order_key`]s, each computed once rather than in every window that holds it.
+fn stream_deviations(samples: &[Vec3], k: usize, keys: &mut Vec<i64>, out: &mut Vec<f64>) {
     let n = samples.len();
     let h = STREAM_HALF_WINDOW;
     // The neighbours without the sample itself: on a steady turn the sample would be its own
@@ -248,11 +250,18 @@ fn stream_deviations(samples: &[Vec3], k: usize, out: &mut Vec<f64>) {
     };
     out.clear();
     out.extend((0..h).map(at_edge));
-    // The interior: the same six neighbours in the same order, from one window.
-    out.extend(samples.windows(2 * h + 1).map(|w| {
-        let mut six = [w[0][k], w[1][k], w[2][k], w[4][k], w[5][k], w[6][k]];
-        w[h][k] - small_median(&mut six)
-    }));
+    // The interior: the same six neighbours, from one window of keys.
+    keys.clear();
+    keys.extend(
+        samples
+            .iter()
+            .map(|v| total_order_key(v[k].to_bits() as i64)),
+    );
+    out.extend(
+        keys.windows(2 * h + 1)
+            .zip(&samples[h..])
+            .map(|(w, x)| x[k] - median_of_six_keys([w[0], w[1], w[2], w[4], w[5], w[6]])),
+    );
     out.extend((n - h..n).map(at_edge));
 }
 
@@ -307,6 +316,24 @@ fn small_median(values: &mut [f64]) -> f64 {
             .fold(f64::NEG_INFINITY, f64::max);
         0.5 * (lower + upper)
     }
+}
+
+/// [`small_median`] of the six values whose [`total_order_key`]s are `keys`, bit for bit: the
+/// same network on the keys, then the same upper middle and the same lower middle by
+/// [`f64::max`].
+fn median_of_six_keys(mut keys: [i64; 6]) -> f64 {
+    for (a, b) in SIX_NETWORK {
+        let (lo, hi) = (keys[a].min(keys[b]), keys[a].max(keys[b]));
+        keys[a] = lo;
+        keys[b] = hi;
+    }
+    let value = |k: i64| f64::from_bits(total_order_key(k) as u64);
+    let upper = value(keys[3]);
+    let lower = [keys[0], keys[1], keys[2]]
+        .map(value)
+        .into_iter()
+        .fold(f64::NEG_INFINITY, f64::max);
+    0.5 * (lower + upper)
 }
 
 /// The key of a value with `bits` in [`f64::total_cmp`]'s order as a signed integer (the same
@@ -404,6 +431,38 @@ mod tests {
                 .collect();
             let expected = median(&mut values.clone());
             let got = small_median(&mut values.clone());
+            assert_eq!(got.to_bits(), expected.to_bits(), "{values:?}");
+        }
+    }
+
+    #[test]
+    fn median_of_six_keys_equals_median_by_selection_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+        // Ties, signed zeros, infinities and NaNs of both signs (three NaNs among the lower
+        // half included).
+        let pool = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+        ];
+        for _ in 0..20_000 {
+            let values: [f64; 6] = std::array::from_fn(|_| {
+                if rng.gen_bool(0.7) {
+                    pool[rng.gen_range(0..pool.len())]
+                } else {
+                    rng.gen_range(-10.0..10.0)
+                }
+            });
+            let keys = values.map(|v| total_order_key(v.to_bits() as i64));
+            let expected = median(&mut values.to_vec());
+            let got = median_of_six_keys(keys);
             assert_eq!(got.to_bits(), expected.to_bits(), "{values:?}");
         }
     }
