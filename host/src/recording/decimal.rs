@@ -96,6 +96,12 @@ const POW10_INT: [u64; 9] = [
 pub fn fast_field(bytes: &[u8], at: usize) -> Option<(f64, usize)> {
     let negative = bytes.get(at) == Some(&b'-');
     let mut i = at + usize::from(negative);
+    // The usual field ends within one word: read it from that word alone.
+    if let Some((mantissa, fraction_digits, len)) = short_field(bytes, i) {
+        let value = mantissa as i64 as f64 / POW10.get(fraction_digits)?;
+        let sign = u64::from(negative) << 63;
+        return Some((f64::from_bits(value.to_bits() | sign), i + len));
+    }
     let (integer_digits, mut mantissa) = digit_run(bytes, i, 0);
     i += integer_digits;
     let mut fraction_digits = 0;
@@ -120,6 +126,50 @@ pub fn fast_field(bytes: &[u8], at: usize) -> Option<(f64, usize)> {
     // not negative, so setting its sign bit is negating it, `-0` included.
     let sign = u64::from(negative) << 63;
     Some((f64::from_bits(value.to_bits() | sign), i))
+}
+
+/// A field `digits[.digits]` at `bytes[at..]` that ends within the eight bytes from `at` or
+/// right after them (a byte that is neither a digit nor its one point follows it): its digits as an
+/// integer, the number of digits after the point and the field's length. `None` when the
+/// field runs past the word (the caller reads it run by run) or has no digit before its end,
+/// or no digit after its point (those are not numbers of the fast path).
+///
+/// The mask of [`eight_digits`] judges every byte up to the field's end: neither a point nor
+/// the byte that ends the field carries out of its byte, so the bytes after the point are
+/// judged as if they came first. The digits after the point are moved down one byte, over it,
+/// and the joined run is converted as one.
+#[inline]
+fn short_field(bytes: &[u8], at: usize) -> Option<(u64, usize, usize)> {
+    let word = load8(bytes, at) ^ 0x3030_3030_3030_3030;
+    let not_digit = (word.wrapping_add(0x7676_7676_7676_7676) | word) & 0x8080_8080_8080_8080;
+    // A field that fills the word ends there when the byte after it is not a digit.
+    let ends_at_word_end = || !bytes.get(at + 8).is_some_and(u8::is_ascii_digit);
+    let first = (not_digit.trailing_zeros() / 8) as usize;
+    if first >= 8 && !(ends_at_word_end() && bytes.get(at + 8) != Some(&b'.')) {
+        return None;
+    }
+    let (digits, fraction_digits, len, run) = if bytes.get(at + first) == Some(&b'.') {
+        let after = not_digit & !(0x80u64 << (8 * first));
+        let end = (after.trailing_zeros() / 8) as usize;
+        if (end >= 8 && !ends_at_word_end()) || end == first + 1 {
+            return None;
+        }
+        // Bytes below the point as they are; those after it one byte down.
+        let below = word & ((1u64 << (8 * first)) - 1);
+        let above = (word >> 8) & !((1u64 << (8 * first)) - 1);
+        (end - 1, end - first - 1, end, below | above)
+    } else {
+        (first, 0, first, word)
+    };
+    if digits == 0 {
+        return None;
+    }
+    // As in `eight_digits`: the digits to the top bytes, then pairs, fours and eights joined.
+    let mut v = run.checked_shl(8 * (8 - digits) as u32).unwrap_or(0);
+    v = v.wrapping_mul(10).wrapping_add(v >> 8) & 0x00FF_00FF_00FF_00FF;
+    v = v.wrapping_mul(100).wrapping_add(v >> 16) & 0x0000_FFFF_0000_FFFF;
+    v = v.wrapping_mul(10_000).wrapping_add(v >> 32) & 0xFFFF_FFFF;
+    Some((v, fraction_digits, len))
 }
 
 /// The run of digits at `bytes[at..]` appended to `mantissa`: its length and the new mantissa.
@@ -252,8 +302,11 @@ mod tests {
             if state & 1 == 1 {
                 text.insert(0, '-');
             }
-            let rest =
-                [",", "\n", "\r\n", "", ",-3.25,7", " ,1", "e3,", "x"][(state >> 40) as usize % 8];
+            // Fields that end within one word (read from it alone) and those that do not, ended
+            // by every kind of byte, a multi-byte character included.
+            let rest = [
+                ",", "\n", "\r\n", "", ",-3.25,7", " ,1", "e3,", "x", "\u{e9},1", ".5,",
+            ][(state >> 40) as usize % 10];
             check_field(&text, rest);
         }
     }
