@@ -435,23 +435,28 @@ mod tests {
         }
     }
 
+    /// Ties, signed zeros, infinities, NaNs of both signs and wide magnitudes: the values on
+    /// which orders and maxima of floats disagree.
+    const SPECIAL_VALUES: [f64; 11] = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.0,
+        2.5,
+        1e300,
+        -3e-300,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+        -f64::NAN,
+    ];
+
     #[test]
     fn median_of_six_keys_equals_median_by_selection_bit_for_bit() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(23);
-        // Ties, signed zeros, infinities and NaNs of both signs (three NaNs among the lower
-        // half included).
-        let pool = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            1e300,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-        ];
+        // Drawn mostly from the special values: sets with three NaNs below the middle too.
+        let pool = SPECIAL_VALUES;
         for _ in 0..20_000 {
             let values: [f64; 6] = std::array::from_fn(|_| {
                 if rng.gen_bool(0.7) {
@@ -471,20 +476,7 @@ mod tests {
     fn median_of_keys_equals_median_by_selection_bit_for_bit() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(29);
-        // Ties, signed zeros, infinities, NaNs of both signs and wide magnitudes.
-        let pool = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.0,
-            2.5,
-            1e300,
-            -3e-300,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-        ];
+        let pool = SPECIAL_VALUES;
         for _ in 0..5_000 {
             let len = rng.gen_range(0..=300);
             let rare = rng.gen_bool(0.2);
