@@ -257,9 +257,10 @@ impl<L: Read + Write> Runner<'_, L> {
         }
         if predicted <= target_mg {
             return Ok(format!(
-                "{} positions give an expected |a| error of {predicted:.3} mg (1σ), within the \
-                 {target_mg:.2} mg target (a quarter of the {:.1} mg budget); no extra positions \
-                 needed",
+                "the {} positions so far give an expected |a| error of {predicted:.3} mg (1σ), \
+                 within the {target_mg:.2} mg target (a quarter of the {:.1} mg budget); no extra \
+                 positions needed (the final fit adds the session's later holds and states its \
+                 own σ)",
                 captured.len(),
                 self.options.budgets.accel_mg
             ));
