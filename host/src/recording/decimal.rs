@@ -164,12 +164,7 @@ fn short_field(bytes: &[u8], at: usize) -> Option<(u64, usize, usize)> {
     if digits == 0 {
         return None;
     }
-    // As in `eight_digits`: the digits to the top bytes, then pairs, fours and eights joined.
-    let mut v = run.checked_shl(8 * (8 - digits) as u32).unwrap_or(0);
-    v = v.wrapping_mul(10).wrapping_add(v >> 8) & 0x00FF_00FF_00FF_00FF;
-    v = v.wrapping_mul(100).wrapping_add(v >> 16) & 0x0000_FFFF_0000_FFFF;
-    v = v.wrapping_mul(10_000).wrapping_add(v >> 32) & 0xFFFF_FFFF;
-    Some((v, fraction_digits, len))
+    Some((join_digits(run, digits), fraction_digits, len))
 }
 
 /// The run of digits at `bytes[at..]` appended to `mantissa`: its length and the new mantissa.
@@ -197,13 +192,18 @@ fn eight_digits(bytes: &[u8], at: usize) -> (usize, u64) {
     let word = load8(bytes, at) ^ 0x3030_3030_3030_3030;
     let not_digit = (word.wrapping_add(0x7676_7676_7676_7676) | word) & 0x8080_8080_8080_8080;
     let n = (not_digit.trailing_zeros() / 8) as usize;
-    // The n digits to the top bytes (the first, most significant, digit lowest), zeros below
-    // as leading zeros; then pairs, fours and eights of digits joined.
-    let mut v = word.checked_shl(8 * (8 - n) as u32).unwrap_or(0);
+    (n, join_digits(word, n))
+}
+
+/// The value of the `n` digits (0..9 per byte, the first and most significant lowest) in the
+/// low bytes of `run`: they go to the top bytes, zeros below as leading zeros, then pairs,
+/// fours and eights of digits are joined.
+#[inline]
+fn join_digits(run: u64, n: usize) -> u64 {
+    let mut v = run.checked_shl(8 * (8 - n) as u32).unwrap_or(0);
     v = v.wrapping_mul(10).wrapping_add(v >> 8) & 0x00FF_00FF_00FF_00FF;
     v = v.wrapping_mul(100).wrapping_add(v >> 16) & 0x0000_FFFF_0000_FFFF;
-    v = v.wrapping_mul(10_000).wrapping_add(v >> 32) & 0xFFFF_FFFF;
-    (n, v)
+    v.wrapping_mul(10_000).wrapping_add(v >> 32) & 0xFFFF_FFFF
 }
 
 /// Eight bytes of `bytes` from `at` as a little-endian word, zeros past the end (a zero byte is

@@ -322,11 +322,7 @@ fn small_median(values: &mut [f64]) -> f64 {
 /// same network on the keys, then the same upper middle and the same lower middle by
 /// [`f64::max`].
 fn median_of_six_keys(mut keys: [i64; 6]) -> f64 {
-    for (a, b) in SIX_NETWORK {
-        let (lo, hi) = (keys[a].min(keys[b]), keys[a].max(keys[b]));
-        keys[a] = lo;
-        keys[b] = hi;
-    }
+    sort_six_keys(&mut keys);
     let value = |k: i64| f64::from_bits(total_order_key(k) as u64);
     let upper = value(keys[3]);
     let lower = [keys[0], keys[1], keys[2]]
@@ -346,12 +342,17 @@ fn total_order_key(bits: i64) -> i64 {
 /// keys: no data-dependent branches, unlike a comparison sort, on the interior of every stream.
 fn sort_six(values: &mut [f64; 6]) {
     let mut keys = values.map(|v| total_order_key(v.to_bits() as i64));
+    sort_six_keys(&mut keys);
+    *values = keys.map(|k| f64::from_bits(total_order_key(k) as u64));
+}
+
+/// [`SIX_NETWORK`] applied to six keys.
+fn sort_six_keys(keys: &mut [i64; 6]) {
     for (a, b) in SIX_NETWORK {
         let (lo, hi) = (keys[a].min(keys[b]), keys[a].max(keys[b]));
         keys[a] = lo;
         keys[b] = hi;
     }
-    *values = keys.map(|k| f64::from_bits(total_order_key(k) as u64));
 }
 
 /// An optimal sorting network for six inputs (Knuth, TAOCP vol. 3, §5.3.4).
