@@ -593,3 +593,33 @@ fn a_fit_of_standard_input_is_not_recorded_as_a_board_without_a_device_id() {
         "no history was written"
     );
 }
+
+#[test]
+fn analyze_write_params_keeps_the_sessions_board_binding_and_provenance() {
+    // A session of one simulated board: its parameter file names that board.
+    let dir = temp_file("bound-session");
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = imucal(&["calibrate", "--sim", "--yes", "--sim-seed", "3", "-o", &dir]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let base = ParamsFile::load(&PathBuf::from(&dir).join("params.json")).expect("base file");
+    assert!(base.device.is_some(), "a session's file names its board");
+
+    let written = temp_file("bound-extended.json");
+    let out = imucal(&["analyze", &dir, "--write-params", &written]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let extended = ParamsFile::load(&PathBuf::from(&written)).expect("written file");
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(&written);
+    // Without the binding, `flash` would write this board's set to any other board.
+    assert_eq!(extended.device, base.device);
+    assert_eq!(extended.provenance, base.provenance);
+    assert_eq!(extended.not_fitted, base.not_fitted);
+    assert_eq!(extended.absent_sensors, base.absent_sensors);
+    for (e, b) in [
+        (&extended.accel, &base.accel),
+        (&extended.gyro, &base.gyro),
+        (&extended.mag, &base.mag),
+    ] {
+        assert_eq!(e.input_unit, b.input_unit);
+    }
+}

@@ -56,10 +56,21 @@ fn run_session_dir(args: &AnalyzeArgs, dir: &std::path::Path) -> anyhow::Result<
                     dir.display()
                 )
             })?;
-        let base =
-            ParamsFile::load(&base_path)?.to_calibration_set(&base_path.display().to_string())?;
+        let base_file = ParamsFile::load(&base_path)?;
+        let base = base_file.to_calibration_set(&base_path.display().to_string())?;
         let extended = extend_set(&base, &analysis);
-        std::fs::write(out, ParamsFile::from(&extended.set).to_json())
+        // The extended set stays the base file's: bound to its board, with its provenance, its
+        // sensors left unfitted and their input units, so `flash` refuses it on another board
+        // and keeps the board's own calibration of a sensor the session did not fit.
+        let mut file = ParamsFile::from(&extended.set);
+        file.device = base_file.device;
+        file.provenance = base_file.provenance;
+        file.not_fitted = base_file.not_fitted;
+        file.absent_sensors = base_file.absent_sensors;
+        file.accel.input_unit = base_file.accel.input_unit;
+        file.gyro.input_unit = base_file.gyro.input_unit;
+        file.mag.input_unit = base_file.mag.input_unit;
+        std::fs::write(out, file.to_json())
             .with_context(|| format!("could not write {}", out.display()))?;
         let added = if extended.extended() {
             extended.added.join(", ")
