@@ -34,6 +34,34 @@ pub const EXPORT_SCHEMA_VERSION: u32 = 2;
 /// Name of the export JSON schema, written in its `schema` field.
 pub const EXPORT_SCHEMA_NAME: &str = "imucal-calibration-export";
 
+/// What an export states about its sensors beyond their numbers.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct SensorNotes<'a> {
+    /// Sensors whose calibration takes raw readings, with their input unit
+    /// (`("accel", "counts")`): the comment and the JSON state it in place of the nominal unit.
+    pub raw_inputs: &'a [(&'a str, &'a str)],
+    /// Sensors the parameter file holds no calibration of, with the reason: exported as the
+    /// identity, and marked so where they are defined (`"calibrated": false` in the JSON), so
+    /// firmware built from the export does not pass an uncalibrated sensor off as calibrated.
+    pub uncalibrated: &'a [(&'a str, &'a str)],
+}
+
+impl SensorNotes<'_> {
+    fn raw_unit(&self, name: &str) -> Option<&str> {
+        self.raw_inputs
+            .iter()
+            .find(|(raw, _)| *raw == name)
+            .map(|(_, unit)| *unit)
+    }
+
+    fn uncalibrated_because(&self, name: &str) -> Option<&str> {
+        self.uncalibrated
+            .iter()
+            .find(|(sensor, _)| *sensor == name)
+            .map(|(_, why)| *why)
+    }
+}
+
 /// What to generate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportFormat {
@@ -68,20 +96,19 @@ pub fn export(
     format: ExportFormat,
     source: &str,
 ) -> Result<String, InvalidParamsReason> {
-    export_checked_as(set, set, format, source, &[])
+    export_checked_as(set, set, format, source, SensorNotes::default())
 }
 
 /// [`export`] of `set`, validated as `checked`: the set with the sensors whose calibration
 /// takes raw counts (no nominal unit, so the board's limits do not apply to them) replaced by
 /// identity. Those sensors are still refused when any of their numbers is not finite.
-/// `raw_inputs` names them with their input unit (`("accel", "counts")`), which the generated
-/// comment and the JSON state in place of the nominal unit.
+/// `notes` names them with their input unit, and the sensors the file does not calibrate.
 pub fn export_checked_as(
     set: &CalibrationSet,
     checked: &CalibrationSet,
     format: ExportFormat,
     source: &str,
-    raw_inputs: &[(&str, &str)],
+    notes: SensorNotes<'_>,
 ) -> Result<String, InvalidParamsReason> {
     validate_for_ranges(checked, &FullScale::WIDEST_SUPPORTED)?;
     let finite = |s: &SensorCalibration| s.a.iter().flatten().chain(&s.b).all(|v| v.is_finite());
@@ -96,12 +123,11 @@ pub fn export_checked_as(
         return Err(InvalidParamsReason::NonFinite(ParamField::Matrix(kind)));
     }
     Ok(match format {
-        ExportFormat::CHeader => c_header(set, source, raw_inputs),
-        ExportFormat::Rust => rust_module(set, source, raw_inputs),
+        ExportFormat::CHeader => c_header(set, source, notes),
+        ExportFormat::Rust => rust_module(set, source, notes),
         ExportFormat::Json => {
             // A tree of numbers and strings always serialises.
-            serde_json::to_string_pretty(&json_document(set, source, raw_inputs))
-                .unwrap_or_default()
+            serde_json::to_string_pretty(&json_document(set, source, notes)).unwrap_or_default()
                 + "\n"
         }
     })
@@ -137,7 +163,7 @@ fn c_mat(m: &[[f32; 3]; 3]) -> String {
     )
 }
 
-fn model_comment(prefix: &str, raw_inputs: &[(&str, &str)]) -> String {
+fn model_comment(prefix: &str, notes: SensorNotes<'_>) -> String {
     let mut lines: Vec<String> = [
         "Model per sensor (as the imucal firmware applies it):",
         "  dT = clamp(T - T_ref, -125, 125)    (degC; T_ref = the sensor's t_ref_c)",
@@ -149,9 +175,14 @@ fn model_comment(prefix: &str, raw_inputs: &[(&str, &str)]) -> String {
     ]
     .map(String::from)
     .to_vec();
-    for (sensor, unit) in raw_inputs {
+    for (sensor, unit) in notes.raw_inputs {
         lines.push(format!(
             "Except: {sensor} inputs x are raw readings in {unit} (as fitted), not the nominal unit."
+        ));
+    }
+    for (sensor, why) in notes.uncalibrated {
+        lines.push(format!(
+            "NOT CALIBRATED: {sensor} is the identity here ({why}); its readings pass unchanged."
         ));
     }
     lines
@@ -161,13 +192,21 @@ fn model_comment(prefix: &str, raw_inputs: &[(&str, &str)]) -> String {
         .join("\n")
 }
 
+/// The heading of a sensor's block: its output unit, or that it is not calibrated.
+fn heading(name: &str, unit: &str, notes: SensorNotes<'_>) -> String {
+    match notes.uncalibrated_because(name) {
+        Some(why) => format!("NOT CALIBRATED, identity ({why})"),
+        None => format!("output in {unit}"),
+    }
+}
+
 /// The C header.
-fn c_header(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) -> String {
+fn c_header(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>) -> String {
     let mut out = String::new();
     out.push_str(&format!(
         "/*\n * IMU calibration exported by imucal from {source} (parameter format {}).\n *\n{}\n */\n#pragma once\n\n",
         set.format_version,
-        model_comment(" * ", raw_inputs)
+        model_comment(" * ", notes)
     ));
     out.push_str(&format!(
         "#define IMUCAL_PARAMS_FORMAT {}\n#define IMUCAL_GRAVITY_MPS2 {}\n#define IMUCAL_FIELD_UT {}\n",
@@ -177,7 +216,12 @@ fn c_header(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) -> 
     ));
     for (name, unit) in SENSORS {
         let cal = sensor(set, name);
-        out.push_str(&format!("\n/* {name}: output in {unit} */\n"));
+        out.push_str(&format!(
+            "\n/* {name}: {} */\n#define IMUCAL_{}_CALIBRATED {}\n",
+            heading(name, unit, notes),
+            name.to_uppercase(),
+            u8::from(notes.uncalibrated_because(name).is_none())
+        ));
         out.push_str(&format!(
             "static const float imucal_{name}_A[3][3] = {};\n",
             c_mat(&cal.a)
@@ -290,11 +334,11 @@ fn rust_mat(m: &[[f32; 3]; 3]) -> String {
 }
 
 /// The Rust module (plain `//` comments, so it can be pasted or `include!`d anywhere).
-fn rust_module(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) -> String {
+fn rust_module(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>) -> String {
     let mut out = format!(
         "// IMU calibration exported by imucal from {source} (parameter format {}).\n//\n{}\n\n",
         set.format_version,
-        model_comment("// ", raw_inputs)
+        model_comment("// ", notes)
     );
     out.push_str(&format!(
         "/// Parameter format of the source file.\npub const PARAMS_FORMAT: u16 = {};\n/// Local gravity of the fit, m/s².\npub const GRAVITY_MPS2: f32 = {};\n/// Local field magnitude of the fit, µT.\npub const FIELD_UT: f32 = {};\n",
@@ -306,7 +350,9 @@ fn rust_module(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) 
         let cal = sensor(set, name);
         let upper = name.to_uppercase();
         out.push_str(&format!(
-            "\n/// {name}: correction matrix `A` (row-major); output in {unit}.\npub const {upper}_A: [[f32; 3]; 3] = {};\n/// {name}: offset `b`, in the input unit.\npub const {upper}_B: [f32; 3] = {};\n/// {name}: reference temperature of the temperature terms, °C.\npub const {upper}_T_REF_C: f32 = {};\n",
+            "\n/// Whether the file calibrates the {name} (else `A`, `b` are the identity).\npub const {upper}_CALIBRATED: bool = {};\n/// {name}: correction matrix `A` (row-major); {}.\npub const {upper}_A: [[f32; 3]; 3] = {};\n/// {name}: offset `b`, in the input unit.\npub const {upper}_B: [f32; 3] = {};\n/// {name}: reference temperature of the temperature terms, °C.\npub const {upper}_T_REF_C: f32 = {};\n",
+            notes.uncalibrated_because(name).is_none(),
+            heading(name, unit, notes),
             rust_mat(&cal.a),
             rust_vec(&cal.b),
             float_text(cal.t_ref_c)
@@ -414,8 +460,9 @@ fn json_sensor(cal: &SensorCalibration, unit: &str) -> Value {
 }
 
 /// The JSON document of schema [`EXPORT_SCHEMA_NAME`] version [`EXPORT_SCHEMA_VERSION`].
-/// Each sensor's `input_unit` is its nominal unit, or its entry in `raw_inputs`.
-pub fn json_document(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &str)]) -> Value {
+/// Each sensor's `input_unit` is its nominal unit, or its entry in `notes.raw_inputs`; a sensor
+/// in `notes.uncalibrated` has `"calibrated": false` and `not_calibrated_because`.
+pub fn json_document(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>) -> Value {
     let mut document = json!({
         "schema": EXPORT_SCHEMA_NAME,
         "schema_version": EXPORT_SCHEMA_VERSION,
@@ -441,11 +488,11 @@ pub fn json_document(set: &CalibrationSet, source: &str, raw_inputs: &[(&str, &s
             _ => "uT",
         };
         document[name] = json_sensor(sensor(set, name), unit);
-        let input = raw_inputs
-            .iter()
-            .find(|(raw, _)| *raw == name)
-            .map_or(unit, |(_, raw_unit)| raw_unit);
-        document[name]["input_unit"] = json!(input);
+        document[name]["input_unit"] = json!(notes.raw_unit(name).unwrap_or(unit));
+        document[name]["calibrated"] = json!(notes.uncalibrated_because(name).is_none());
+        if let Some(why) = notes.uncalibrated_because(name) {
+            document[name]["not_calibrated_because"] = json!(why);
+        }
     }
     if let Some(k) = &set.gyro_g_sensitivity {
         document["gyro_g_sensitivity"] = json!(k);

@@ -406,3 +406,67 @@ fn json_export_names_its_schema_and_keeps_every_f32_exactly() {
         3e-5f32
     );
 }
+
+#[test]
+fn a_sensor_the_parameter_file_does_not_calibrate_is_exported_marked_as_not_calibrated() {
+    let dir = scratch("uncalibrated");
+    // A file with the accelerometer and gyroscope only: its magnetometer is left as the board
+    // has it by `flash`, but an export can only give the identity, and must say so.
+    let mut file = serde_json::to_value(imucal::device::ParamsFile::from(&plain_set()))
+        .expect("a parameter file serialises");
+    file.as_object_mut()
+        .expect("a JSON object")
+        .remove("mag")
+        .expect("the file had a magnetometer entry");
+    let params = dir.join("params.json");
+    std::fs::write(&params, file.to_string()).expect("write the parameter file");
+    let export = |format: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["export", "--format", format])
+            .arg(&params)
+            .output()
+            .expect("the imucal binary runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+
+    let (json, note) = export("json");
+    assert!(
+        note.contains("no mag calibration") && note.contains("no `mag` entry"),
+        "{note}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&json).expect("the export is JSON");
+    assert_eq!(json["mag"]["calibrated"], false);
+    assert!(json["mag"]["not_calibrated_because"]
+        .as_str()
+        .is_some_and(|why| why.contains("no `mag` entry")));
+    assert_eq!(json["accel"]["calibrated"], true);
+    assert!(json["accel"].get("not_calibrated_because").is_none());
+
+    let (header, _) = export("c-header");
+    assert!(
+        header.contains("#define IMUCAL_MAG_CALIBRATED 0"),
+        "{header}"
+    );
+    assert!(
+        header.contains("#define IMUCAL_ACCEL_CALIBRATED 1"),
+        "{header}"
+    );
+    assert!(header.contains("NOT CALIBRATED: mag"), "{header}");
+    let (module, _) = export("rust");
+    assert!(
+        module.contains("pub const MAG_CALIBRATED: bool = false;"),
+        "{module}"
+    );
+    assert!(
+        module.contains("pub const GYRO_CALIBRATED: bool = true;"),
+        "{module}"
+    );
+}

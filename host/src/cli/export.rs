@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::{Args, ValueEnum};
 use imucal::compat::{self, encode_packet, AdafruitCalibration};
 use imucal::device::ParamsFile;
-use imucal::export::{export_checked_as, ExportFormat};
+use imucal::export::{export_checked_as, ExportFormat, SensorNotes};
 use imucal_protocol::{CalibrationSet, SensorCalibration};
 
 use super::write_policy::{check_outputs, Output};
@@ -91,8 +91,12 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
              unit (the export says so)"
         );
     }
-    for (sensor, why) in &params.not_fitted {
-        eprintln!("imucal: note: `{shown}` has no {sensor} calibration ({why}); it is exported as identity");
+    let uncalibrated = uncalibrated_sensors(&params);
+    for (sensor, why) in &uncalibrated {
+        eprintln!(
+            "imucal: note: `{shown}` has no {sensor} calibration ({why}); it is exported as the \
+             identity and marked as not calibrated"
+        );
     }
     let name = args
         .params
@@ -118,9 +122,36 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
             *cal = SensorCalibration::identity();
         }
     }
-    let text = export_checked_as(&set, &checked, format, &name, &raw_inputs)
+    let uncalibrated: Vec<(&str, &str)> = uncalibrated
+        .iter()
+        .map(|(sensor, why)| (*sensor, why.as_str()))
+        .collect();
+    let notes = SensorNotes {
+        raw_inputs: &raw_inputs,
+        uncalibrated: &uncalibrated,
+    };
+    let text = export_checked_as(&set, &checked, format, &name, notes)
         .map_err(|reason| anyhow::anyhow!("`{shown}` is not exported: {reason}"))?;
     write_output(args.out.as_deref(), text.as_bytes())
+}
+
+/// The sensors `params` holds no calibration of, with the reason: those it lists as not fitted,
+/// and those it has no entry for at all (which `flash` leaves as the board has them, but an
+/// export can only give as the identity).
+fn uncalibrated_sensors(params: &ParamsFile) -> Vec<(&'static str, String)> {
+    ["accel", "gyro", "mag"]
+        .into_iter()
+        .filter_map(|sensor| {
+            let why = match params.not_fitted.get(sensor) {
+                Some(why) => why.clone(),
+                None if params.absent_sensors.iter().any(|a| a == sensor) => {
+                    format!("the file has no `{sensor}` entry")
+                }
+                None => return None,
+            };
+            Some((sensor, why))
+        })
+        .collect()
 }
 
 /// The Adafruit library's forms: what it can apply of `set`, and a note of what it cannot.
