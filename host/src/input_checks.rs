@@ -151,6 +151,18 @@ pub enum InputError {
         /// What is missing and what to add.
         detail: String,
     },
+    /// An axis reads the same number in every row: the sensor is not measuring.
+    #[error("the {sensor} column {column} reads {value} in every one of its {count} rows, so the sensor is not measuring (stuck, asleep, unpowered, or its column filled with a constant); check the sensor and the column mapping, and record again")]
+    Stuck {
+        /// Sensor concerned.
+        sensor: Sensor,
+        /// The first column found stuck (`gx`, as the CSV format names it).
+        column: &'static str,
+        /// The value it repeats, in the file's unit.
+        value: f64,
+        /// Rows of the sensor's data.
+        count: usize,
+    },
     /// Too few magnetometer samples.
     #[error("only {count} magnetometer samples; an ellipsoid fit needs at least {needed}, so record longer while turning the board in all directions")]
     TooFewMagSamples {
@@ -159,6 +171,38 @@ pub enum InputError {
         /// Samples needed.
         needed: usize,
     },
+}
+
+/// Fewest rows over which an axis that never changes is taken as stuck. A working sensor's
+/// noise moves its reading by at least one count now and then: even with noise of a quarter
+/// count, 95 % of readings fall on one value, and 100 in a row do so with probability
+/// 0.95⁹⁹ < 1 %. Shorter series are too few to tell.
+pub const MIN_ROWS_FOR_STUCK: usize = 100;
+
+/// Refuses a sensor one of whose axes reads exactly the same number in each of at least
+/// [`MIN_ROWS_FOR_STUCK`] rows: its calibration would be fitted to a constant (a gyroscope's
+/// bias with zero noise, RMS 0) and look perfect. Stops at the first row that differs, so a
+/// working sensor costs a few comparisons.
+pub fn check_not_stuck(samples: &[Vec3], sensor: Sensor) -> Result<(), InputError> {
+    let Some(first) = samples.first() else {
+        return Ok(());
+    };
+    if samples.len() < MIN_ROWS_FOR_STUCK {
+        return Ok(());
+    }
+    for (axis, column) in sensor.columns().into_iter().enumerate() {
+        // Bitwise equality: a column of NaN is as stuck as one of zeros.
+        let value = first[axis];
+        if samples.iter().all(|s| s[axis].to_bits() == value.to_bits()) {
+            return Err(InputError::Stuck {
+                sensor,
+                column,
+                value,
+                count: samples.len(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Median of a list (the upper middle value; 0 when empty). Selection, not a sort: the
@@ -742,6 +786,35 @@ mod tests {
             .collect();
         let radius = sphere_radius(&points).unwrap_or(f64::NAN);
         assert!((radius - 48.5).abs() < 1e-9, "{radius}");
+    }
+
+    #[test]
+    fn an_axis_with_one_value_in_every_row_is_stuck_and_any_change_or_a_short_series_is_not() {
+        let mut samples = vec![Vec3::new(0.0, 0.25, 1.0); MIN_ROWS_FOR_STUCK];
+        // y and z stuck too, but x is named first.
+        let error = check_not_stuck(&samples, Sensor::Gyro).expect_err("stuck");
+        assert!(
+            error
+                .to_string()
+                .contains("column gx reads 0 in every one of its 100 rows"),
+            "{error}"
+        );
+        for (i, s) in samples.iter_mut().enumerate() {
+            s.x = i as f64;
+        }
+        let error = check_not_stuck(&samples, Sensor::Mag).expect_err("y still stuck");
+        assert!(
+            error.to_string().contains("column my reads 0.25"),
+            "{error}"
+        );
+        // One reading of one count apart is a working sensor.
+        samples[MIN_ROWS_FOR_STUCK - 1].y = 0.26;
+        samples[0].z = f64::NAN;
+        assert!(check_not_stuck(&samples, Sensor::Mag).is_ok());
+        // A column of NaN is stuck; fewer rows than the bound are too few to tell.
+        let nan = vec![Vec3::new(1.0, f64::NAN, 2.0); MIN_ROWS_FOR_STUCK];
+        assert!(check_not_stuck(&nan, Sensor::Accel).is_err());
+        assert!(check_not_stuck(&nan[1..], Sensor::Accel).is_ok());
     }
 
     #[test]

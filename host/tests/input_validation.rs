@@ -634,3 +634,33 @@ fn a_value_that_is_not_a_number_gets_advice_from_how_much_of_its_column_is_like_
         assert_refused(&imucal(&["fit", &path]), phrases);
     }
 }
+
+#[test]
+fn a_gyroscope_that_reads_one_constant_is_refused_as_not_measuring_and_the_accelerometer_still_fits(
+) {
+    // A stuck gyroscope fits a bias with zero noise and RMS 0: a perfect-looking calibration of
+    // a dead sensor. Its columns become one constant; the accelerometer's are left as they are.
+    let clean = Synthetic::new(twelve_directions()).csv();
+    let mut lines = clean.lines();
+    let mut stuck = format!("{}\n", lines.next().expect("a header"));
+    for line in lines {
+        let fields: Vec<&str> = line.split(',').collect();
+        stuck.push_str(&format!("{},0.5,-0.25,0.125\n", fields[..4].join(",")));
+    }
+    let path = write("stuck-gyro.csv", stuck.as_bytes());
+    let outcome = imucal(&["fit", &path, "--json"]);
+    assert_refused(
+        &outcome,
+        &[
+            "gyro column gx reads 0.5 in every one of its",
+            "not measuring",
+        ],
+    );
+    // The symptom the unit check would report instead is not given as the cause.
+    assert!(!outcome.stderr.contains("turns"), "{}", outcome.stderr);
+    let json: serde_json::Value = serde_json::from_str(&outcome.stdout).expect("JSON on stdout");
+    assert!(json["accel"]["A"].is_array(), "{}", json["accel"]);
+    assert!(json["gyro"]["error"]
+        .as_str()
+        .is_some_and(|e| e.contains("not measuring")));
+}

@@ -182,6 +182,20 @@ pub fn check_input_then<T: Send>(
     // A unit refusal is the first reason given for its sensor.
     refusals.retain(|(s, _)| !unit_refusals.iter().any(|(u, _)| u == s));
     refusals.splice(0..0, unit_refusals.iter().cloned());
+    // A sensor that is not measuring fails every other check as a symptom (a stuck gyroscope
+    // "turns 0 times as far as gravity", a stuck magnetometer "was not turned"): the cause is
+    // its only reason, and it concerns that sensor, not the recording's units.
+    for &sensor in sensors {
+        let samples = recording.samples(sensor).unwrap_or(&[]);
+        if let Err(stuck) = input_checks::check_not_stuck(samples, sensor) {
+            refusals.retain(|(s, _)| *s != sensor);
+            unit_refusals.retain(|(s, _)| *s != sensor);
+            refusals.insert(0, (sensor, stuck.to_string()));
+            if sensor == Sensor::Mag {
+                mag_next = None;
+            }
+        }
+    }
     let checked = CheckedInput {
         recording,
         sensors: sensors.to_vec(),
