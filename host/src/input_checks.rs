@@ -114,14 +114,28 @@ pub enum InputError {
         step_s: f64,
     },
     /// No still interval was found.
-    #[error("no still interval in `{path}` ({duration:.1} s long): the board was never still for {min_hold_s} s (--min-hold); hold it still for 2–3 s in each orientation, or lower --min-hold")]
+    #[error("no still interval in `{path}` ({duration:.1} s long): the board was never still for {shortest_s} s ({option}); hold it still for 2–3 s in each orientation, or lower {option}")]
     NoStill {
         /// File concerned.
         path: String,
         /// Length of the recording in seconds.
         duration: f64,
-        /// Shortest hold kept.
-        min_hold_s: f64,
+        /// Shortest stillness that could have been found: the longer of the window and the
+        /// shortest hold kept.
+        shortest_s: f64,
+        /// The option that sets it (`--min-hold`, or `--window`, which the stillness test
+        /// needs still as a whole).
+        option: &'static str,
+    },
+    /// The stillness test's window is longer than the recording.
+    #[error("no still interval in `{path}`: the stillness test's window (--window {window_s} s) is longer than the whole recording ({duration:.1} s), so no window of it can be judged; use a window of about 0.5 s (the default)")]
+    WindowTooLong {
+        /// File concerned.
+        path: String,
+        /// The window, seconds.
+        window_s: f64,
+        /// Length of the recording in seconds.
+        duration: f64,
     },
     /// Every hold was excluded for saturation or motion.
     #[error("every hold of `{path}` was left out ({reasons}); record the holds again with the board still and within the sensor's range")]
@@ -589,7 +603,7 @@ pub fn check_mag_field(
 pub fn require_still(
     recording: &Recording,
     still: &StillReport,
-    min_hold_s: f64,
+    options: &crate::still::StillOptions,
 ) -> Result<(), InputError> {
     if !still.intervals.is_empty() {
         return Ok(());
@@ -610,10 +624,24 @@ pub fn require_still(
         (Some(first), Some(last)) if !recording.time_is_index => last - first,
         _ => 0.0,
     };
+    let path = recording.source.display().to_string();
+    if options.window_s > duration {
+        return Err(InputError::WindowTooLong {
+            path,
+            window_s: options.window_s,
+            duration,
+        });
+    }
+    let (shortest_s, option) = if options.window_s > options.min_hold_s {
+        (options.window_s, "--window")
+    } else {
+        (options.min_hold_s, "--min-hold")
+    };
     Err(InputError::NoStill {
-        path: recording.source.display().to_string(),
+        path,
         duration,
-        min_hold_s,
+        shortest_s,
+        option,
     })
 }
 

@@ -56,13 +56,23 @@ fn main() -> ExitCode {
     }
 }
 
+/// `imucal calibrate` in the session its options choose, once they agree with each other.
+fn calibrate(args: &cli::args::CalibrateArgs) -> anyhow::Result<()> {
+    args.check_combination()?;
+    if args.talks_motioncal() {
+        // A board running the MotionCal sketch has a session of its own.
+        cli::calibrate_motioncal::run(args)
+    } else if args.is_batch() {
+        cli::calibrate_batch::run(args)
+    } else {
+        cli::calibrate::run(args)
+    }
+}
+
 fn run(cli: Cli) -> ExitCode {
     let result = match cli.command {
         Command::Fit(args) => cli::fit::run(&args),
-        // A board running the MotionCal sketch has a session of its own.
-        Command::Calibrate(args) if args.talks_motioncal() => cli::calibrate_motioncal::run(&args),
-        Command::Calibrate(args) if args.is_batch() => cli::calibrate_batch::run(&args),
-        Command::Calibrate(args) => cli::calibrate::run(&args),
+        Command::Calibrate(args) => calibrate(&args),
         Command::Still(args) => cli::still::run(&args),
         Command::Analyze(args) => cli::analyze::run(&args),
         Command::Device(command) => cli::device::run(&command),

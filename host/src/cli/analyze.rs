@@ -4,8 +4,6 @@
 //! (`imucal::session::analyse_poses`), and `--write-params` writes its parameter set with the
 //! accepted effects added, for `imucal flash`.
 
-use std::path::PathBuf;
-
 use anyhow::{bail, Context};
 use imucal::analysis::{analyse_recording, report, AnalysisError, AnalysisOptions};
 use imucal::device::ParamsFile;
@@ -100,22 +98,6 @@ fn is_pose_session(path: &std::path::Path) -> bool {
     path.is_dir() && !path.join("recording.csv").is_file() && path.join("poses.json").is_file()
 }
 
-/// A session directory holds its recording as `recording.csv`; a file is used as it is.
-fn resolve_input(path: &std::path::Path) -> anyhow::Result<PathBuf> {
-    if path.is_dir() {
-        let candidate = path.join("recording.csv");
-        if candidate.is_file() {
-            return Ok(candidate);
-        }
-        bail!(
-            "`{}` is a directory without a recording.csv or poses.json; pass the recording file \
-             itself or a session directory of `imucal calibrate`",
-            path.display()
-        );
-    }
-    Ok(path.to_path_buf())
-}
-
 /// Run the command.
 pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
     let outputs: Vec<Output> = [
@@ -138,7 +120,7 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         );
     }
     let input = InputArgs {
-        recording: resolve_input(&args.input.recording)?,
+        recording: super::recording_file(&args.input.recording)?,
         ..args.input.clone()
     };
     let recording = super::load(&input)?;

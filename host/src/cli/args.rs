@@ -374,6 +374,37 @@ impl CalibrateArgs {
         protocol == BoardProtocol::Motioncal
     }
 
+    /// Readings per second of a MotionCal sketch board: `--sketch-rate`, else Adafruit's 100.
+    pub fn sketch_rate_hz(&self) -> f64 {
+        self.sketch_rate.unwrap_or(100.0)
+    }
+
+    /// Refuses options that would have no effect in the session the others choose, before a
+    /// board is opened: a user who gives one expects it to act.
+    pub fn check_combination(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.sim_faulty == 0 || self.sim_boards.is_some(),
+            "--sim-faulty {} chooses faulty boards among --sim-boards, which is not given; add \
+             --sim-boards N (N ≥ {}) or leave --sim-faulty out",
+            self.sim_faulty,
+            self.sim_faulty
+        );
+        if let Some(rate) = self.sketch_rate {
+            anyhow::ensure!(
+                self.talks_motioncal(),
+                "--sketch-rate {rate} is the reading rate of a MotionCal sketch board, but this \
+                 session talks to imucal's firmware, which states its own rate; leave \
+                 --sketch-rate out, or add {} motioncal for a sketch board",
+                if self.sim {
+                    "--sim-protocol"
+                } else {
+                    "--protocol"
+                }
+            );
+        }
+        Ok(())
+    }
+
     /// Whether several boards on one fixture are calibrated together (`--sim-boards`,
     /// `--ports auto`, or more than one `--port`).
     pub fn is_batch(&self) -> bool {
@@ -424,9 +455,9 @@ pub struct CalibrateArgs {
     /// `Raw:`/`Uni:` lines and stores its 68-byte packet (Adafruit_Sensor_Calibration).
     #[arg(long, value_enum, default_value = "imucal", conflicts_with = "sim")]
     pub protocol: BoardProtocol,
-    /// MotionCal sketch: readings per second it prints (Adafruit's sketch: 100).
-    #[arg(long, default_value_t = 100.0)]
-    pub sketch_rate: f64,
+    /// MotionCal sketch: readings per second it prints (default: 100, as Adafruit's sketch).
+    #[arg(long)]
+    pub sketch_rate: Option<f64>,
     /// Simulator: simulated seconds per wall second.
     #[arg(long, default_value_t = 15.0, requires = "simulated")]
     pub speed: f64,
@@ -442,7 +473,7 @@ pub struct CalibrateArgs {
     /// Capture the twelve positions this many times over (the simulated person repeats them).
     /// Spreading the poses over time and temperature lets `--analyze` see temperature effects;
     /// the accelerometer's analysis needs at least two rounds.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..))]
     pub rounds: u8,
     /// After the base fit, analyse the residual of the session's poses; the effects the firmware
     /// can apply (bias temperature polynomial, scale temperature coefficient, non-linearity, gyro

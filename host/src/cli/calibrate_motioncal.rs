@@ -38,7 +38,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let field_ut = field_reference(args)?;
     let options = MotionCalOptions {
         session: session_options(args, field_ut)?,
-        sample_rate_hz: args.sketch_rate,
+        sample_rate_hz: args.sketch_rate_hz(),
         accept_poor: args.accept_poor,
         echo_timeout: ECHO_TIMEOUT,
     };
@@ -61,7 +61,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     eprintln!(
         "Connected to {port}: a MotionCal sketch board ({} readings/s assumed). It cannot detect \
          stillness or average poses, so this computer does both from its readings.",
-        args.sketch_rate
+        args.sketch_rate_hz()
     );
     let plain = args.yes || !std::io::stderr().is_terminal();
     let policy = WritePolicy {

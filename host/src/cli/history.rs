@@ -44,7 +44,7 @@ pub struct RecordArgs {
     #[arg(long)]
     pub station: Option<String>,
     /// Do not record this calibration in the history.
-    #[arg(long)]
+    #[arg(long, conflicts_with_all = ["db", "operator", "station"])]
     pub no_history: bool,
 }
 

@@ -22,7 +22,7 @@ pub mod still;
 mod values;
 mod write_policy;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use imucal::pipeline::{InputOptions, ReferenceError, References};
@@ -33,7 +33,25 @@ use args::{
     AccelUnitArg, FormatArg, GyroUnitArg, InputArgs, MagUnitArg, ReferenceArgs, TimeUnitArg,
 };
 
-/// Read the recording named on the command line.
+/// The recording file a path names: the file itself, or a session directory's `recording.csv`
+/// (so every command that reads a recording takes a session of `imucal calibrate` alike).
+pub fn recording_file(path: &Path) -> anyhow::Result<PathBuf> {
+    if !path.is_dir() {
+        return Ok(path.to_path_buf());
+    }
+    let candidate = path.join("recording.csv");
+    if candidate.is_file() {
+        return Ok(candidate);
+    }
+    anyhow::bail!(
+        "`{}` is a directory without a recording.csv; pass a recording file, or a session \
+         directory of `imucal calibrate` (sessions saved without their recording can be studied \
+         by `imucal analyze` and `imucal report` from their poses)",
+        path.display()
+    )
+}
+
+/// Read the recording named on the command line (a file, or a session directory's).
 pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
     let units = Units {
         accel: match input.accel_unit {
@@ -75,8 +93,8 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
             TimeUnitArg::Ns => 1e-9,
         }),
     };
-    let recording =
-        Recording::load(&input.recording, &options).context("the recording could not be read")?;
+    let recording = Recording::load(&recording_file(&input.recording)?, &options)
+        .context("the recording could not be read")?;
     // Options that the file makes moot are said to be so, not silently dropped.
     if input.rate.is_some() && recording.time_from_file {
         eprintln!("imucal: warning: --rate is ignored: the recording has its own time stamps");

@@ -103,6 +103,18 @@ fn default_out(path: &Path, is_session: bool) -> PathBuf {
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let path = &args.input.recording;
     let is_session = path.is_dir();
+    if is_session && !(path.join("params.json").is_file() && path.join("poses.json").is_file()) {
+        anyhow::bail!(
+            "`{}` is not a session directory of `imucal calibrate`: it has no params.json and \
+             poses.json{}; pass a session directory or a recording file",
+            path.display(),
+            if path.join(REPORT_FILE).is_file() {
+                format!(" (its {REPORT_FILE} is the output of `imucal report`)")
+            } else {
+                String::new()
+            }
+        );
+    }
     let out = args
         .out
         .clone()

@@ -328,20 +328,17 @@ fn stream_outliers_sentence(screening: &Screening, total: usize) -> String {
     )
 }
 
-/// Still intervals with the holds that cannot be used left out; refuses when none is found or
-/// none is usable. Returns warnings, among them one per hold and sensor whose outliers were
-/// dropped.
 /// The still intervals of `recording` as every command sees them: detected, required, and
 /// screened (holds the board moved during, saturated or spiked readings), with the warnings to
-/// show.
+/// show, among them one per hold and sensor whose outliers were dropped. Refuses when no hold
+/// is found or none is usable.
 pub fn still_intervals(
     recording: &Recording,
     options: &StillOptions,
 ) -> Result<(StillReport, Vec<String>), String> {
     let mut still = find_still(recording, options)
         .map_err(|e| format!("still intervals could not be found: {e}"))?;
-    input_checks::require_still(recording, &still, options.min_hold_s)
-        .map_err(|e| e.to_string())?;
+    input_checks::require_still(recording, &still, options).map_err(|e| e.to_string())?;
     let mut warnings =
         input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
             .map_err(|e| e.to_string())?;

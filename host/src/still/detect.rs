@@ -308,6 +308,15 @@ pub(super) fn detect(
                 GyroUnit::Counts => "rads or dps",
             },
             bound_dps: MAX_STILL_GYRO_STD_DPS,
+            window_note: if options.window_s > options.min_hold_s {
+                format!(
+                    "; or the stillness window (--window {} s) is longer than the holds, so each \
+                     window takes in a move: lower it (0.5 s by default)",
+                    options.window_s
+                )
+            } else {
+                String::new()
+            },
         });
     }
     Ok(StillReport {

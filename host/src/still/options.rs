@@ -53,7 +53,7 @@ pub enum StillError {
     NoRate(String),
     /// The relative test found still stretches, but in every one the gyroscope varies by more
     /// than a board at rest can ([`super::MAX_STILL_GYRO_STD_DPS`]).
-    #[error("the gyroscope of `{path}` never rests: even in its quietest window it varies by {quietest_dps:.1} °/s (reading the data as {unit}), more than the {bound_dps} °/s of sensor noise a board at rest shows; either the board moved throughout (hold it still for 2–3 s in each orientation) or the gyroscope is not in {unit} (pass --gyro-unit {other_units} as the data are)")]
+    #[error("the gyroscope of `{path}` never rests: even in its quietest window it varies by {quietest_dps:.1} °/s (reading the data as {unit}), more than the {bound_dps} °/s of sensor noise a board at rest shows; either the board moved throughout (hold it still for 2–3 s in each orientation) or the gyroscope is not in {unit} (pass --gyro-unit {other_units} as the data are){window_note}")]
     NeverAtRest {
         /// The recording.
         path: String,
@@ -65,6 +65,9 @@ pub enum StillError {
         other_units: &'static str,
         /// The rest bound, °/s.
         bound_dps: f64,
+        /// When the window is longer than the shortest hold kept, that a window longer than the
+        /// holds sees every one with a move in it (empty otherwise).
+        window_note: String,
     },
     /// An option is out of range.
     #[error("still-detection option {name} = {value} is out of range ({expected})")]

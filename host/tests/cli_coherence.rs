@@ -1,0 +1,121 @@
+//! Options and paths every command treats alike: an option that would have no effect in the
+//! session the others choose is refused before a board is opened, a session directory reads as
+//! its recording, and a refusal names the option or path that causes it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn imucal_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .current_dir(dir)
+        .env("IMUCAL_DB", dir.join("history.sqlite"))
+        .args(args)
+        .output()
+        .expect("the imucal binary runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("imucal-coherence-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temporary directory");
+    dir
+}
+
+fn real(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/real")
+        .join(name)
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn calibrate_refuses_an_option_that_would_have_no_effect_before_any_board_starts() {
+    let cases: [(&[&str], &str); 4] = [
+        (&["--sim", "--sim-faulty", "2"], "--sim-boards"),
+        (
+            &["--sim", "--sketch-rate", "50"],
+            "--sim-protocol motioncal",
+        ),
+        (
+            &["--sim", "--no-history", "--db", "sqlite://x.sqlite"],
+            "--db",
+        ),
+        (&["--sim", "--rounds", "0"], "--rounds"),
+    ];
+    for (options, named) in cases {
+        let dir = scratch("calibrate");
+        let out = imucal_in(&dir, &[&["calibrate", "--yes"], options].concat());
+        let message = stderr(&out);
+        assert!(!out.status.success(), "{options:?} was accepted: {message}");
+        assert!(message.contains(named), "{options:?}: {message}");
+        // Refused before the simulated board started: no session directory was begun.
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .expect("the scratch directory")
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert!(left.is_empty(), "{options:?} left {left:?}");
+    }
+}
+
+#[test]
+fn fit_and_still_read_a_session_directory_as_its_recording() {
+    let dir = scratch("session");
+    let session = dir.join("imucal-session-1");
+    std::fs::create_dir(&session).expect("session directory");
+    let recording = real("imucal_nilspod_ferraris.csv");
+    std::fs::copy(&recording, session.join("recording.csv")).expect("copy the recording");
+    let session = session.display().to_string();
+    let recording = recording.display().to_string();
+    for command in ["fit", "still"] {
+        let of_dir = imucal_in(&dir, &[command, &session, "--gyro-unit", "dps", "--json"]);
+        let of_file = imucal_in(&dir, &[command, &recording, "--gyro-unit", "dps", "--json"]);
+        assert!(of_dir.status.success(), "{command}: {}", stderr(&of_dir));
+        assert_eq!(of_dir.stdout, of_file.stdout, "{command}");
+    }
+    let empty = dir.join("empty");
+    std::fs::create_dir(&empty).expect("an empty directory");
+    let out = imucal_in(&dir, &["fit", &empty.display().to_string()]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("is a directory without a recording.csv"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn report_refuses_a_report_directory_saying_what_it_is() {
+    let dir = scratch("report");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let first = imucal_in(
+        &dir,
+        &["report", &recording, "--gyro-unit", "dps", "-o", "rep"],
+    );
+    assert!(first.status.success(), "{}", stderr(&first));
+    let out = imucal_in(&dir, &["report", "rep"]);
+    assert!(!out.status.success());
+    let message = stderr(&out);
+    assert!(message.contains("is not a session directory"), "{message}");
+    assert!(message.contains("output of `imucal report`"), "{message}");
+}
+
+#[test]
+fn a_stillness_window_longer_than_the_recording_is_named_as_the_cause() {
+    let dir = scratch("window");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let out = imucal_in(
+        &dir,
+        &["fit", &recording, "--gyro-unit", "dps", "--window", "1e9"],
+    );
+    let message = stderr(&out);
+    assert!(!out.status.success());
+    assert!(
+        message.contains("--window 1000000000 s) is longer than the whole recording"),
+        "{message}"
+    );
+    assert!(!message.contains("--min-hold"), "{message}");
+}
