@@ -12,7 +12,9 @@ use crate::recording::{Recording, Sensor, Units};
 use crate::still::StillReport;
 
 use super::align::align_mag;
-use super::calibration::{pose_noise_floor, RecordingCalibration, SensorOutcome};
+use super::calibration::{
+    pose_noise_floor, sample_noise_floor, RecordingCalibration, SensorOutcome,
+};
 use super::chain::default_accel_chain;
 use super::gyro::{fit_gyroscope, gyro_unit_scale, moot_gyro_scale};
 use super::input::{check_input_then, CheckedInput, InputOptions};
@@ -171,6 +173,14 @@ fn calibrate_with(
             })
             .collect()
     });
+    // The magnetometer's residual against its samples' noise, whichever thread fitted it.
+    if let Some(noise) = &input.mag_noise {
+        for outcome in sensors.iter_mut().filter(|s| s.sensor == Sensor::Mag) {
+            if let Ok(fit) = &outcome.fit {
+                outcome.noise_floor = sample_noise_floor(input.mag_points(), fit, noise);
+            }
+        }
+    }
     align_outcomes(&mut sensors, input.still.as_ref());
 
     let methods = sensors

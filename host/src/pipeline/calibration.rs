@@ -5,7 +5,7 @@
 
 use crate::device::params_json::Provenance;
 use crate::fit::alignment::Alignment;
-use crate::fit::{Fit, Pose};
+use crate::fit::{Fit, Pose, Vec3};
 use crate::geomag::{LocalField, RadiusCheck};
 use crate::recording::Sensor;
 
@@ -87,6 +87,18 @@ impl SensorOutcome {
     pub fn verdict(&self) -> Option<String> {
         let fit = self.fit.as_ref().ok()?;
         let mut parts = Vec::new();
+        let (noise, misses) = if self.sensor == Sensor::Mag {
+            (
+                "sample noise",
+                "a field that changed during the recording (iron nearby, the board carried \
+                 elsewhere, parts recorded apart) or a sensor that moved on its mount",
+            )
+        } else {
+            (
+                "pose noise",
+                "temperature, non-linearity, motion during holds",
+            )
+        };
         if let Some(floor) = self.noise_floor.filter(|f| *f > 0.0) {
             let ratio = fit.rms / floor;
             // Noise never leaves a residual a millionth of its floor: the fit has as many
@@ -99,11 +111,11 @@ impl SensorOutcome {
                 );
             } else if ratio <= 3.0 {
                 parts.push(format!(
-                    "residual is at the noise floor ({ratio:.1}× the pose noise)"
+                    "residual is at the noise floor ({ratio:.1}× the {noise})"
                 ));
             } else {
                 parts.push(format!(
-                    "residual is {ratio:.0}× the pose noise: the model misses something (temperature, non-linearity, motion during holds)"
+                    "residual is {ratio:.0}× the {noise}: the model misses something ({misses})"
                 ));
             }
         }
@@ -118,10 +130,10 @@ impl SensorOutcome {
             }
         }
         if self.sensor == Sensor::Mag {
-            parts.push(format!(
-                "{} samples over the sphere; no noise floor for moving samples",
-                self.n_samples
-            ));
+            parts.push(format!("{} samples over the sphere", self.n_samples));
+            if self.noise_floor.is_none() {
+                parts.push("too few samples to estimate their noise".to_string());
+            }
         }
         Some(if parts.is_empty() {
             "fitted".to_string()
@@ -144,6 +156,32 @@ pub fn pose_noise_floor(poses: &[Pose], fit: &Fit) -> Option<f64> {
         .collect();
     (!values.is_empty())
         .then(|| (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt())
+}
+
+/// Most samples the sample noise floor is averaged over: evenly spaced, they give its RMS to
+/// about 1 % (a mean of squares over 10⁴ values), at a fixed cost on a long recording.
+const NOISE_FLOOR_SAMPLES: usize = 10_000;
+
+/// Expected relative residual of a norm fit of single samples (the magnetometer's) from their
+/// noise per axis `noise` (file units): each sample's noise carried to the norm
+/// `|A·(x − b)|` to first order, `σ_r² = Σ_k (Aᵀn̂)_k² σ_k²` with `n̂` the calibrated
+/// direction, divided by that norm, as an RMS over (at most [`NOISE_FLOOR_SAMPLES`] of) the
+/// samples.
+pub fn sample_noise_floor(points: &[Vec3], fit: &Fit, noise: &Vec3) -> Option<f64> {
+    let step = points.len().div_ceil(NOISE_FLOOR_SAMPLES).max(1);
+    let (sum, count) = points
+        .iter()
+        .step_by(step)
+        .filter_map(|x| {
+            let y = fit.cal.a * (x - fit.cal.b);
+            let norm = y.norm();
+            let gradient = fit.cal.a.transpose() * (y / norm);
+            let radial = gradient.component_mul(noise).norm();
+            let relative = radial / norm;
+            relative.is_finite().then_some(relative * relative)
+        })
+        .fold((0.0, 0_usize), |(s, n), v| (s + v, n + 1));
+    (count > 0).then(|| (sum / count as f64).sqrt())
 }
 
 /// The calibration of a recording: every requested sensor's outcome and what it rests on.

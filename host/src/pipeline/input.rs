@@ -43,6 +43,9 @@ pub struct CheckedInput {
     pub unit_refusals: Vec<(Sensor, String)>,
     /// Findings that cast doubt without refusing.
     pub warnings: Vec<String>,
+    /// The magnetometer's noise per sample and axis, in the file's unit, from its stream
+    /// screen; `None` when too few samples were screened.
+    pub mag_noise: Option<Vec3>,
 }
 
 impl CheckedInput {
@@ -144,9 +147,11 @@ pub fn check_input_then<T: Send>(
         points: Vec::new(),
         indices: Vec::new(),
     };
+    let mut mag_noise = None;
     if let Some((mag, next)) = mag {
         mag_next = next;
         mag_points = mag.points;
+        mag_noise = mag.noise;
         warnings.extend(mag.warnings);
         match mag.verdict {
             MagVerdict::Usable => {}
@@ -204,6 +209,7 @@ pub fn check_input_then<T: Send>(
         mag_points,
         refusals,
         warnings,
+        mag_noise,
     };
     (checked, mag_next)
 }
@@ -235,6 +241,7 @@ struct CheckedMag {
     points: MagPoints,
     verdict: MagVerdict,
     warnings: Vec<String>,
+    noise: Option<Vec3>,
 }
 
 /// What the magnetometer's checks concluded.
@@ -244,6 +251,21 @@ enum MagVerdict {
     Refused(String),
     /// Refused because the declared unit (or stated field) contradicts the data.
     UnitRefused(String),
+}
+
+/// Spread of a deviation from the median of six neighbours over that of one sample's noise:
+/// the median of six normal values has a variance of about 0.215 σ², so the deviation's is
+/// about 1.215 σ².
+const NEIGHBOUR_DEVIATION_SPREAD: f64 = 1.102;
+
+/// A stream's noise per sample and axis from its screen: the robust spread of each sample's
+/// deviation from its neighbours' median, which on a smooth turn is the sensor's noise (the
+/// path's curvature between neighbours adds a little, so the estimate errs high).
+fn sample_noise(screening: &Screening) -> Option<Vec3> {
+    match screening.axis_scales[..] {
+        [x, y, z] => Some(Vec3::new(x, y, z) / NEIGHBOUR_DEVIATION_SPREAD),
+        _ => None,
+    }
 }
 
 /// The magnetometer's samples screened (and thinned when asked), checked for coverage and
@@ -257,6 +279,7 @@ fn checked_mag_points<T: Send>(
 ) -> (CheckedMag, Option<T>) {
     let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
     let screening = screen_stream(all);
+    let noise = sample_noise(&screening);
     let mut warnings = Vec::new();
     if screening.dropped > 0 {
         warnings.push(stream_outliers_sentence(&screening, all.len()));
@@ -313,6 +336,7 @@ fn checked_mag_points<T: Send>(
         points,
         verdict,
         warnings,
+        noise,
     };
     (checked, next)
 }

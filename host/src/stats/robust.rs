@@ -43,6 +43,9 @@ pub struct Screening {
     /// Largest deviation of a dropped sample from the median, in standard deviations (0 when
     /// nothing was dropped).
     pub worst_sigmas: f64,
+    /// Per axis screened, the robust standard deviation of its deviations (floored at the
+    /// axis's resolution); empty when too few values were screened.
+    pub axis_scales: Vec<f64>,
 }
 
 impl Screening {
@@ -53,12 +56,13 @@ impl Screening {
             dropped: 0,
             bound_sigmas: f64::INFINITY,
             worst_sigmas: 0.0,
+            axis_scales: Vec::new(),
         }
     }
 
     /// The verdict on samples whose largest deviations, in standard deviations, are `worst`:
     /// those beyond `bound` are dropped.
-    fn from_worst(worst: &[f64], bound: f64) -> Self {
+    fn from_worst(worst: &[f64], bound: f64, axis_scales: Vec<f64>) -> Self {
         let keep: Vec<bool> = worst.iter().map(|z| *z <= bound).collect();
         let dropped = keep.iter().filter(|k| !**k).count();
         let worst_sigmas = worst
@@ -70,6 +74,7 @@ impl Screening {
             dropped,
             bound_sigmas: bound,
             worst_sigmas,
+            axis_scales,
         }
     }
 
@@ -146,6 +151,8 @@ struct AxisScreen {
     worst: Vec<f64>,
     /// Selection buffer of [`centre_and_scale`], shared by the axes.
     scratch: Vec<i64>,
+    /// The scale of each axis added.
+    scales: Vec<f64>,
 }
 
 impl AxisScreen {
@@ -155,6 +162,7 @@ impl AxisScreen {
             bound: bonferroni_bound(n * axes),
             worst: vec![0.0; n],
             scratch: Vec::with_capacity(n),
+            scales: Vec::with_capacity(axes),
         }
     }
 
@@ -162,6 +170,7 @@ impl AxisScreen {
     /// scale floored at `floor`.
     fn add_axis<I: Iterator<Item = f64>>(&mut self, values: impl Fn() -> I, floor: f64) {
         let (centre, sigma) = centre_and_scale(&values, floor, &mut self.scratch);
+        self.scales.push(sigma);
         if !(sigma > 0.0 && sigma.is_finite()) {
             return;
         }
@@ -178,7 +187,7 @@ impl AxisScreen {
 
     /// What the screen decided over the axes added.
     fn finish(self) -> Screening {
-        Screening::from_worst(&self.worst, self.bound)
+        Screening::from_worst(&self.worst, self.bound, self.scales)
     }
 }
 
@@ -591,7 +600,7 @@ mod tests {
                     *w = w.max(z);
                 }
             }
-            Screening::from_worst(&worst, bound)
+            Screening::from_worst(&worst, bound, Vec::new())
         }
         fn same(a: &Screening, b: &Screening) -> bool {
             a.keep == b.keep
