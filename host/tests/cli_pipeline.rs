@@ -623,3 +623,81 @@ fn analyze_write_params_keeps_the_sessions_board_binding_and_provenance() {
         assert_eq!(e.input_unit, b.input_unit);
     }
 }
+
+/// The lines of the block that starts with `start` and runs to the next empty line.
+fn block<'a>(stdout: &'a str, start: &str) -> Vec<&'a str> {
+    stdout
+        .lines()
+        .skip_while(|l| !l.starts_with(start))
+        .take_while(|l| !l.is_empty())
+        .collect()
+}
+
+#[test]
+fn analyze_prints_the_base_fits_fit_gives_for_the_same_recording_and_options() {
+    let recording = real("imucal_nilspod_ferraris.csv");
+    let units = ["--gyro-unit", "dps"];
+    let fit = imucal(&[&["fit", &recording, "--json"][..], &units].concat());
+    assert!(fit.status.success(), "{}", text(&fit.stderr));
+    let analyze = imucal(&[&["analyze", &recording, "--json"][..], &units].concat());
+    let fit: serde_json::Value = serde_json::from_slice(&fit.stdout).expect("fit JSON");
+    let analyze: serde_json::Value = serde_json::from_slice(&analyze.stdout).expect("analyze JSON");
+    for sensor in ["accel", "gyro"] {
+        // One pipeline, the same arithmetic on the same samples: equal to the last bit, not
+        // within a tolerance (the gyroscope's bias RMS once came out 1.706e-4 and 1.776e-4).
+        assert_eq!(
+            analyze["sensors"][sensor]["base_fit"], fit[sensor],
+            "{sensor}"
+        );
+    }
+    assert_eq!(fit["accel"]["method"], "minmax+axis-aligned");
+
+    // The text: each sensor's base-fit block as `fit` prints it, line for line.
+    let fit = text(&imucal(&[&["fit", &recording][..], &units].concat()).stdout);
+    let analyze = text(&imucal(&[&["analyze", &recording][..], &units].concat()).stdout);
+    for start in ["accel — method", "gyro — method"] {
+        let printed = block(&fit, start);
+        assert!(printed.len() > 4, "{start}: {fit}");
+        assert_eq!(block(&analyze, start), printed, "{start}");
+    }
+    // The analysis builds on the model `fit` chose, not on one it chose again.
+    assert!(
+        analyze.contains("accel: not analysed: the accel base model minmax+axis-aligned"),
+        "{analyze}"
+    );
+}
+
+#[test]
+fn analyze_fails_naming_the_sensor_it_could_not_analyse_after_reporting_the_others() {
+    // Six faces cannot carry the accelerometer's analysis; the gyroscope's is still done.
+    let recording = real("imucal_nilspod_ferraris.csv");
+    let dir = temp_file("partial-analysis-report");
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = imucal(&[
+        "analyze",
+        &recording,
+        "--gyro-unit",
+        "dps",
+        "--report",
+        &dir,
+    ]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    let written = PathBuf::from(&dir).join("analysis.json").is_file();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stdout.contains("gyro — base model gyro-bias"), "{stdout}");
+    assert!(written, "the report of what could be analysed is written");
+    let last = stderr.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("imucal: accel not analysed") && last.contains("held-out fold"),
+        "{stderr}"
+    );
+    assert!(!last.contains("gyro"), "{stderr}");
+    for command in ["fit", "analyze"] {
+        let help = text(&imucal(&[command, "--help"]).stdout);
+        assert!(
+            help.contains("Exit status: 0 when every") && help.contains("1 when any"),
+            "{command}: {help}"
+        );
+    }
+}

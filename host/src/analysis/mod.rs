@@ -49,4 +49,4 @@ pub use result::{
     RecordingAnalysis, SensorAnalysis,
 };
 pub use selection::{analyse_observations, SensorSetup, CONFOUNDING_LIMIT};
-pub use sensors::{analyse_recording, analyse_sensor};
+pub use sensors::{analyse_calibration, analyse_recording, analyse_sensor};

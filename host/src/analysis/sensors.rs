@@ -13,7 +13,8 @@ use crate::fit::li::{fit_li, LiOptions};
 use crate::fit::norm_lm::fit_mag_lm;
 use crate::fit::Method;
 use crate::fit::{Calibration, Vec3};
-use crate::pipeline::chain::{default_accel_chain, CandidateOutcome};
+use crate::pipeline::chain::{default_accel_chain, unknowns, CandidateOutcome};
+use crate::pipeline::RecordingCalibration;
 use crate::recording::{Recording, Sensor};
 use crate::still::StillReport;
 
@@ -28,6 +29,57 @@ pub fn analyse_recording(
     let mut accel_cal: Option<Calibration> = None;
     for sensor in recording.sensors() {
         let result = analyse_sensor(recording, still, options, sensor, accel_cal.as_ref());
+        if let (Sensor::Accel, Ok(a)) = (sensor, &result) {
+            accel_cal = Some(a.calibration);
+        }
+        sensors.push((sensor, result));
+    }
+    RecordingAnalysis { sensors }
+}
+
+/// Analyse every sensor of a recording on top of the pipeline's `calibration` of it (what `fit`
+/// prints for the same data and options): a sensor the pipeline could not fit is not analysed,
+/// with the pipeline's reason, and the accelerometer's base model is the one the pipeline
+/// chose, not a second choice made on the analysis's own observations.
+pub fn analyse_calibration(
+    recording: &Recording,
+    still: &StillReport,
+    options: &AnalysisOptions,
+    calibration: &RecordingCalibration,
+) -> RecordingAnalysis {
+    let mut sensors = Vec::new();
+    let mut accel_cal: Option<Calibration> = None;
+    for sensor in recording.sensors() {
+        let result = match calibration.sensor(sensor).map(|o| &o.fit) {
+            Some(Err(reason)) => Err(AnalysisError::Refused(format!("not fitted: {reason}"))),
+            Some(Ok(fit)) if sensor == Sensor::Accel => {
+                let obs = dataset::pose_observations(recording, still, Sensor::Accel);
+                if obs.len() < 10 {
+                    Err(AnalysisError::TooFewObservations {
+                        sensor: sensor.name(),
+                        what: "still poses",
+                        found: obs.len(),
+                        needed: 10,
+                    })
+                } else {
+                    let setup = SensorSetup {
+                        sensor,
+                        base_model: fit.method.name(),
+                        base: BaseKind::Norm {
+                            reference: options.gravity,
+                            // Min/max, axis-aligned and their mean share the 6 unknowns.
+                            axis_aligned: unknowns(fit.method) == 6,
+                        },
+                        start: fit.cal,
+                        force: None,
+                        gravity: options.gravity,
+                        unit: recording.units.symbol(sensor),
+                    };
+                    analyse_observations(setup, obs)
+                }
+            }
+            _ => analyse_sensor(recording, still, options, sensor, accel_cal.as_ref()),
+        };
         if let (Sensor::Accel, Ok(a)) = (sensor, &result) {
             accel_cal = Some(a.calibration);
         }

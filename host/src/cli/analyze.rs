@@ -1,16 +1,20 @@
 //! `imucal analyze`: residual analysis of a recording (see `imucal::analysis`), printed as text
-//! or as the stable JSON document, optionally with a report directory of plots. A session
+//! or as the stable JSON document, optionally with a report directory of plots. The base fits
+//! are the pipeline's, as `imucal fit` prints them for the same options, and the analysis starts
+//! from them; like `fit`, the command fails when any sensor could not be fitted or analysed. A session
 //! directory of `imucal calibrate` without a `recording.csv` is analysed from its `poses.json`
 //! (`imucal::session::analyse_poses`), and `--write-params` writes its parameter set with the
 //! accepted effects added, for `imucal flash`.
 
 use anyhow::{bail, Context};
-use imucal::analysis::{analyse_recording, report, AnalysisError, AnalysisOptions};
+use imucal::analysis::{analyse_calibration, report, AnalysisOptions};
 use imucal::device::ParamsFile;
 use imucal::geomag::local_field_today;
-use imucal::pipeline::check_input;
+use imucal::pipeline::calibration::once_per_reason;
 use imucal::pipeline::gyro::{gyro_unit_scale, moot_gyro_scale};
+use imucal::pipeline::{check_and_calibrate, FitOptions};
 use imucal::session::{analyse_poses, extend_set, load_poses};
+use serde_json::Value;
 
 use super::args::{AnalyzeArgs, InputArgs};
 use super::write_policy::{check_outputs, Output};
@@ -87,10 +91,7 @@ fn run_session_dir(args: &AnalyzeArgs, dir: &std::path::Path) -> anyhow::Result<
             );
         }
     }
-    if analysis.sensors.iter().all(|(_, r)| r.is_err()) {
-        bail!("no sensor could be analysed (see the messages above)");
-    }
-    Ok(())
+    fail_on_any(&analysis)
 }
 
 /// A session directory without a recording but with its poses.
@@ -125,13 +126,22 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
     };
     let recording = super::load(&input)?;
     let sensors = recording.sensors();
-    // The same checks as `imucal fit`: a unit mix-up or unusable holds refuse the analysis.
-    let checked = check_input(
+    // The pipeline `imucal fit` runs, with the same options: the base fits printed here are
+    // its result, and the analysis builds on them.
+    let fit_options = FitOptions {
+        references: Some(references),
+        location: args.reference.location,
+        methods: Vec::new(),
+        device_id: None,
+    };
+    let (checked, calibration) = check_and_calibrate(
         recording,
         &sensors,
         &super::input_options(&args.input, &args.reference),
-        references.field_ut,
-    );
+        args.reference.field_ut,
+        &fit_options,
+    )?;
+    // The same checks as `imucal fit`: a unit mix-up or unusable holds refuse the analysis.
     if !checked.unit_refusals.is_empty() {
         bail!(
             "the recording was refused: {}",
@@ -172,22 +182,23 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         latitude_deg: args.reference.location.map(|l| l.latitude_deg),
         ..AnalysisOptions::default()
     };
-    let mut analysis = analyse_recording(recording, still, &options);
-    for (sensor, result) in &mut analysis.sensors {
-        if let Some(reason) = checked.refusal(*sensor) {
-            *result = Err(AnalysisError::Refused(reason.to_string()));
-        }
-    }
+    let analysis = analyse_calibration(recording, still, &options, &calibration);
     let output = if args.json {
-        format!(
-            "{}\n",
-            serde_json::to_string_pretty(&report::to_json(&analysis))?
-        )
+        let mut document = report::to_json(&analysis);
+        // Each sensor's base fit as `imucal fit --json` gives it.
+        if let Some(sensors) = document["sensors"].as_object_mut() {
+            for outcome in &calibration.sensors {
+                if let Some(Value::Object(entry)) = sensors.get_mut(outcome.sensor.name()) {
+                    entry.insert("base_fit".into(), super::fit::to_json(outcome));
+                }
+            }
+        }
+        format!("{}\n", serde_json::to_string_pretty(&document)?)
     } else {
+        super::fit::print_table(&calibration);
         format!(
-            "{}\n  {}\n\n{}",
-            recording.source.display(),
-            still.summary(),
+            "\nresidual analysis (on each hold less one detection window at either end, so its \
+             RMS is not the fit's above)\n\n{}",
             report::to_text(&analysis)
         )
     };
@@ -203,8 +214,22 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
             println!("report: {} files in {}", files.len(), dir.display());
         }
     }
-    if analysis.sensors.iter().all(|(_, r)| r.is_err()) {
-        bail!("no sensor could be analysed (see the messages above)");
+    fail_on_any(&analysis)
+}
+
+/// As `imucal fit` does: the command fails when any sensor could not be analysed, after
+/// everything that could be done was printed and written; the error names each sensor and why.
+fn fail_on_any(analysis: &imucal::analysis::RecordingAnalysis) -> anyhow::Result<()> {
+    let reasons: Vec<(&str, String)> = analysis
+        .sensors
+        .iter()
+        .filter_map(|(sensor, r)| {
+            let e = r.as_ref().err()?;
+            Some((sensor.name(), format!("not analysed: {e}")))
+        })
+        .collect();
+    if reasons.is_empty() {
+        return Ok(());
     }
-    Ok(())
+    bail!("{}", once_per_reason(&reasons).join("; "))
 }

@@ -19,11 +19,16 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Fit calibrations of the accelerometer, gyroscope and magnetometer to a recording.
-    #[command(after_help = "Examples:\n  \
+    #[command(
+        after_help = "Exit status: 0 when every requested sensor was fitted; 1 when any could \
+        not be (standard error says which and why; --params-out still writes the others and \
+        lists it under not_fitted) or on any other error; 2 for a usage error.\n\n\
+        Examples:\n  \
         imucal fit data/real/imucal_nilspod_ferraris.csv --gyro-unit dps\n  \
         imucal fit data/real/imutk_xsens_multipos.csv --accel-unit counts --gyro-unit counts --sensor accel --method chen --json\n  \
         imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --field-ut 48.5\n  \
-        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --location 48.14,11.58   (the field there today)")]
+        imucal fit data/real/sf_mpu6050_hmc5883l_full_sphere.csv --sensor mag --mag-unit gauss --location 48.14,11.58   (the field there today)"
+    )]
     Fit(FitArgs),
     /// List the still intervals of a recording and the gravity directions they cover.
     #[command(
@@ -31,6 +36,14 @@ pub enum Command {
     )]
     Still(StillArgs),
     /// Analyse the residual of the fitted models: noise floor, candidate effects, held-out error.
+    #[command(
+        after_help = "The base fits are those `imucal fit` gives for the same recording and \
+        options, printed the same way; the analysis follows them.\n\n\
+        Exit status: 0 when every sensor was fitted and analysed; 1 when any could not be \
+        (what could be done is still printed and written, and standard error says which sensor \
+        and why) or on any other error; 2 for a usage error.\n\n\
+        Example:\n  imucal analyze data/real/tsi_mpu6050_multipos.csv --accel-unit counts --gyro-unit counts"
+    )]
     Analyze(AnalyzeArgs),
     /// Board commands: ports, info, flash, stream, record, params.
     #[command(flatten)]

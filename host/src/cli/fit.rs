@@ -141,7 +141,7 @@ fn alignment_json(outcome: &Result<Alignment, String>) -> Value {
     }
 }
 
-fn to_json(result: &SensorOutcome) -> Value {
+pub(super) fn to_json(result: &SensorOutcome) -> Value {
     let note = (!result.notes.is_empty()).then(|| result.notes.join("; "));
     let mut object = match &result.fit {
         Err(e) => json!({"error": e, "n_poses": result.n_poses, "n_samples": result.n_samples}),
@@ -225,7 +225,7 @@ fn print_alignment(outcome: &Result<Alignment, String>) {
     }
 }
 
-fn print_table(calibration: &RecordingCalibration) {
+pub(super) fn print_table(calibration: &RecordingCalibration) {
     println!("{}", calibration.provenance.source);
     if let Some(still) = &calibration.still_summary {
         println!("  {still}");
