@@ -701,3 +701,78 @@ fn analyze_fails_naming_the_sensor_it_could_not_analyse_after_reporting_the_othe
         );
     }
 }
+
+#[test]
+fn fit_of_gyroscope_counts_with_a_scale_prints_the_calibration_the_parameter_file_holds() {
+    // The NilsPod's gyroscope in its raw counts (±2000 °/s over 16 bits), read back with the
+    // scale that makes them rad/s.
+    let step_dps = 2000.0 / 32768.0;
+    let source = std::fs::read_to_string(real("imucal_nilspod_ferraris.csv")).expect("recording");
+    let mut lines = source.lines();
+    let header = lines.next().expect("header");
+    let columns: Vec<&str> = header.split(',').collect();
+    let gyro: Vec<usize> = ["gx", "gy", "gz"]
+        .map(|c| columns.iter().position(|h| *h == c).expect("gyro column"))
+        .to_vec();
+    let mut counts = format!("{header}\n");
+    for line in lines {
+        let fields: Vec<String> = line
+            .split(',')
+            .enumerate()
+            .map(|(i, v)| match gyro.contains(&i) {
+                true => format!("{}", (v.parse::<f64>().expect("number") / step_dps).round()),
+                false => v.to_string(),
+            })
+            .collect();
+        counts.push_str(&fields.join(","));
+        counts.push('\n');
+    }
+    let csv = temp_file("gyro-counts.csv");
+    std::fs::write(&csv, counts).expect("scratch recording");
+    let params = temp_file("gyro-counts-params.json");
+    let _ = std::fs::remove_file(&params);
+    let scale = format!("{}", step_dps.to_radians());
+    let out = imucal(&[
+        "fit",
+        &csv,
+        "--sensor",
+        "gyro",
+        "--gyro-unit",
+        "counts",
+        "--gyro-scale",
+        &scale,
+        "--params-out",
+        &params,
+    ]);
+    let stdout = text(&out.stdout);
+    let file = ParamsFile::load(params.as_ref());
+    let _ = std::fs::remove_file(&csv);
+    let _ = std::fs::remove_file(&params);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let file = file.expect("the parameter file");
+    assert_eq!(file.gyro.input_unit, None, "the file holds rad/s input");
+    // The table's rows for the file: `A[r] a a a   b[r] b`.
+    let rows: Vec<Vec<f64>> = stdout
+        .lines()
+        .skip_while(|l| !l.contains("as the parameter file holds it, for input in rad/s"))
+        .skip(1)
+        .take(3)
+        .map(|l| {
+            l.split_whitespace()
+                .filter_map(|w| w.parse::<f64>().ok())
+                .collect()
+        })
+        .collect();
+    assert_eq!(rows.len(), 3, "{stdout}");
+    for (r, row) in rows.iter().enumerate() {
+        assert_eq!(row.len(), 4, "{stdout}");
+        // Printed with 6 decimals (or 7 significant digits below 0.01): agreement to half a
+        // unit of the sixth decimal, far below the factor of 939 (1/scale) a count differs by.
+        let close =
+            |printed: f64, written: f64| (printed - written).abs() <= 5e-7 * written.abs().max(1.0);
+        for (c, (printed, written)) in row.iter().zip(file.gyro.a[r]).enumerate() {
+            assert!(close(*printed, written), "A[{r}][{c}]: {stdout}");
+        }
+        assert!(close(row[3], file.gyro.b[r]), "b[{r}]: {stdout}");
+    }
+}

@@ -226,6 +226,7 @@ fn print_alignment(outcome: &Result<Alignment, String>) {
 }
 
 pub(super) fn print_table(calibration: &RecordingCalibration) {
+    let file = params_file(calibration);
     println!("{}", calibration.provenance.source);
     if let Some(still) = &calibration.still_summary {
         println!("  {still}");
@@ -279,6 +280,27 @@ pub(super) fn print_table(calibration: &RecordingCalibration) {
         {
             let estimated = Estimated::of(&fit.cal.a);
             println!("  {}", gain_text_of(&g, 3, estimated));
+        }
+        // The parameter file holds the fit for the board's nominal input unit: its numbers are
+        // printed too, so that the table and the file show the same calibration.
+        let (written, unit) = match result.sensor {
+            Sensor::Accel => (&file.accel, "m/s²"),
+            Sensor::Gyro => (&file.gyro, "rad/s"),
+            Sensor::Mag => (&file.mag, "µT"),
+        };
+        let same = (0..3).all(|r| {
+            written.b[r] == fit.cal.b[r] && (0..3).all(|c| written.a[r][c] == fit.cal.a[(r, c)])
+        });
+        if !file.not_fitted.contains_key(result.sensor.name()) && !same {
+            println!("  as the parameter file holds it, for input in {unit}:");
+            for (r, row) in written.a.iter().enumerate() {
+                let a: Vec<String> = row.iter().map(|v| format!("{:>14}", number(*v))).collect();
+                println!(
+                    "  A[{r}] {}   b[{r}] {:>14}",
+                    a.join(" "),
+                    number(written.b[r])
+                );
+            }
         }
         let loo = fit
             .loo_rms
