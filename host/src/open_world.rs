@@ -1,6 +1,7 @@
 //! The residual analysis tried in an open world: simulated recordings (`imucal_hil_sim`) with one
 //! hidden effect, analysed exactly as `imucal analyze` analyses a file (CSV written and loaded,
-//! the same input checks, still detection and [`analyse_recording`]), and the verdict reduced to
+//! the same input checks, still detection, pipeline fits and [`analyse_calibration`] on them),
+//! and the verdict reduced to
 //! an [`Outcome`]. Used by the power sweep, the confusion matrix and the out-of-family cases
 //! (`examples/analysis_power.rs`, `tests/analysis_open_world.rs`).
 //!
@@ -25,11 +26,9 @@ use imucal_hil_sim::{simulate_recording, write_csv, SimConfig};
 
 use crate::analysis::crossval::ALPHA;
 use crate::analysis::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
-use crate::analysis::{
-    analyse_recording, AnalysisError, AnalysisOptions, RecordingAnalysis, SensorAnalysis,
-};
-use crate::pipeline::check_input;
+use crate::analysis::{analyse_calibration, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
 use crate::pipeline::input::InputOptions;
+use crate::pipeline::{check_and_calibrate, FitOptions, References};
 use crate::recording::{LoadOptions, Recording, Sensor};
 use crate::stats::distributions::chi2_quantile_per_dof;
 use crate::still::StillOptions;
@@ -261,7 +260,16 @@ pub fn analyse_simulated(config: &SimConfig) -> Result<RecordingAnalysis, String
         still: StillOptions::default(),
         max_mag_samples: 0,
     };
-    let checked = check_input(recording, &sensors, &options, Some(field));
+    let fit_options = FitOptions {
+        references: Some(
+            References::checked(config.gravity_mps2, Some(field), None)
+                .map_err(|e| e.to_string())?,
+        ),
+        ..FitOptions::default()
+    };
+    let (checked, calibration) =
+        check_and_calibrate(recording, &sensors, &options, Some(field), &fit_options)
+            .map_err(|e| e.to_string())?;
     if !checked.unit_refusals.is_empty() {
         return Err(checked.unit_refusal_sentences().join("; "));
     }
@@ -274,13 +282,12 @@ pub fn analyse_simulated(config: &SimConfig) -> Result<RecordingAnalysis, String
         field_ut: Some(field),
         ..AnalysisOptions::default()
     };
-    let mut analysis = analyse_recording(&checked.recording, still, &options);
-    for (sensor, result) in &mut analysis.sensors {
-        if let Some(reason) = checked.refusal(*sensor) {
-            *result = Err(AnalysisError::Refused(reason.to_string()));
-        }
-    }
-    Ok(analysis)
+    Ok(analyse_calibration(
+        &checked.recording,
+        still,
+        &options,
+        &calibration,
+    ))
 }
 
 /// The base model's χ² of `sensor`, or `None` when it was not analysed.
