@@ -1,6 +1,23 @@
 //! `imucal` command-line tool: a thin layer over the `imucal` library.
 #![forbid(unsafe_code)]
 
+/// `eprintln!` that never ends the command: a message to a standard error that was closed (the
+/// reader of `2>&1 | head` gone) or is full is lost, and the work and its exit status go on.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+/// [`say!`] without the line end (a prompt, or text that ends its own lines).
+macro_rules! say_part {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stderr(), $($arg)*);
+    }};
+}
+
 mod cli;
 
 use std::any::Any;
@@ -90,7 +107,7 @@ fn run(cli: Cli) -> ExitCode {
             {
                 return output_failure(io);
             }
-            eprintln!("imucal: {error:#}");
+            say!("imucal: {error:#}");
             ExitCode::FAILURE
         }
     }

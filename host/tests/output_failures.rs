@@ -1,5 +1,6 @@
 //! Standard output that fails never makes `imucal` panic: a reader that closed the pipe ends the
-//! command quietly, a full disk is an error that says so.
+//! command quietly, a full disk is an error that says so. A standard error that fails loses
+//! its messages, not the command's work.
 
 use std::process::{Command, Output, Stdio};
 
@@ -39,4 +40,34 @@ fn a_full_disk_is_an_error_naming_the_cause() {
     assert!(stderr.contains("cannot write the output"), "{stderr}");
     assert!(stderr.contains("No space left on device"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn a_closed_standard_error_loses_the_messages_but_not_the_work() {
+    // The fit warns on standard error (outliers dropped from holds) before it writes the
+    // parameter file; with the reader of standard error gone, as under `2>&1 | head -0`, it
+    // still writes the file and exits as it would have.
+    let params = std::env::temp_dir().join(format!(
+        "imucal-output-failures-{}-params.json",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_file(&params);
+    let recording = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/real/imucal_nilspod_ferraris.csv");
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env(
+            "IMUCAL_DB",
+            std::env::temp_dir().join("imucal-output-failures.sqlite"),
+        )
+        .args(["fit", "--gyro-unit", "dps", "--no-history", "--params-out"])
+        .arg(&params)
+        .arg(&recording)
+        .stdout(Stdio::null())
+        .stderr(writer)
+        .output()
+        .expect("the imucal binary runs");
+    assert!(out.status.success(), "exit status {:?}", out.status);
+    assert!(params.is_file(), "the parameter file was written");
 }

@@ -79,16 +79,14 @@ fn run_session_dir(args: &AnalyzeArgs, dir: &std::path::Path) -> anyhow::Result<
         } else {
             "none (the set is unchanged)".to_string()
         };
-        eprintln!(
+        say!(
             "Wrote {} from {}; extended terms added: {added}. `imucal flash {}` writes it to the board.",
             out.display(),
             base_path.display(),
             out.display()
         );
         for effect in &extended.left_out {
-            eprintln!(
-                "Note: {effect} was accepted but the firmware has no term for it; not written"
-            );
+            say!("Note: {effect} was accepted but the firmware has no term for it; not written");
         }
     }
     fail_on_any(&analysis)
@@ -149,7 +147,7 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         );
     }
     for warning in &checked.warnings {
-        eprintln!("imucal: warning: {warning}");
+        say!("imucal: warning: {warning}");
     }
     let Some(still) = &checked.still else {
         let why = [
@@ -164,7 +162,7 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
     let recording = &checked.recording;
     let (gyro_scale, gyro_unit) = gyro_unit_scale(recording, references.gyro_scale);
     if let Some(moot) = moot_gyro_scale(recording, references.gyro_scale) {
-        eprintln!("imucal: warning: {moot}");
+        say!("imucal: warning: {moot}");
     }
     let options = AnalysisOptions {
         gravity: references.gravity_mps2,

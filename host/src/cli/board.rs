@@ -66,7 +66,7 @@ pub(super) fn given_or_only_board(port: Option<&str>) -> anyhow::Result<String> 
         Some(port) => port.to_string(),
         None => {
             let chosen = choose_port(&list_ports()?)?.path.clone();
-            eprintln!("using port {chosen}");
+            say!("using port {chosen}");
             chosen
         }
     })
@@ -125,7 +125,7 @@ impl SimBoard {
             }
         };
         let board = board.context("the simulated board could not start")?;
-        eprintln!(
+        say!(
             "Simulated board running {} (seed {seed}, real time) on {}",
             match protocol {
                 BoardProtocol::Imucal => "imucal's firmware",

@@ -58,7 +58,7 @@ fn resumed_poses(dir: &Path, device_id: &str) -> anyhow::Result<Vec<CapturedPose
     );
     let poses = load_poses(&dir.join("poses.json"))?;
     let names: Vec<&str> = poses.iter().map(|p| p.target.name.as_str()).collect();
-    eprintln!(
+    say!(
         "Resuming {} (stopped: {}): {} positions already captured ({}); they are not asked for \
          again",
         dir.display(),
@@ -78,7 +78,7 @@ fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
         if handler_flag.swap(true, Ordering::SeqCst) {
             std::process::exit(130);
         }
-        eprintln!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
+        say!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
     })
     .context("the Ctrl-C handler could not be installed")?;
     Ok(flag)
@@ -103,9 +103,10 @@ pub(super) fn field_reference(args: &CalibrateArgs) -> anyhow::Result<Option<f64
         .transpose()
         .context("the field at --location could not be modelled")?;
     if let (Some(model), None) = (&modelled, args.field_ut) {
-        eprintln!(
+        say!(
             "Reference field from the World Magnetic Model at --location: {:.2} µT, dip {:.1}°",
-            model.total_ut, model.inclination_deg
+            model.total_ut,
+            model.inclination_deg
         );
     }
     Ok(args.field_ut.or(modelled.as_ref().map(|m| m.total_ut)))
@@ -166,7 +167,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let field_ut = given_field.or(simulated.as_ref().map(Simulated::field_ut));
     if simulated.is_some() {
         let field_given = args.field_ut.is_some() || args.location.is_some();
-        eprintln!(
+        say!(
             "Simulated board (seed {}, {}× real time) on {port}; field {:.2} µT{}",
             args.sim_seed,
             args.speed,
@@ -182,7 +183,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let options = session_options(args, field_ut)?;
     let mut client = DeviceClient::open(&port)?;
     let welcome = *client.welcome();
-    eprintln!(
+    say!(
         "Connected to {port}: device {}, firmware {}.{}.{}, {} Hz",
         welcome.device_id,
         welcome.firmware_version.major,

@@ -114,13 +114,13 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         operator: args.history.operator.clone(),
         station: args.history.station.clone(),
     };
-    eprintln!(
+    say!(
         "Batch of {} boards on one fixture; sessions in {}",
         ports.len(),
         out_dir.display()
     );
     if !simulated.is_empty() {
-        eprintln!(
+        say!(
             "Simulated boards (seeds {} to {}, {}× real time), {} with a hardware fault; each \
              simulated person follows its own board's prompts",
             args.sim_seed,
@@ -129,7 +129,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             args.sim_faulty
         );
     }
-    let log = |port: &str, line: &str| eprintln!("[{port}] {line}");
+    let log = |port: &str, line: &str| say!("[{port}] {line}");
     // Each simulated person reads their board's prompts off the screen.
     let show = |port: &str, event: &SessionEvent<'_>| {
         if let Some(sim) = simulated.iter().find(|s| s.port() == port) {

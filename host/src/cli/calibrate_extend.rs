@@ -34,7 +34,7 @@ pub(super) fn close_the_loop(
     .with_context(|| format!("could not write {}", dir.join("analysis.json").display()))?;
     let text = report::to_text(&analysis);
     if !json {
-        eprintln!(
+        say!(
             "\nResidual analysis of the {} poses:\n{text}",
             outcome.poses.len()
         );
@@ -56,13 +56,13 @@ pub(super) fn close_the_loop(
     std::fs::write(&text_path, shown)
         .with_context(|| format!("could not write {}", text_path.display()))?;
     for effect in &extended.left_out {
-        eprintln!("Note: {effect} was accepted but the firmware has no term for it; not written");
+        say!("Note: {effect} was accepted but the firmware has no term for it; not written");
     }
     if !extended.extended() {
-        eprintln!("The analysis accepted no effect the firmware applies; the base set stays.");
+        say!("The analysis accepted no effect the firmware applies; the base set stays.");
         return Ok(Ok(None));
     }
-    eprintln!("Extended terms added: {}", extended.added.join(", "));
+    say!("Extended terms added: {}", extended.added.join(", "));
     let base_path = dir.join("params-base.json");
     std::fs::write(
         &base_path,
@@ -80,7 +80,7 @@ pub(super) fn close_the_loop(
     )
     .with_context(|| format!("could not write {}", params_path.display()))?;
     if !outcome.written {
-        eprintln!(
+        say!(
             "The base set was not written, so neither is the extended one; `imucal flash {}` \
              writes it",
             params_path.display()
@@ -92,16 +92,17 @@ pub(super) fn close_the_loop(
     match policy.decide(outcome.fit.verdict.level, &question) {
         WriteDecision::Write => {}
         WriteDecision::Declined => {
-            eprintln!("The extended set was not written; the board keeps the base set");
+            say!("The extended set was not written; the board keeps the base set");
             return Ok(Ok(None));
         }
         WriteDecision::RefusedPoor => return Ok(Err(params_path)),
     }
     let status = client.write_params_verified(&extended.set)?;
-    eprintln!(
+    say!(
         "Extended set written, committed, read back and compared: CRC {:#010x} (store \
          sequence {})",
-        status.active_crc, status.active_seq
+        status.active_crc,
+        status.active_seq
     );
     let samples = stream_for(
         client,

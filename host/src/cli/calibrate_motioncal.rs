@@ -52,13 +52,14 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         None => given_or_only_board(args.port.first().map(String::as_str))?,
     };
     if simulated.is_some() {
-        eprintln!(
+        say!(
             "Simulated MotionCal sketch board (seed {}, {}× real time) on {port}",
-            args.sim_seed, args.speed
+            args.sim_seed,
+            args.speed
         );
     }
     let mut client = MotionCalClient::open(&port, RawAccelScaling::AdafruitSketch)?;
-    eprintln!(
+    say!(
         "Connected to {port}: a MotionCal sketch board ({} readings/s assumed). It cannot detect \
          stillness or average poses, so this computer does both from its readings.",
         args.sketch_rate_hz()

@@ -64,7 +64,7 @@ impl Terminal {
 
     fn line(&self, text: &str) {
         if self.plain {
-            eprintln!("{text}");
+            say!("{text}");
         } else {
             self.bar.println(text);
         }

@@ -259,14 +259,14 @@ fn check_binding(
     let mut mismatches = match &file.device {
         Some(device) => {
             for note in device.notes(welcome) {
-                eprintln!("imucal: note: {note}");
+                say!("imucal: note: {note}");
             }
             device.mismatches(welcome)
         }
         None => Vec::new(),
     };
     match file.device_id() {
-        None => eprintln!(
+        None => say!(
             "imucal: note: `{shown}` names no board (it was fitted from a recording without \
              --device); writing it to device {board}"
         ),
@@ -279,7 +279,7 @@ fn check_binding(
         return Ok(());
     }
     if force {
-        eprintln!(
+        say!(
             "imucal: warning: writing `{shown}` although {} (--force-other-device)",
             mismatches.join("; ")
         );
@@ -360,7 +360,7 @@ fn merge_with_active(
         } else {
             "is set to identity (--reset)"
         };
-        eprintln!(
+        say!(
             "imucal: note: `{shown}` has no {} calibration ({why}); the board's {} {what}",
             sensor.key(),
             sensor.key()

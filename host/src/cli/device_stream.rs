@@ -113,7 +113,7 @@ impl SampleSource for FirmwareSource {
     fn next(&mut self, wait: Duration) -> anyhow::Result<Option<Vec<UnitSample>>> {
         let chunk = self.client.next_samples(wait)?;
         for line in self.client.drain_logs() {
-            eprintln!("board {:?}: {}", line.level, line.text);
+            say!("board {:?}: {}", line.level, line.text);
         }
         Ok(chunk.map(|c| c.samples))
     }
@@ -122,7 +122,7 @@ impl SampleSource for FirmwareSource {
         self.client.stop_stream()?;
         let lost = self.client.stats().lost_samples;
         if lost > 0 {
-            eprintln!(
+            say!(
                 "{lost} samples were lost in transit (the link could not keep up; try --decimation)"
             );
         }
@@ -182,11 +182,9 @@ impl SampleSource for SketchSource {
     fn stop(&mut self) -> anyhow::Result<()> {
         let malformed = self.client.malformed_lines();
         if malformed > 0 {
-            eprintln!(
-                "{malformed} lines could not be read (noise on the line, or another baud rate)"
-            );
+            say!("{malformed} lines could not be read (noise on the line, or another baud rate)");
         }
-        eprintln!(
+        say!(
             "readings from the sketch's {} lines",
             if self.client.has_unified_lines() {
                 "`Uni:` (SI units as the sketch computed them)"
@@ -370,7 +368,7 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write `{shown}`; check the disk space"))?;
         if last_report.elapsed() >= Duration::from_secs(1) {
             last_report = Instant::now();
-            eprint!(
+            say_part!(
                 "\rrecording {shown}: {:.0} s, {} samples",
                 start.elapsed().as_secs_f64(),
                 writer.rows()
@@ -382,7 +380,7 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
     writer
         .finish()
         .with_context(|| format!("cannot write `{shown}`"))?;
-    eprintln!();
+    say!();
     println!("recorded {rows} samples to {shown}");
     Ok(())
 }

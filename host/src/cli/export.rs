@@ -86,14 +86,14 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
         );
     }
     for (sensor, unit) in &raw_inputs {
-        eprintln!(
+        say!(
             "imucal: note: the {sensor} calibration takes raw readings in {unit}, not the nominal \
              unit (the export says so)"
         );
     }
     let uncalibrated = uncalibrated_sensors(&params);
     for (sensor, why) in &uncalibrated {
-        eprintln!(
+        say!(
             "imucal: note: `{shown}` has no {sensor} calibration ({why}); it is exported as the \
              identity and marked as not calibrated"
         );
@@ -157,7 +157,7 @@ fn uncalibrated_sensors(params: &ParamsFile) -> Vec<(&'static str, String)> {
 /// The Adafruit library's forms: what it can apply of `set`, and a note of what it cannot.
 fn export_adafruit(set: &CalibrationSet, args: &ExportArgs) -> anyhow::Result<()> {
     let conversion = AdafruitCalibration::from_set(set)?;
-    eprint!("{}", compat::limitations(set, &[])?.describe());
+    say_part!("{}", compat::limitations(set, &[])?.describe());
     if args.format == ExportFormatArg::AdafruitJson {
         let text = conversion.calibration.to_sensor_calib_json();
         return write_output(args.out.as_deref(), text.as_bytes());
@@ -175,7 +175,7 @@ fn write_output(out: Option<&Path>, bytes: &[u8]) -> anyhow::Result<()> {
             std::fs::write(path, bytes).with_context(|| {
                 format!("cannot write `{}`; check the directory", path.display())
             })?;
-            eprintln!("wrote {}", path.display());
+            say!("wrote {}", path.display());
         }
         None => std::io::stdout()
             .write_all(bytes)

@@ -86,7 +86,7 @@ fn methods_for(
                 .filter(|(_, m)| m.is_err())
                 .map(|(s, _)| s.name())
                 .collect();
-            eprintln!(
+            say!(
                 "imucal: note: --method {name} is fitted to the {}; the {} {} the default \
                  (choose the sensor with --sensor)",
                 applies
@@ -361,7 +361,7 @@ fn write_params(file: ParamsFile, path: &Path) -> anyhow::Result<Option<ParamsFi
         .map(|(sensor, why)| format!("{sensor} ({why})"))
         .collect();
     if let Some(why) = file.holds_nothing() {
-        eprintln!("imucal: {} was not written: {why}", path.display());
+        say!("imucal: {} was not written: {why}", path.display());
         return Ok(None);
     }
     std::fs::write(path, file.to_json())
@@ -382,7 +382,7 @@ fn write_params(file: ParamsFile, path: &Path) -> anyhow::Result<Option<ParamsFi
             raw.join(", ")
         )
     };
-    eprintln!(
+    say!(
         "imucal: wrote {shown}{}; {next}",
         if left_out.is_empty() {
             String::new()
@@ -429,7 +429,7 @@ fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
         Some(device) => device,
         // Every piped recording would be one board `recording:-`, compared with the others.
         None if recording.as_os_str() == "-" => {
-            eprintln!(
+            say!(
                 "imucal: note: not recorded in the calibration history: a recording read from \
                  standard input names no board; pass --device ID to record it"
             );
@@ -484,7 +484,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         &options,
     )?;
     for warning in &input.warnings {
-        eprintln!("imucal: warning: {warning}");
+        say!("imucal: warning: {warning}");
     }
     if args.json {
         let object: serde_json::Map<String, Value> = calibration

@@ -59,7 +59,7 @@ pub fn record(args: &RecordArgs, mut record: CalibrationRecord) -> anyhow::Resul
     record.station.clone_from(&args.station);
     match record_calibration(args.db.as_deref(), &record) {
         Ok((id, location)) => {
-            eprintln!(
+            say!(
                 "Recorded as calibration {id} of {} in {}",
                 record.device_id,
                 location.display()
@@ -68,7 +68,7 @@ pub fn record(args: &RecordArgs, mut record: CalibrationRecord) -> anyhow::Resul
         }
         Err(error) if args.db.is_some() => Err(error.into()),
         Err(error) => {
-            eprintln!("imucal: warning: {error}");
+            say!("imucal: warning: {error}");
             Ok(())
         }
     }

@@ -97,7 +97,7 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
         .context("the recording could not be read")?;
     // Options that the file makes moot are said to be so, not silently dropped.
     if input.rate.is_some() && recording.time_from_file {
-        eprintln!("imucal: warning: --rate is ignored: the recording has its own time stamps");
+        say!("imucal: warning: --rate is ignored: the recording has its own time stamps");
     }
     if !recording.ignored_columns.is_empty() {
         // A trailing delimiter leaves a column without a name: say so rather than nothing.
@@ -110,7 +110,7 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
                 _ => name.clone(),
             })
             .collect();
-        eprintln!(
+        say!(
             "imucal: note: not read from {}: {}",
             input.recording.display(),
             named.join(", ")

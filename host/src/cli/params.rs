@@ -122,7 +122,7 @@ fn reset(args: &ResetArgs) -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    eprintln!(
+    say!(
         "Device {device_id} holds: {} (CRC {crc:#010x}). `imucal params get -o FILE` saves it \
          first.",
         describe_params(&set)

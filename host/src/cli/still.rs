@@ -27,7 +27,7 @@ fn label_name(recording: &Recording, value: i64) -> Option<String> {
 /// `why` as the command's error, once `warnings` are printed: they may be why nothing was found.
 fn said_then(warnings: &[String], why: String) -> anyhow::Error {
     for warning in warnings {
-        eprintln!("imucal: warning: {warning}");
+        say!("imucal: warning: {warning}");
     }
     anyhow::Error::msg(why)
 }
@@ -91,7 +91,7 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
     };
     let (recording, report, warnings) = checked_still(recording, options)?;
     for warning in &warnings {
-        eprintln!("imucal: warning: {warning}");
+        say!("imucal: warning: {warning}");
     }
     if args.json {
         let intervals: Vec<_> = report

@@ -77,7 +77,7 @@ impl WritePolicy {
 /// Asks `prompt` on the terminal; the answer trimmed and in lower case, `None` when standard
 /// input cannot be read.
 fn ask(prompt: &str) -> Option<String> {
-    eprint!("{prompt}");
+    say_part!("{prompt}");
     let _ = std::io::stderr().flush();
     let mut answer = String::new();
     std::io::stdin().lock().read_line(&mut answer).ok()?;
