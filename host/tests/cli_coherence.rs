@@ -119,3 +119,28 @@ fn a_stillness_window_longer_than_the_recording_is_named_as_the_cause() {
     );
     assert!(!message.contains("--min-hold"), "{message}");
 }
+
+#[test]
+fn a_report_with_nothing_fitted_names_why_each_sensor_was_not() {
+    let dir = scratch("nothing");
+    let mut csv = String::from("t_s,ax,ay,az,gx,gy,gz\n");
+    for i in 0..1000 {
+        csv.push_str(&format!(
+            "{:.2},0.1,0.2,9.8,0.5,-0.25,0.125\n",
+            f64::from(i) / 100.0
+        ));
+    }
+    let path = dir.join("stuck.csv");
+    std::fs::write(&path, csv).expect("write the recording");
+    let out = imucal_in(&dir, &["report", &path.display().to_string(), "-o", "rep"]);
+    let message = stderr(&out);
+    assert!(!out.status.success());
+    assert!(
+        message.contains("no accelerometer or gyroscope poses"),
+        "{message}"
+    );
+    assert!(
+        message.contains("column ax reads 0.1") && message.contains("column gx reads 0.5"),
+        "{message}"
+    );
+}

@@ -21,7 +21,13 @@ pub(super) fn figure(svg: &str) -> String {
 /// Renders the report page.
 pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
     if data.accel.is_none() && data.mag.is_none() && data.gyro.is_none() {
-        return Err(ReportError::NoData);
+        // The verdict holds the reasons no sensor was fitted: they are the cause to name.
+        let because = if data.verdict.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", data.verdict.join("; "))
+        };
+        return Err(ReportError::NoData { because });
     }
     let mut summary_rows = Vec::new();
     let mut body = String::new();

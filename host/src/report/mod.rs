@@ -62,9 +62,12 @@ pub enum ReportError {
     Plot(#[from] plots::PlotError),
     /// There is nothing to show.
     #[error(
-        "the input has no accelerometer or gyroscope poses and no magnetometer samples to report on"
+        "the input has no accelerometer or gyroscope poses and no magnetometer samples to report on{because}"
     )]
-    NoData,
+    NoData {
+        /// Why no sensor could be fitted (`": accel not fitted: …"`), or empty.
+        because: String,
+    },
     /// The report could not be written.
     #[error("cannot write `{path}`: {cause}; check that the directory is writable")]
     Write {
