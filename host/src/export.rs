@@ -182,7 +182,8 @@ fn model_comment(prefix: &str, notes: SensorNotes<'_>) -> String {
     }
     for (sensor, why) in notes.uncalibrated {
         lines.push(format!(
-            "NOT CALIBRATED: {sensor} is the identity here ({why}); its readings pass unchanged."
+            "NOT CALIBRATED: {sensor} is the identity here ({}); its readings pass unchanged.",
+            comment_safe(why)
         ));
     }
     lines
@@ -192,10 +193,19 @@ fn model_comment(prefix: &str, notes: SensorNotes<'_>) -> String {
         .join("\n")
 }
 
+/// `text` from a parameter file (a reason, a file name) made safe inside a generated comment:
+/// a line break would end a `//` comment and `*/` a C one, turning the rest into code.
+fn comment_safe(text: &str) -> String {
+    text.chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect::<String>()
+        .replace("*/", "* /")
+}
+
 /// The heading of a sensor's block: its output unit, or that it is not calibrated.
 fn heading(name: &str, unit: &str, notes: SensorNotes<'_>) -> String {
     match notes.uncalibrated_because(name) {
-        Some(why) => format!("NOT CALIBRATED, identity ({why})"),
+        Some(why) => format!("NOT CALIBRATED, identity ({})", comment_safe(why)),
         None => format!("output in {unit}"),
     }
 }
@@ -204,7 +214,8 @@ fn heading(name: &str, unit: &str, notes: SensorNotes<'_>) -> String {
 fn c_header(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>) -> String {
     let mut out = String::new();
     out.push_str(&format!(
-        "/*\n * IMU calibration exported by imucal from {source} (parameter format {}).\n *\n{}\n */\n#pragma once\n\n",
+        "/*\n * IMU calibration exported by imucal from {} (parameter format {}).\n *\n{}\n */\n#pragma once\n\n",
+        comment_safe(source),
         set.format_version,
         model_comment(" * ", notes)
     ));
@@ -336,7 +347,8 @@ fn rust_mat(m: &[[f32; 3]; 3]) -> String {
 /// The Rust module (plain `//` comments, so it can be pasted or `include!`d anywhere).
 fn rust_module(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>) -> String {
     let mut out = format!(
-        "// IMU calibration exported by imucal from {source} (parameter format {}).\n//\n{}\n\n",
+        "// IMU calibration exported by imucal from {} (parameter format {}).\n//\n{}\n\n",
+        comment_safe(source),
         set.format_version,
         model_comment("// ", notes)
     );

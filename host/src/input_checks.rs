@@ -165,15 +165,13 @@ pub enum InputError {
         /// What is missing and what to add.
         detail: String,
     },
-    /// An axis reads the same number in every row: the sensor is not measuring.
-    #[error("the {sensor} column {column} reads {value} in every one of its {count} rows, so the sensor is not measuring (stuck, asleep, unpowered, or its column filled with a constant); check the sensor and the column mapping, and record again")]
+    /// Every axis reads the same number in every row: the sensor is not measuring.
+    #[error("the {sensor} reads ({}, {}, {}) in every one of its {count} rows, so it is not measuring (stuck, asleep, unpowered, absent from the log, or its columns filled with a constant) or its readings are rounded far coarser than its noise; check the sensor, the column mapping and the logged resolution, and record again", value[0], value[1], value[2])]
     Stuck {
         /// Sensor concerned.
         sensor: Sensor,
-        /// The first column found stuck (`gx`, as the CSV format names it).
-        column: &'static str,
-        /// The value it repeats, in the file's unit.
-        value: f64,
+        /// The reading it repeats, in the file's unit.
+        value: [f64; 3],
         /// Rows of the sensor's data.
         count: usize,
     },
@@ -193,30 +191,47 @@ pub enum InputError {
 /// 0.95⁹⁹ < 1 %. Shorter series are too few to tell.
 pub const MIN_ROWS_FOR_STUCK: usize = 100;
 
-/// Refuses a sensor one of whose axes reads exactly the same number in each of at least
+/// Refuses a sensor whose three axes each read exactly one number in at least
 /// [`MIN_ROWS_FOR_STUCK`] rows: its calibration would be fitted to a constant (a gyroscope's
-/// bias with zero noise, RMS 0) and look perfect. Stops at the first row that differs, so a
-/// working sensor costs a few comparisons.
-pub fn check_not_stuck(samples: &[Vec3], sensor: Sensor) -> Result<(), InputError> {
+/// bias with zero noise, RMS 0) and look perfect. One or two such axes are a warning only: a
+/// reading logged coarser than its noise (a gyroscope in whole °/s at rest) keeps one value on
+/// an axis whose offset is near a whole step, and cannot be told from a dead axis. Stops at the
+/// first row that differs, so a working sensor costs a few comparisons.
+pub fn check_not_stuck(samples: &[Vec3], sensor: Sensor) -> Result<Option<String>, InputError> {
     let Some(first) = samples.first() else {
-        return Ok(());
+        return Ok(None);
     };
     if samples.len() < MIN_ROWS_FOR_STUCK {
-        return Ok(());
+        return Ok(None);
     }
-    for (axis, column) in sensor.columns().into_iter().enumerate() {
-        // Bitwise equality: a column of NaN is as stuck as one of zeros.
-        let value = first[axis];
-        if samples.iter().all(|s| s[axis].to_bits() == value.to_bits()) {
-            return Err(InputError::Stuck {
-                sensor,
-                column,
-                value,
-                count: samples.len(),
-            });
+    // Bitwise equality: a column of NaN is as stuck as one of zeros.
+    let constant: Vec<usize> = (0..3)
+        .filter(|&k| samples.iter().all(|s| s[k].to_bits() == first[k].to_bits()))
+        .collect();
+    let columns = sensor.columns();
+    match constant.len() {
+        0 => Ok(None),
+        3 => Err(InputError::Stuck {
+            sensor,
+            value: [first.x, first.y, first.z],
+            count: samples.len(),
+        }),
+        _ => {
+            let named: Vec<String> = constant
+                .iter()
+                .map(|&k| format!("{} ({})", columns[k], first[k]))
+                .collect();
+            Ok(Some(format!(
+                "the {sensor} column{} {} never change{} over {} rows: either the readings are \
+                 rounded coarser than the sensor's noise or that axis is dead; its calibration \
+                 on that axis rests on the rounding",
+                if named.len() > 1 { "s" } else { "" },
+                named.join(" and "),
+                if named.len() > 1 { "" } else { "s" },
+                samples.len()
+            )))
         }
     }
-    Ok(())
 }
 
 /// Median of a list (the upper middle value; 0 when empty). Selection, not a sort: the
@@ -819,32 +834,33 @@ mod tests {
     }
 
     #[test]
-    fn an_axis_with_one_value_in_every_row_is_stuck_and_any_change_or_a_short_series_is_not() {
+    fn a_sensor_with_one_reading_in_every_row_is_stuck_and_one_constant_axis_is_a_warning() {
         let mut samples = vec![Vec3::new(0.0, 0.25, 1.0); MIN_ROWS_FOR_STUCK];
-        // y and z stuck too, but x is named first.
         let error = check_not_stuck(&samples, Sensor::Gyro).expect_err("stuck");
         assert!(
             error
                 .to_string()
-                .contains("column gx reads 0 in every one of its 100 rows"),
+                .contains("reads (0, 0.25, 1) in every one of its 100 rows"),
             "{error}"
         );
         for (i, s) in samples.iter_mut().enumerate() {
             s.x = i as f64;
         }
-        let error = check_not_stuck(&samples, Sensor::Mag).expect_err("y still stuck");
+        let warning = check_not_stuck(&samples, Sensor::Mag)
+            .expect("one axis moving is not refused")
+            .expect("a warning");
         assert!(
-            error.to_string().contains("column my reads 0.25"),
-            "{error}"
+            warning.contains("columns my (0.25) and mz (1) never change"),
+            "{warning}"
         );
-        // One reading of one count apart is a working sensor.
+        // One reading one count apart on each axis is a working sensor.
         samples[MIN_ROWS_FOR_STUCK - 1].y = 0.26;
         samples[0].z = f64::NAN;
-        assert!(check_not_stuck(&samples, Sensor::Mag).is_ok());
-        // A column of NaN is stuck; fewer rows than the bound are too few to tell.
-        let nan = vec![Vec3::new(1.0, f64::NAN, 2.0); MIN_ROWS_FOR_STUCK];
+        assert_eq!(check_not_stuck(&samples, Sensor::Mag), Ok(None));
+        // A sensor of NaN is stuck; fewer rows than the bound are too few to tell.
+        let nan = vec![Vec3::new(f64::NAN, f64::NAN, 2.0); MIN_ROWS_FOR_STUCK];
         assert!(check_not_stuck(&nan, Sensor::Accel).is_err());
-        assert!(check_not_stuck(&nan[1..], Sensor::Accel).is_ok());
+        assert_eq!(check_not_stuck(&nan[1..], Sensor::Accel), Ok(None));
     }
 
     #[test]

@@ -140,7 +140,45 @@ fn a_report_with_nothing_fitted_names_why_each_sensor_was_not() {
         "{message}"
     );
     assert!(
-        message.contains("column ax reads 0.1") && message.contains("column gx reads 0.5"),
+        message.contains("accel reads (0.1, 0.2, 9.8)")
+            && message.contains("gyro reads (0.5, -0.25, 0.125)"),
         "{message}"
     );
+}
+
+#[test]
+fn a_session_directorys_magnetometer_file_is_an_input_no_output_may_replace() {
+    let dir = scratch("mag-input");
+    let session = dir.join("session");
+    std::fs::create_dir(&session).expect("session directory");
+    std::fs::copy(
+        real("sf_mpu6050_hmc5883l_full_sphere.csv"),
+        session.join("recording.csv"),
+    )
+    .expect("copy the recording");
+    let mag = session.join("recording_mag.csv");
+    std::fs::copy(real("sf_mpu6050_hmc5883l_full_sphere_mag.csv"), &mag)
+        .expect("copy its magnetometer file");
+    let before = std::fs::read(&mag).expect("the magnetometer file");
+    let out = imucal_in(
+        &dir,
+        &[
+            "fit",
+            "session",
+            "--sensor",
+            "mag",
+            "--mag-unit",
+            "gauss",
+            "--params-out",
+            "session/recording_mag.csv",
+            "--force",
+        ],
+    );
+    assert!(!out.status.success(), "the input was replaced");
+    assert!(
+        stderr(&out).contains("is also the input"),
+        "{}",
+        stderr(&out)
+    );
+    assert_eq!(std::fs::read(&mag).expect("still there"), before);
 }

@@ -470,3 +470,38 @@ fn a_sensor_the_parameter_file_does_not_calibrate_is_exported_marked_as_not_cali
         "{module}"
     );
 }
+
+#[test]
+fn a_reason_read_from_the_parameter_file_cannot_end_the_generated_comment() {
+    let dir = scratch("comment");
+    let mut file = serde_json::to_value(imucal::device::ParamsFile::from(&plain_set()))
+        .expect("a parameter file serialises");
+    file["not_fitted"] = serde_json::json!({ "mag": "line one\nline two */ #error boom /*" });
+    let params = dir.join("params.json");
+    std::fs::write(&params, file.to_string()).expect("write the parameter file");
+    for format in ["c-header", "rust"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["export", "--format", format])
+            .arg(&params)
+            .output()
+            .expect("the imucal binary runs");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            text.contains("line one line two * / #error boom /*"),
+            "{text}"
+        );
+        // Every line holding the reason is inside a comment.
+        for line in text.lines().filter(|l| l.contains("#error")) {
+            let line = line.trim_start();
+            assert!(
+                line.starts_with("* ") || line.starts_with("//") || line.starts_with("/*"),
+                "{line}"
+            );
+        }
+    }
+}

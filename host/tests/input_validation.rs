@@ -652,7 +652,7 @@ fn a_gyroscope_that_reads_one_constant_is_refused_as_not_measuring_and_the_accel
     assert_refused(
         &outcome,
         &[
-            "gyro column gx reads 0.5 in every one of its",
+            "the gyro reads (0.5, -0.25, 0.125) in every one of its",
             "not measuring",
         ],
     );

@@ -137,7 +137,10 @@ pub fn input_paths(input: &InputArgs) -> Vec<PathBuf> {
     }
     let mag = match &input.mag_file {
         Some(path) => Some(path.clone()),
-        None if !input.no_mag_sibling => imucal::recording::sibling_mag_file(recording),
+        // The sibling of the file read: a session directory's is `recording_mag.csv` in it.
+        None if !input.no_mag_sibling => recording_file(recording)
+            .ok()
+            .and_then(|file| imucal::recording::sibling_mag_file(&file)),
         None => None,
     };
     paths.extend(mag);

@@ -102,11 +102,14 @@ fn default_out(path: &Path, is_session: bool) -> PathBuf {
 /// Run the command.
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let path = &args.input.recording;
-    let is_session = path.is_dir();
-    if is_session && !(path.join("params.json").is_file() && path.join("poses.json").is_file()) {
+    // A session directory with its parameters and poses is reported from them; one with only
+    // its recording (as `fit` and `analyze` read it), from the recording.
+    let is_session =
+        path.is_dir() && path.join("params.json").is_file() && path.join("poses.json").is_file();
+    if path.is_dir() && !is_session && !path.join("recording.csv").is_file() {
         anyhow::bail!(
             "`{}` is not a session directory of `imucal calibrate`: it has no params.json and \
-             poses.json{}; pass a session directory or a recording file",
+             poses.json, nor a recording.csv{}; pass a session directory or a recording file",
             path.display(),
             if path.join(REPORT_FILE).is_file() {
                 format!(" (its {REPORT_FILE} is the output of `imucal report`)")

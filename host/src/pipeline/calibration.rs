@@ -28,7 +28,8 @@ pub struct SensorOutcome {
     pub output_unit: String,
     /// Factor from the data's unit to the board's nominal unit (m/s², rad/s, µT), when known.
     pub to_nominal: Option<f64>,
-    /// Relative residual expected from the pose noise alone.
+    /// Relative residual a perfect model would leave: from the pose noise (accelerometer,
+    /// gyroscope), or from the noise of single samples (magnetometer).
     pub noise_floor: Option<f64>,
     /// Findings worth a line (e.g. which model the default chain chose and why).
     pub notes: Vec<String>,
@@ -115,7 +116,7 @@ impl SensorOutcome {
                 ));
             } else {
                 parts.push(format!(
-                    "residual is {ratio:.0}× the {noise}: the model misses something ({misses})"
+                    "residual is {ratio:.1}× the {noise}: the model misses something ({misses})"
                 ));
             }
         }

@@ -8,7 +8,7 @@
 use crate::fit::Vec3;
 use crate::input_checks;
 use crate::recording::{Recording, Sensor};
-use crate::stats::robust::{screen_stream, Screening};
+use crate::stats::robust::{screen_stream, stream_noise, Screening};
 use crate::still::{find_still, StillOptions, StillReport};
 
 use super::methods::thin_indices;
@@ -44,7 +44,7 @@ pub struct CheckedInput {
     /// Findings that cast doubt without refusing.
     pub warnings: Vec<String>,
     /// The magnetometer's noise per sample and axis, in the file's unit, from its stream
-    /// screen; `None` when too few samples were screened.
+    /// ([`stream_noise`]); `None` when too few distinct readings.
     pub mag_noise: Option<Vec3>,
 }
 
@@ -192,12 +192,16 @@ pub fn check_input_then<T: Send>(
     // its only reason, and it concerns that sensor, not the recording's units.
     for &sensor in sensors {
         let samples = recording.samples(sensor).unwrap_or(&[]);
-        if let Err(stuck) = input_checks::check_not_stuck(samples, sensor) {
-            refusals.retain(|(s, _)| *s != sensor);
-            unit_refusals.retain(|(s, _)| *s != sensor);
-            refusals.insert(0, (sensor, stuck.to_string()));
-            if sensor == Sensor::Mag {
-                mag_next = None;
+        match input_checks::check_not_stuck(samples, sensor) {
+            Ok(None) => {}
+            Ok(Some(warning)) => warnings.push(warning),
+            Err(stuck) => {
+                refusals.retain(|(s, _)| *s != sensor);
+                unit_refusals.retain(|(s, _)| *s != sensor);
+                refusals.insert(0, (sensor, stuck.to_string()));
+                if sensor == Sensor::Mag {
+                    mag_next = None;
+                }
             }
         }
     }
@@ -253,21 +257,6 @@ enum MagVerdict {
     UnitRefused(String),
 }
 
-/// Spread of a deviation from the median of six neighbours over that of one sample's noise:
-/// the median of six normal values has a variance of about 0.215 σ², so the deviation's is
-/// about 1.215 σ².
-const NEIGHBOUR_DEVIATION_SPREAD: f64 = 1.102;
-
-/// A stream's noise per sample and axis from its screen: the robust spread of each sample's
-/// deviation from its neighbours' median, which on a smooth turn is the sensor's noise (the
-/// path's curvature between neighbours adds a little, so the estimate errs high).
-fn sample_noise(screening: &Screening) -> Option<Vec3> {
-    match screening.axis_scales[..] {
-        [x, y, z] => Some(Vec3::new(x, y, z) / NEIGHBOUR_DEVIATION_SPREAD),
-        _ => None,
-    }
-}
-
 /// The magnetometer's samples screened (and thinned when asked), checked for coverage and
 /// field, and `then_mag` on them when the checks pass. `then_mag` runs beside the coverage and
 /// field checks, which it does not depend on; its result is dropped when they refuse.
@@ -279,7 +268,7 @@ fn checked_mag_points<T: Send>(
 ) -> (CheckedMag, Option<T>) {
     let all = recording.samples(Sensor::Mag).unwrap_or(&[]);
     let screening = screen_stream(all);
-    let noise = sample_noise(&screening);
+    let noise = stream_noise(all);
     let mut warnings = Vec::new();
     if screening.dropped > 0 {
         warnings.push(stream_outliers_sentence(&screening, all.len()));
