@@ -25,16 +25,9 @@ pub fn analyse_recording(
     still: &StillReport,
     options: &AnalysisOptions,
 ) -> RecordingAnalysis {
-    let mut sensors = Vec::new();
-    let mut accel_cal: Option<Calibration> = None;
-    for sensor in recording.sensors() {
-        let result = analyse_sensor(recording, still, options, sensor, accel_cal.as_ref());
-        if let (Sensor::Accel, Ok(a)) = (sensor, &result) {
-            accel_cal = Some(a.calibration);
-        }
-        sensors.push((sensor, result));
-    }
-    RecordingAnalysis { sensors }
+    analyse_each(recording, |sensor, accel_cal| {
+        analyse_sensor(recording, still, options, sensor, accel_cal)
+    })
 }
 
 /// Analyse every sensor of a recording on top of the pipeline's `calibration` of it (what `fit`
@@ -47,45 +40,86 @@ pub fn analyse_calibration(
     options: &AnalysisOptions,
     calibration: &RecordingCalibration,
 ) -> RecordingAnalysis {
+    analyse_each(recording, |sensor, accel_cal| {
+        match calibration.sensor(sensor).map(|o| &o.fit) {
+            Some(Err(reason)) => Err(AnalysisError::Refused(format!("not fitted: {reason}"))),
+            Some(Ok(fit)) if sensor == Sensor::Accel => {
+                let obs = accel_observations(recording, still)?;
+                // Min/max, axis-aligned and their mean share the 6 unknowns.
+                let base = NormBase {
+                    model: fit.method.name(),
+                    axis_aligned: unknowns(fit.method) == 6,
+                    start: fit.cal,
+                };
+                analyse_accel(recording, options, obs, base)
+            }
+            _ => analyse_sensor(recording, still, options, sensor, accel_cal),
+        }
+    })
+}
+
+/// `analyse` of each sensor of `recording` in turn, the accelerometer's final calibration
+/// handed to those after it.
+fn analyse_each(
+    recording: &Recording,
+    mut analyse: impl FnMut(Sensor, Option<&Calibration>) -> Result<SensorAnalysis, AnalysisError>,
+) -> RecordingAnalysis {
     let mut sensors = Vec::new();
     let mut accel_cal: Option<Calibration> = None;
     for sensor in recording.sensors() {
-        let result = match calibration.sensor(sensor).map(|o| &o.fit) {
-            Some(Err(reason)) => Err(AnalysisError::Refused(format!("not fitted: {reason}"))),
-            Some(Ok(fit)) if sensor == Sensor::Accel => {
-                let obs = dataset::pose_observations(recording, still, Sensor::Accel);
-                if obs.len() < 10 {
-                    Err(AnalysisError::TooFewObservations {
-                        sensor: sensor.name(),
-                        what: "still poses",
-                        found: obs.len(),
-                        needed: 10,
-                    })
-                } else {
-                    let setup = SensorSetup {
-                        sensor,
-                        base_model: fit.method.name(),
-                        base: BaseKind::Norm {
-                            reference: options.gravity,
-                            // Min/max, axis-aligned and their mean share the 6 unknowns.
-                            axis_aligned: unknowns(fit.method) == 6,
-                        },
-                        start: fit.cal,
-                        force: None,
-                        gravity: options.gravity,
-                        unit: recording.units.symbol(sensor),
-                    };
-                    analyse_observations(setup, obs)
-                }
-            }
-            _ => analyse_sensor(recording, still, options, sensor, accel_cal.as_ref()),
-        };
+        let result = analyse(sensor, accel_cal.as_ref());
         if let (Sensor::Accel, Ok(a)) = (sensor, &result) {
             accel_cal = Some(a.calibration);
         }
         sensors.push((sensor, result));
     }
     RecordingAnalysis { sensors }
+}
+
+/// The accelerometer's still poses, refused when too few for the analysis.
+fn accel_observations(
+    recording: &Recording,
+    still: &StillReport,
+) -> Result<Vec<dataset::Observation>, AnalysisError> {
+    let obs = dataset::pose_observations(recording, still, Sensor::Accel);
+    if obs.len() < 10 {
+        return Err(AnalysisError::TooFewObservations {
+            sensor: Sensor::Accel.name(),
+            what: "still poses",
+            found: obs.len(),
+            needed: 10,
+        });
+    }
+    Ok(obs)
+}
+
+/// The norm model the accelerometer's analysis starts from.
+struct NormBase {
+    model: &'static str,
+    axis_aligned: bool,
+    start: Calibration,
+}
+
+/// The accelerometer's analysis of `obs` from `base`.
+fn analyse_accel(
+    recording: &Recording,
+    options: &AnalysisOptions,
+    obs: Vec<dataset::Observation>,
+    base: NormBase,
+) -> Result<SensorAnalysis, AnalysisError> {
+    let setup = SensorSetup {
+        sensor: Sensor::Accel,
+        base_model: base.model,
+        base: BaseKind::Norm {
+            reference: options.gravity,
+            axis_aligned: base.axis_aligned,
+        },
+        start: base.start,
+        force: None,
+        gravity: options.gravity,
+        unit: recording.units.symbol(Sensor::Accel),
+    };
+    analyse_observations(setup, obs)
 }
 
 /// Analyse one sensor; `accel_cal` (the accelerometer's calibration) enables g-sensitivity.
@@ -108,57 +142,39 @@ pub fn analyse_sensor(
     };
     match sensor {
         Sensor::Accel => {
-            let obs = dataset::pose_observations(recording, still, Sensor::Accel);
-            if obs.len() < 10 {
-                return Err(too_few("still poses", obs.len(), 10));
-            }
+            let obs = accel_observations(recording, still)?;
             // The default chain's model starts the extended fit. The base is the full norm model
             // (an effect must not be credited with what misalignment explains) unless `fit`
             // refused it because the poses cannot determine it (e.g. six faces, or a plane of
             // tilts): then the axis-aligned model (6 unknowns), which `fit` can determine. When every model
             // of the chain refuses, the generic solver restarts from the sphere.
-            let (start, axis_aligned) = match default_accel_chain(&to_poses(&obs), options.gravity)
-            {
+            let base = match default_accel_chain(&to_poses(&obs), options.gravity) {
                 Ok(choice) => {
                     let axis_aligned = choice.candidates.iter().any(|c| {
                         c.method == Method::Lm && matches!(c.outcome, CandidateOutcome::Refused(_))
                     });
-                    (choice.fit.cal, axis_aligned)
+                    NormBase {
+                        model: if axis_aligned { "axis-aligned" } else { "lm" },
+                        axis_aligned,
+                        start: choice.fit.cal,
+                    }
                 }
                 Err(source) => {
                     let means: Vec<Vec3> = obs.iter().map(|o| o.mean).collect();
-                    let sphere = sphere_start(&means, options.gravity);
-                    let setup = SensorSetup {
-                        sensor,
-                        base_model: "lm",
-                        base: BaseKind::Norm {
-                            reference: options.gravity,
-                            axis_aligned: false,
-                        },
-                        start: sphere,
-                        force: None,
-                        gravity: options.gravity,
-                        unit,
+                    let base = NormBase {
+                        model: "lm",
+                        axis_aligned: false,
+                        start: sphere_start(&means, options.gravity),
                     };
-                    return analyse_observations(setup, obs).map_err(|_| AnalysisError::BaseFit {
-                        sensor: "accel",
-                        source,
+                    return analyse_accel(recording, options, obs, base).map_err(|_| {
+                        AnalysisError::BaseFit {
+                            sensor: "accel",
+                            source,
+                        }
                     });
                 }
             };
-            let setup = SensorSetup {
-                sensor,
-                base_model: if axis_aligned { "axis-aligned" } else { "lm" },
-                base: BaseKind::Norm {
-                    reference: options.gravity,
-                    axis_aligned,
-                },
-                start,
-                force: None,
-                gravity: options.gravity,
-                unit,
-            };
-            analyse_observations(setup, obs)
+            analyse_accel(recording, options, obs, base)
         }
         Sensor::Gyro => {
             let obs = dataset::pose_observations(recording, still, Sensor::Gyro);

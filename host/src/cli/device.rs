@@ -303,10 +303,7 @@ fn merge_with_active(
 ) -> anyhow::Result<()> {
     let left_out: Vec<SensorArg> = [SensorArg::Accel, SensorArg::Gyro, SensorArg::Mag]
         .into_iter()
-        .filter(|s| {
-            file.absent_sensors.iter().any(|a| a == s.key())
-                || file.not_fitted.contains_key(s.key())
-        })
+        .filter(|s| file.left_out().iter().any(|(key, _)| *key == s.key()))
         .collect();
     let identity = CalibrationSet::identity();
     for sensor in reset {

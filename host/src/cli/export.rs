@@ -91,7 +91,7 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
              unit (the export says so)"
         );
     }
-    let uncalibrated = uncalibrated_sensors(&params);
+    let uncalibrated = params.left_out();
     for (sensor, why) in &uncalibrated {
         say!(
             "imucal: note: `{shown}` has no {sensor} calibration ({why}); it is exported as the \
@@ -133,25 +133,6 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
     let text = export_checked_as(&set, &checked, format, &name, notes)
         .map_err(|reason| anyhow::anyhow!("`{shown}` is not exported: {reason}"))?;
     write_output(args.out.as_deref(), text.as_bytes())
-}
-
-/// The sensors `params` holds no calibration of, with the reason: those it lists as not fitted,
-/// and those it has no entry for at all (which `flash` leaves as the board has them, but an
-/// export can only give as the identity).
-fn uncalibrated_sensors(params: &ParamsFile) -> Vec<(&'static str, String)> {
-    ["accel", "gyro", "mag"]
-        .into_iter()
-        .filter_map(|sensor| {
-            let why = match params.not_fitted.get(sensor) {
-                Some(why) => why.clone(),
-                None if params.absent_sensors.iter().any(|a| a == sensor) => {
-                    format!("the file has no `{sensor}` entry")
-                }
-                None => return None,
-            };
-            Some((sensor, why))
-        })
-        .collect()
 }
 
 /// The Adafruit library's forms: what it can apply of `set`, and a note of what it cannot.

@@ -491,11 +491,29 @@ impl ParamsFile {
     /// The sensors the file calibrates: those neither listed as not fitted nor absent from the
     /// board.
     pub fn fitted_sensors(&self) -> Vec<&'static str> {
-        ["accel", "gyro", "mag"]
+        SENSOR_KEYS
             .into_iter()
-            .filter(|s| !self.not_fitted.contains_key(*s))
-            .filter(|s| !self.absent_sensors.iter().any(|a| a == s))
+            .filter(|s| self.left_out_because(s).is_none())
             .collect()
+    }
+
+    /// The sensors (of [`SENSOR_KEYS`]) the file holds no calibration of, each with the reason:
+    /// listed under `not_fitted`, or with no entry at all.
+    pub fn left_out(&self) -> Vec<(&'static str, String)> {
+        SENSOR_KEYS
+            .into_iter()
+            .filter_map(|s| Some((s, self.left_out_because(s)?)))
+            .collect()
+    }
+
+    fn left_out_because(&self, sensor: &str) -> Option<String> {
+        match self.not_fitted.get(sensor) {
+            Some(why) => Some(why.clone()),
+            None if self.absent_sensors.iter().any(|a| a == sensor) => {
+                Some(format!("the file has no `{sensor}` entry"))
+            }
+            None => None,
+        }
     }
 
     /// Why the file is of no use to a board, when it calibrates no sensor at all: writing or

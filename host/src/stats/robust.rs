@@ -18,7 +18,7 @@
 //! quantised sensor whose readings mostly repeat has `σ̂ = 0`, so `σ` is at least the data's
 //! resolution (one step: a reading a few steps from the median is noise, not a spike).
 
-use super::descriptive::{median, quantisation_step};
+use super::descriptive::{mad_sigma, quantisation_step};
 use super::distributions::normal_quantile;
 use super::Vec3;
 
@@ -281,11 +281,8 @@ pub fn stream_noise(samples: &[Vec3]) -> Option<Vec3> {
     if deviations.iter().any(|d| d.len() < MIN_SCREENED) {
         return None;
     }
-    let mut sigma = |k: usize| {
-        let values = &mut deviations[k];
-        let centre = median(values);
-        let mut absolute: Vec<f64> = values.iter().map(|d| (d - centre).abs()).collect();
-        let spread = 1.482_6 * median(&mut absolute) / NEIGHBOUR_DEVIATION_SPREAD;
+    let sigma = |k: usize| {
+        let spread = mad_sigma(&deviations[k]) / NEIGHBOUR_DEVIATION_SPREAD;
         let quantum = if step[k].is_finite() { step[k] } else { 0.0 };
         (spread * spread + quantum * quantum / 12.0).sqrt()
     };
@@ -448,6 +445,7 @@ fn insertion_sort(values: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stats::descriptive::median;
 
     /// A smooth turn through a sphere of radius 50 with white noise `sigma` per axis, each
     /// reading written `repeat` times.
