@@ -636,6 +636,42 @@ pub fn refine_lm_detailed(
     let std = covariance
         .as_ref()
         .map(|c| calibration_std(c, &UPPER_TRIANGULAR_LAYOUT));
+    // What still needs the problem's per-sample values is computed first, so that they (and
+    // the solver's residuals) are freed before the residuals of the fit are allocated.
+    let LmSolution {
+        jtj,
+        termination,
+        residuals: solver_residuals,
+        ..
+    } = sol;
+    drop(solver_residuals);
+    let first_order_loo_rms = first_order_loo_rms(
+        &upper_from_params(&params),
+        &Vec3::new(params[6], params[7], params[8]),
+        problem.samples(),
+        &jtj,
+    );
+    // Pose means (a noise per point) always; clouds of samples only when small. The closure
+    // takes the problem, so its values are freed here whether it runs or not.
+    let poses = matches!(obs.sigma, NormNoise::PerPoint(_));
+    let fold_update = (poses || n <= FOLD_UPDATE_MAX_POINTS)
+        .then(|| {
+            let NormProblem {
+                points,
+                weights,
+                tangential,
+                ..
+            } = problem;
+            FoldUpdate::new(
+                &params,
+                (points, weights, tangential),
+                &jtj,
+                centre,
+                s,
+                reference,
+            )
+        })
+        .flatten();
     // Each residual on its own, on two threads for large problems; the RMS sums them in order.
     let mut residuals = vec![0.0; n];
     in_two_halves(
@@ -658,38 +694,12 @@ pub fn refine_lm_detailed(
         covariance,
         param_names: param_names(&UPPER_TRIANGULAR_LAYOUT),
         std,
-        condition_number: condition_from_normal_matrix(&sol.jtj),
+        condition_number: condition_from_normal_matrix(&jtj),
         iterations,
-        termination: Some(sol.termination),
+        termination: Some(termination),
         coverage_factor,
         reference,
     };
-    let first_order_loo_rms = first_order_loo_rms(
-        &upper_from_params(&params),
-        &Vec3::new(params[6], params[7], params[8]),
-        problem.samples(),
-        &sol.jtj,
-    );
-    // Pose means (a noise per point) always; clouds of samples only when small.
-    let poses = matches!(obs.sigma, NormNoise::PerPoint(_));
-    let fold_update = (poses || n <= FOLD_UPDATE_MAX_POINTS)
-        .then(|| {
-            let NormProblem {
-                points,
-                weights,
-                tangential,
-                ..
-            } = problem;
-            FoldUpdate::new(
-                &params,
-                (points, weights, tangential),
-                &sol.jtj,
-                centre,
-                s,
-                reference,
-            )
-        })
-        .flatten();
     Ok(NormLmOutcome {
         fit,
         reduced_chi_square: chi2_red,

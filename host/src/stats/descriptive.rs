@@ -95,25 +95,90 @@ pub fn window_variances(x: &[Vec3], w: usize) -> Vec<Vec3> {
 /// after stream of a long recording instead of a fresh allocation each.
 pub fn window_variances_into(x: &[Vec3], w: usize, out: &mut Vec<Vec3>) {
     out.clear();
-    let n = x.len();
+    out.reserve((x.len() + 1).saturating_sub(w));
+    for_each_window_variance(x, w, |v| out.push(v));
+}
+
+/// [`window_variances`] handed to `each` in window order instead of collected: a caller that
+/// reduces them as they come needs no array the length of the recording.
+pub fn for_each_window_variance(x: &[Vec3], w: usize, each: impl FnMut(Vec3)) {
+    sliding_variances(x.len(), |i| x[i], w, each);
+}
+
+/// Axis `k` of [`for_each_window_variance`], bit for bit (each axis of the vector form is
+/// computed by the same operations in the same order, alone), at a third of its cost.
+pub fn for_each_axis_window_variance(x: &[Vec3], k: usize, w: usize, each: impl FnMut(f64)) {
+    sliding_variances(x.len(), |i| x[i][k], w, each);
+}
+
+/// What the sliding variance needs of a value: one number, or one vector of axes treated
+/// alike and independently.
+trait Lanes: Copy + std::ops::Add<Output = Self> + std::ops::Sub<Output = Self> {
+    fn zero() -> Self;
+    /// Each lane squared.
+    fn squared(self) -> Self;
+    /// Each lane divided by `d`.
+    fn over(self, d: f64) -> Self;
+    /// Each lane `(v/d).max(0)`: rounding can leave a tiny negative sum of squares.
+    fn unbiased_over(self, d: f64) -> Self;
+}
+
+impl Lanes for f64 {
+    fn zero() -> Self {
+        0.0
+    }
+    fn squared(self) -> Self {
+        self * self
+    }
+    fn over(self, d: f64) -> Self {
+        self / d
+    }
+    fn unbiased_over(self, d: f64) -> Self {
+        (self / d).max(0.0)
+    }
+}
+
+impl Lanes for Vec3 {
+    fn zero() -> Self {
+        Vec3::zeros()
+    }
+    fn squared(self) -> Self {
+        self.component_mul(&self)
+    }
+    fn over(self, d: f64) -> Self {
+        self / d
+    }
+    fn unbiased_over(self, d: f64) -> Self {
+        self.map(|v| (v / d).max(0.0))
+    }
+}
+
+/// The windowed variances of the `n` values `value(i)` (see [`window_variances`]).
+fn sliding_variances<T: Lanes>(
+    n: usize,
+    value: impl Fn(usize) -> T,
+    w: usize,
+    mut each: impl FnMut(T),
+) {
     if n < w || w < 2 {
         return;
     }
-    let mean = x.iter().sum::<Vec3>() / n as f64;
+    let mean = (0..n)
+        .fold(T::zero(), |acc, i| acc + value(i))
+        .over(n as f64);
     let wf = w as f64;
     // Slot `i % (w + 1)` holds the prefix sums of the first `i` values. The slot is counted
     // along rather than divided out: two integer divisions per row cost more than the sums.
-    let mut s1 = vec![Vec3::zeros(); w + 1];
-    let mut s2 = vec![Vec3::zeros(); w + 1];
-    let (mut p1, mut p2) = (Vec3::zeros(), Vec3::zeros());
+    let mut s1 = vec![T::zero(); w + 1];
+    let mut s2 = vec![T::zero(); w + 1];
+    let (mut p1, mut p2) = (T::zero(), T::zero());
     let next_slot = |slot: usize| if slot == w { 0 } else { slot + 1 };
     let mut slot = 0;
-    out.reserve(n - w + 1);
     for i in 0..=n {
         if i > 0 {
-            let d = x[i - 1] - mean;
-            p1 += d;
-            p2 += d.component_mul(&d);
+            let d = value(i - 1) - mean;
+            p1 = p1 + d;
+            p2 = p2 + d.squared();
         }
         if i >= w {
             // The window starts at row `i − w`, whose slot `(i − w) % (w + 1)` is the one after
@@ -121,7 +186,7 @@ pub fn window_variances_into(x: &[Vec3], w: usize, out: &mut Vec<Vec3>) {
             let start = next_slot(slot);
             let sum = p1 - s1[start];
             let sq = p2 - s2[start];
-            out.push((sq - sum.component_mul(&sum) / wf).map(|v| (v / (wf - 1.0)).max(0.0)));
+            each((sq - sum.squared().over(wf)).unbiased_over(wf - 1.0));
         }
         s1[slot] = p1;
         s2[slot] = p2;
@@ -207,6 +272,31 @@ mod tests {
                 for k in 0..3 {
                     assert_eq!(g[k].to_bits(), e[k].to_bits(), "w = {w}");
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn one_axis_of_the_window_variances_equals_that_axis_of_the_vector_form_bit_for_bit() {
+        // Still detection selects its noise percentile from one axis at a time: it must see
+        // exactly the values the three-axis form gives, offsets and rounding included.
+        let x: Vec<Vec3> = (0..3000)
+            .map(|i| {
+                let t = i as f64 * 0.013;
+                Vec3::new(
+                    1e6 + (t * 7.0).sin(),
+                    -9.81 + 1e-3 * (t * 31.0).cos(),
+                    ((i * 7919) % 13) as f64,
+                )
+            })
+            .collect();
+        for w in [2, 5, 51, 2999, 3000, 3001] {
+            let vector = window_variances(&x, w);
+            for k in 0..3 {
+                let mut axis = Vec::new();
+                for_each_axis_window_variance(&x, k, w, |v| axis.push(v.to_bits()));
+                let want: Vec<u64> = vector.iter().map(|v| v[k].to_bits()).collect();
+                assert_eq!(axis, want, "w = {w}, axis {k}");
             }
         }
     }

@@ -20,7 +20,8 @@ use super::options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
 use crate::fit::Vec3;
 use crate::recording::{GyroUnit, LabelKind, Recording, Sensor};
 use crate::stats::descriptive::{
-    mean, percentile_of_positive_bits, quantisation_step, window_variances_into,
+    for_each_axis_window_variance, for_each_window_variance, mean, percentile_of_positive_bits,
+    quantisation_step,
 };
 use crate::stats::distributions::chi2_quantile_per_dof;
 use crate::stats::threshold::otsu;
@@ -139,16 +140,13 @@ pub(super) fn detect(
         .units
         .to_si(Sensor::Gyro)
         .map(|to_rad_s| MAX_STILL_GYRO_STD_DPS.to_radians() / to_rad_s);
-    // Buffers the length of the recording, filled again for every stream and axis rather than
-    // allocated (and faulted in) afresh each time: the windowed variances per section, and one
-    // axis of them (as bit patterns, for the selection) or the logarithms of the ratios.
+    // The windowed variances are reduced as they are computed, never stored: per axis into
+    // the selection buffer for the noise percentile (one buffer the length of the recording,
+    // refilled for every stream and axis), then all three axes at once into the windows'
+    // ratios and the gyroscope's rest test.
     let windows: usize = ratio.iter().map(Vec::len).sum();
-    let mut per_section: Vec<Vec<Vec3>> = sections.iter().map(|_| Vec::new()).collect();
     let mut scratch: Vec<u64> = Vec::with_capacity(windows);
     for (sensor, x) in &streams {
-        for (&(a, b), vars) in sections.iter().zip(per_section.iter_mut()) {
-            window_variances_into(&x[a..b], w, vars);
-        }
         let step = quantisation_step(x);
         let mut sigma = Vec3::zeros();
         for k in 0..3 {
@@ -156,33 +154,38 @@ pub(super) fn detect(
             // below one quantisation step; the quantisation floor below covers the latter, and
             // counting them would set the noise to zero and call every other hold moving.
             scratch.clear();
-            scratch.extend(
-                per_section
-                    .iter()
-                    .flatten()
-                    .map(|v| v[k])
-                    .filter(|v| *v > 0.0)
-                    .map(f64::to_bits),
-            );
+            for &(a, b) in &sections {
+                for_each_axis_window_variance(&x[a..b], k, w, |v| {
+                    if v > 0.0 {
+                        scratch.push(v.to_bits());
+                    }
+                });
+            }
             let quiet = percentile_of_positive_bits(&mut scratch, options.noise_percentile)
                 / percentile_factor.max(1e-12);
             // Uniform quantisation error has variance step²/12: no real sensor is quieter.
             let floor = step[k] * step[k] / 12.0;
             sigma[k] = quiet.max(floor).max(f64::MIN_POSITIVE).sqrt();
         }
-        for (vars, out) in per_section.iter().zip(ratio.iter_mut()) {
-            for (v, r) in vars.iter().zip(out.iter_mut()) {
+        let rest_limit = match sensor {
+            Sensor::Gyro => rate_limit,
+            _ => None,
+        };
+        for ((&(a, b), out), turns) in sections
+            .iter()
+            .zip(ratio.iter_mut())
+            .zip(turning.iter_mut())
+        {
+            let mut slots = out.iter_mut().zip(turns.iter_mut());
+            for_each_window_variance(&x[a..b], w, |v| {
+                let Some((r, t)) = slots.next() else { return };
                 let stat: f64 = (0..3).map(|k| v[k] / (sigma[k] * sigma[k])).sum();
                 *r = r.max(stat / chi2_threshold);
-            }
-        }
-        if let (Sensor::Gyro, Some(limit)) = (sensor, rate_limit) {
-            for (vars, out) in per_section.iter().zip(turning.iter_mut()) {
-                for (v, t) in vars.iter().zip(out.iter_mut()) {
+                if let Some(limit) = rest_limit {
                     *t = v.iter().any(|var| *var > limit * limit);
                     quietest_gyro_var = quietest_gyro_var.min(v.max());
                 }
-            }
+            });
         }
         sigmas.push(sigma);
     }
