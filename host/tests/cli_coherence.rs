@@ -182,3 +182,33 @@ fn a_session_directorys_magnetometer_file_is_an_input_no_output_may_replace() {
     );
     assert_eq!(std::fs::read(&mag).expect("still there"), before);
 }
+
+#[test]
+fn a_stillness_window_longer_than_the_holds_is_named_when_moves_pass_as_one_hold() {
+    // tsi_mpu6050_multipos holds each face for a few seconds in raw counts (no gyroscope rest
+    // bound applies): a 60 s window takes in a move in every window, so the whole recording
+    // passes as one "hold" whose samples scatter over several faces.
+    let dir = scratch("long-window");
+    let csv = real("tsi_mpu6050_multipos.csv");
+    let csv = csv.to_str().expect("UTF-8 path");
+    let args = ["--accel-unit", "counts", "--gyro-unit", "counts"];
+    let long = imucal_in(
+        &dir,
+        &[&["still", csv, "--window", "60"][..], &args[..]].concat(),
+    );
+    let err = stderr(&long);
+    assert!(
+        err.contains("it is not one pose") && err.contains("--window"),
+        "{err}"
+    );
+    assert!(!err.contains("a knock during the hold"), "{err}");
+    // With the default window the holds are real poses: no such sentence.
+    let default = imucal_in(&dir, &[&["still", csv][..], &args[..]].concat());
+    assert!(default.status.success(), "{}", stderr(&default));
+    assert!(
+        !stderr(&default).contains("not one pose"),
+        "{}",
+        stderr(&default)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

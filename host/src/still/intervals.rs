@@ -83,10 +83,19 @@ impl StillInterval {
         }
         let name = self.label.map_or(String::new(), |l| format!(" (pose {l})"));
         let what: Vec<String> = self.dropped.iter().map(DroppedSamples::phrase).collect();
+        // The screen's bound is set so that a pose's own noise crosses it with small
+        // probability over all its samples; a spike or a knock is a few samples. When most
+        // samples lie beyond it, they do not scatter about one value: the board moved.
+        let cause = if self.dropped.iter().any(|d| 2 * d.dropped > d.total) {
+            "most of its samples lie far from its median, so it is not one pose: the board moved \
+             during it (when the stillness window, --window, is longer than the holds, each \
+             window takes in a move and moves pass as holds: lower it, 0.5 s by default)"
+        } else {
+            "a spike, a corrupted read or a knock during the hold"
+        };
         Some(format!(
             "hold at {:.1}–{:.1} s{name}: outliers dropped from its statistics: {} (robust \
-             standard deviations from the hold's median): a spike, a corrupted read or a knock \
-             during the hold",
+             standard deviations from the hold's median): {cause}",
             self.t_start,
             self.t_end,
             what.join(", ")
