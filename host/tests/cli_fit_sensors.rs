@@ -481,3 +481,45 @@ fn a_parameter_file_names_the_methods_and_units_of_the_sensors_it_holds_only() {
         }
     }
 }
+
+#[test]
+fn a_gyroscope_bias_from_a_single_hold_says_nothing_was_held_out() {
+    // One 20 s hold at 100 Hz: the bias is that hold's mean and its residual is zero by
+    // construction, which must not read as a clean bill of health.
+    let dir = scratch("one-hold");
+    let path = dir.join("one_hold.csv");
+    let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+    let noise = Normal::new(0.0, 0.05).expect("valid normal");
+    let mut text = String::from("t_s,ax,ay,az,gx,gy,gz\n");
+    for i in 0..2000 {
+        let g = [0.4, -0.2, 0.1].map(|b: f64| b + noise.sample(&mut rng));
+        text.push_str(&format!(
+            "{:.2},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5}\n",
+            i as f64 * 0.01,
+            0.002 * noise.sample(&mut rng),
+            0.002 * noise.sample(&mut rng),
+            1.0 + 0.002 * noise.sample(&mut rng),
+            g[0],
+            g[1],
+            g[2]
+        ));
+    }
+    std::fs::write(&path, text).expect("recording written");
+    let path = path.display().to_string();
+    let (_, out, err) = imucal(&[
+        "fit",
+        &path,
+        "--accel-unit",
+        "g",
+        "--gyro-unit",
+        "dps",
+        "--sensor",
+        "gyro",
+    ]);
+    assert!(
+        out.contains("one hold: the bias is its mean"),
+        "{out}\n{err}"
+    );
+    assert!(!out.contains("verdict: fitted\n"), "{out}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -120,6 +120,16 @@ impl SensorOutcome {
                 ));
             }
         }
+        if self.sensor == Sensor::Gyro && self.n_poses == 1 && fit.loo_rms.is_none() {
+            // A single hold's mean is its own fit: the residual is zero by construction and
+            // there is no other hold to test it on.
+            parts.push(
+                "one hold: the bias is its mean (± the standard error of that mean); with no \
+                 second hold nothing is held out, so drift between holds (temperature, time) is \
+                 not seen: record two or more holds apart in time to check it"
+                    .to_string(),
+            );
+        }
         if let Some(loo) = fit.loo_rms {
             if fit.rms > 0.0 && loo > 3.0 * fit.rms {
                 parts.push(format!(
