@@ -283,6 +283,45 @@ fn six_position_recovers_a_full_matrix_exactly_without_noise() {
 }
 
 #[test]
+fn six_position_reports_the_same_norm_residual_as_its_held_out_error_and_the_other_fits() {
+    // Faces placed 3° off their axes: the six-position model takes each pose for its ±axis, so
+    // its vector error holds the placement, while its held-out error (and every other static
+    // fit's residual) is the norm residual. Fit and held-out error must be one quantity.
+    let truth = upper_truth(42, G);
+    let mut r = rng(43);
+    let level = directions(&mut r, PoseSet::SixFaces);
+    let dirs = perturb_directions(&mut r, &level, 3.0);
+    let faces: Vec<Vec3> = dirs.iter().map(|d| face_axis(d)).collect();
+    let poses = accel_poses(&mut r, &truth, &dirs, G, 0.0, 1);
+    let fit = fit_six_position(&poses, Some(&faces), G).expect("fit");
+    for (pose, residual) in poses.iter().zip(&fit.residuals) {
+        let norm = (fit.cal.apply(&pose.mean).norm() - G) / G;
+        assert_eq!(residual.to_bits(), norm.to_bits());
+    }
+    let vector_rms = (poses
+        .iter()
+        .zip(&faces)
+        .map(|(p, u)| ((fit.cal.apply(&p.mean) - u * G).norm() / G).powi(2))
+        .sum::<f64>()
+        / poses.len() as f64)
+        .sqrt();
+    assert!(
+        vector_rms > 1.5 * fit.rms,
+        "the placement must show in the vector error for the test to mean anything: \
+         vector {vector_rms:.3e}, norm {:.3e}",
+        fit.rms
+    );
+}
+
+/// The ±axis nearest to `d`.
+fn face_axis(d: &Vec3) -> Vec3 {
+    let k = d.iamax();
+    let mut axis = Vec3::zeros();
+    axis[k] = d[k].signum();
+    axis
+}
+
+#[test]
 fn six_position_covariance_predicts_the_monte_carlo_spread_of_b() {
     let mut r = rng(41);
     let truth = random_calibration(

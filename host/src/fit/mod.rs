@@ -115,9 +115,9 @@ pub struct Fit {
     pub method: Method,
     /// The fitted parameters.
     pub cal: Calibration,
-    /// Residual per pose or sample. Norm-model fits: `(|A(x−b)| − ref) / ref` (relative);
-    /// vector fits (six-position, gyro bias): the norm of the vector error, in output units
-    /// divided by `ref` where a reference exists.
+    /// Residual per pose or sample. Accelerometer and magnetometer fits (six-position
+    /// included): `(|A(x−b)| − ref) / ref` (relative); gyroscope bias: the norm of the
+    /// calibrated rate left at rest, in output units.
     pub residuals: Vec<f64>,
     /// Root mean square of `residuals`.
     pub rms: f64,
