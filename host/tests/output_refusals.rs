@@ -182,6 +182,48 @@ fn fit_params_out_onto_the_recording_is_refused_before_the_recording_is_read() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A hard link is the input under a name of its own: neither its path nor a link resolves to
+/// the input's, so only the file's identity tells them apart.
+#[cfg(unix)]
+#[test]
+fn an_output_hard_linked_to_an_input_is_refused_even_with_force() {
+    let dir = scratch("hard-link");
+    std::fs::create_dir(dir.join("rec")).unwrap();
+    std::fs::write(dir.join("rec/n.csv"), "not a recording").unwrap();
+    std::fs::hard_link(dir.join("rec/n.csv"), dir.join("hard.json")).unwrap();
+    let fit = imucal(
+        &[
+            "fit",
+            "rec/n.csv",
+            "--gyro-unit",
+            "dps",
+            "--params-out",
+            "hard.json",
+            "--force",
+        ],
+        &dir,
+    );
+    refused(&fit, &["`hard.json` is also the input `rec/n.csv`"]);
+    std::fs::create_dir(dir.join("out")).unwrap();
+    std::fs::hard_link(dir.join("rec/n.csv"), dir.join("out/report.html")).unwrap();
+    let report = imucal(&["report", "rec/n.csv", "-o", "out", "--force"], &dir);
+    refused(&report, &["is also the input `rec/n.csv`"]);
+    let params = imucal::device::ParamsFile::from(&imucal_protocol::CalibrationSet::identity());
+    std::fs::write(dir.join("p.json"), params.to_json()).unwrap();
+    std::fs::hard_link(dir.join("p.json"), dir.join("p.h")).unwrap();
+    let export = imucal(&["export", "p.json", "-o", "p.h", "--force"], &dir);
+    refused(&export, &["`p.h` is also the input `p.json`"]);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("rec/n.csv")).unwrap(),
+        "not a recording"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("p.json")).unwrap(),
+        params.to_json()
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn report_next_to_an_earlier_report_is_refused_unless_forced() {
     let dir = scratch("report");
