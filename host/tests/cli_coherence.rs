@@ -88,6 +88,32 @@ fn fit_and_still_read_a_session_directory_as_its_recording() {
 }
 
 #[test]
+fn fit_and_still_on_a_session_without_its_recording_point_to_analyze_and_report() {
+    let dir = scratch("pose-session");
+    // What `calibrate` leaves: the poses it averaged and its parameters, no recording.
+    let session = dir.join("S");
+    std::fs::create_dir(&session).expect("session directory");
+    std::fs::write(session.join("poses.json"), "[]").expect("poses");
+    std::fs::write(session.join("params.json"), "{}").expect("params");
+    for command in ["fit", "still"] {
+        let out = imucal_in(&dir, &[command, "S"]);
+        let message = stderr(&out);
+        assert!(!out.status.success(), "{command}: {message}");
+        assert!(
+            message.contains("`S` is a session directory of `imucal calibrate`")
+                && message.contains("no recording (recording.csv)")
+                && message.contains("`imucal analyze S`")
+                && message.contains("`imucal report S`"),
+            "{command}: {message}"
+        );
+        assert!(
+            !message.contains("pass a recording file, or a session"),
+            "{message}"
+        );
+    }
+}
+
+#[test]
 fn report_refuses_a_report_directory_saying_what_it_is() {
     let dir = scratch("report");
     let recording = real("imucal_nilspod_ferraris.csv").display().to_string();

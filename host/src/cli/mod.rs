@@ -43,11 +43,19 @@ pub fn recording_file(path: &Path) -> anyhow::Result<PathBuf> {
     if candidate.is_file() {
         return Ok(candidate);
     }
+    let shown = path.display();
+    // `calibrate` keeps only the poses it averaged, not the stream they came from.
+    if path.join("poses.json").is_file() {
+        anyhow::bail!(
+            "`{shown}` is a session directory of `imucal calibrate` that holds its poses \
+             (poses.json) but no recording (recording.csv); this command reads a continuous \
+             recording, so study the session with `imucal analyze {shown}` or `imucal report \
+             {shown}`, or pass a recording file"
+        );
+    }
     anyhow::bail!(
-        "`{}` is a directory without a recording.csv; pass a recording file, or a session \
-         directory of `imucal calibrate` (sessions saved without their recording can be studied \
-         by `imucal analyze` and `imucal report` from their poses)",
-        path.display()
+        "`{shown}` is a directory without a recording.csv; pass a recording file, or a session \
+         directory of `imucal calibrate` that holds one"
     )
 }
 
