@@ -114,6 +114,53 @@ fn fit_and_still_on_a_session_without_its_recording_point_to_analyze_and_report(
 }
 
 #[test]
+fn an_option_value_or_combination_the_command_cannot_take_exits_with_the_usage_status() {
+    let dir = scratch("usage");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    for (options, named) in [
+        (
+            &["--method", "bogus"][..],
+            "unknown method `bogus`; choose one of",
+        ),
+        (&["--gravity", "0"], "--gravity 0 is outside 9.7–9.9 m/s²"),
+        (&["--field-ut", "-5"], "--field-ut -5 is outside 1–5000 µT"),
+        (&["--gyro-scale", "-1"], "--gyro-scale -1 is outside"),
+        (
+            &["--sensor", "gyro", "--method", "chen"],
+            "method `chen` does not apply to the gyro",
+        ),
+    ] {
+        let out = imucal_in(
+            &dir,
+            &[&["fit", &recording, "--gyro-unit", "dps"], options].concat(),
+        );
+        let message = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{options:?}: {message}");
+        assert!(message.contains(named), "{options:?}: {message}");
+    }
+    // Said before the recording is read: a missing file does not hide it.
+    let out = imucal_in(
+        &dir,
+        &[
+            "fit",
+            "none.csv",
+            "--sensor",
+            "mag",
+            "--method",
+            "six-position",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("does not apply to the mag"),
+        "{}",
+        stderr(&out)
+    );
+    let out = imucal_in(&dir, &["calibrate", "--sim", "--yes", "--sim-faulty", "2"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+}
+
+#[test]
 fn report_refuses_a_report_directory_saying_what_it_is() {
     let dir = scratch("report");
     let recording = real("imucal_nilspod_ferraris.csv").display().to_string();

@@ -28,8 +28,13 @@ fn scratch(name: &str) -> PathBuf {
 
 /// The command failed with `expected` in its message, before it touched the (missing) board.
 fn refused(out: &Output, expected: &[&str]) {
+    refused_with(out, 1, expected);
+}
+
+/// [`refused`] with the exit status `code` (2 for an option value the command cannot take).
+fn refused_with(out: &Output, code: i32, expected: &[&str]) {
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(out.status.code(), Some(code), "{stderr}");
     for part in expected {
         assert!(stderr.contains(part), "missing {part:?} in: {stderr}");
     }
@@ -74,9 +79,9 @@ fn calibrate_checks_gravity_and_field_as_fit_does_before_the_board_is_opened() {
             &["calibrate", "--port", NO_BOARD, "--yes", flag, value],
             &dir,
         );
-        refused(&out, &[expected]);
+        refused_with(&out, 2, &[expected]);
         let fit = imucal(&["fit", "none.csv", flag, value], &dir);
-        refused(&fit, &[expected]);
+        refused_with(&fit, 2, &[expected]);
     }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use super::board::BoardProtocol;
+use super::UsageError;
 
 /// IMU calibration: fit calibration models to recordings and inspect still intervals.
 #[derive(Debug, Parser)]
@@ -222,6 +223,20 @@ fn at_least_one(text: &str) -> Result<f64, String> {
     number_that(text, |v| v >= 1.0, "at least 1")
 }
 
+/// `--method`: a method's name, checked here so that a misspelling is a usage error said
+/// before any data is read (whether it suits the sensor is checked with the sensor).
+fn method_name(text: &str) -> Result<String, String> {
+    use imucal::pipeline::methods::{method_by_name, ALL_METHODS};
+    if method_by_name(text).is_some() {
+        return Ok(text.to_string());
+    }
+    let all: Vec<&str> = ALL_METHODS.iter().map(|m| m.name()).collect();
+    Err(format!(
+        "unknown method `{text}`; choose one of {}",
+        all.join(", ")
+    ))
+}
+
 /// `--max-mag-samples`: 0 (every sample) or enough for an ellipsoid fit. A smaller cap would
 /// only ever refuse the fit, and its refusal would read as a recording that is too short.
 fn sample_cap(text: &str) -> Result<usize, String> {
@@ -281,7 +296,7 @@ pub struct FitArgs {
     /// magnetometer, `gyro-bias` for the gyroscope). One of: gyro-bias, gyro-scale, minmax,
     /// axis-aligned, six-position, chen, li, lm, frosio, merayo. Without --sensor it is fitted
     /// to the sensors it is a method for; the others keep their default.
-    #[arg(long)]
+    #[arg(long, value_parser = method_name)]
     pub method: Option<String>,
     /// Print a JSON object keyed by sensor instead of a table.
     #[arg(long)]
@@ -397,22 +412,25 @@ impl CalibrateArgs {
     pub fn check_combination(&self) -> anyhow::Result<()> {
         anyhow::ensure!(
             self.sim_faulty == 0 || self.sim_boards.is_some(),
-            "--sim-faulty {} chooses faulty boards among --sim-boards, which is not given; add \
-             --sim-boards N (N ≥ {}) or leave --sim-faulty out",
-            self.sim_faulty,
-            self.sim_faulty
+            UsageError(format!(
+                "--sim-faulty {} chooses faulty boards among --sim-boards, which is not given; \
+                 add --sim-boards N (N ≥ {}) or leave --sim-faulty out",
+                self.sim_faulty, self.sim_faulty
+            ))
         );
         if let Some(rate) = self.sketch_rate {
             anyhow::ensure!(
                 self.talks_motioncal(),
-                "--sketch-rate {rate} is the reading rate of a MotionCal sketch board, but this \
-                 session talks to imucal's firmware, which states its own rate; leave \
-                 --sketch-rate out, or add {} motioncal for a sketch board",
-                if self.sim {
-                    "--sim-protocol"
-                } else {
-                    "--protocol"
-                }
+                UsageError(format!(
+                    "--sketch-rate {rate} is the reading rate of a MotionCal sketch board, but \
+                     this session talks to imucal's firmware, which states its own rate; leave \
+                     --sketch-rate out, or add {} motioncal for a sketch board",
+                    if self.sim {
+                        "--sim-protocol"
+                    } else {
+                        "--protocol"
+                    }
+                ))
             );
         }
         Ok(())

@@ -32,18 +32,27 @@ use imucal::report::gain::{gain, gain_text_of, Estimated};
 
 use super::args::{FitArgs, SensorChoice};
 use super::write_policy::{check_outputs, Output};
+use super::UsageError;
 
 /// A 3×3 matrix as rows, the layout of the parameter file.
 fn rows(m: &Mat3) -> [[f64; 3]; 3] {
     [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)]))
 }
 
+/// The one sensor `--sensor` names; `None` for every sensor of the recording.
+fn chosen_sensor(choice: SensorChoice) -> Option<Sensor> {
+    match choice {
+        SensorChoice::Accel => Some(Sensor::Accel),
+        SensorChoice::Gyro => Some(Sensor::Gyro),
+        SensorChoice::Mag => Some(Sensor::Mag),
+        SensorChoice::All => None,
+    }
+}
+
 fn requested(args: &FitArgs, recording: &Recording) -> anyhow::Result<Vec<Sensor>> {
-    let wanted = match args.sensor {
-        SensorChoice::Accel => vec![Sensor::Accel],
-        SensorChoice::Gyro => vec![Sensor::Gyro],
-        SensorChoice::Mag => vec![Sensor::Mag],
-        SensorChoice::All => recording.sensors(),
+    let wanted = match chosen_sensor(args.sensor) {
+        Some(sensor) => vec![sensor],
+        None => recording.sensors(),
     };
     for sensor in &wanted {
         if !recording.has(*sensor) {
@@ -79,7 +88,7 @@ fn methods_for(
     let first_refusal = each.iter().find_map(|(_, m)| m.as_ref().err());
     match first_refusal {
         None => Ok(applies),
-        Some(why) if !all_sensors || applies.is_empty() => bail!("{why}"),
+        Some(why) if !all_sensors || applies.is_empty() => Err(UsageError(why.clone()).into()),
         Some(_) => {
             let others: Vec<&str> = each
                 .iter()
@@ -463,6 +472,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         )?;
     }
     let references = super::references(&args.reference)?;
+    // A method named for one sensor is checked before the data are read.
+    if let (Some(name), Some(sensor)) = (&args.method, chosen_sensor(args.sensor)) {
+        methods_for(name, &[sensor], false)?;
+    }
     let recording = super::load(&args.input)?;
     let sensors = requested(args, &recording)?;
     // A wrong --method is an argument error: report it before anything about the data.

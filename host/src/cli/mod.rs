@@ -33,6 +33,18 @@ use args::{
     AccelUnitArg, FormatArg, GyroUnitArg, InputArgs, MagUnitArg, ReferenceArgs, TimeUnitArg,
 };
 
+/// An option value, or a combination of options, the command cannot run with, found after
+/// parsing: it ends the command with exit status 2, the status of clap's own usage errors.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+impl From<ReferenceError> for UsageError {
+    fn from(error: ReferenceError) -> Self {
+        Self(error.to_string())
+    }
+}
+
 /// The recording file a path names: the file itself, or a session directory's `recording.csv`
 /// (so every command that reads a recording takes a session of `imucal calibrate` alike).
 pub fn recording_file(path: &Path) -> anyhow::Result<PathBuf> {
@@ -165,8 +177,12 @@ pub fn input_options(input: &InputArgs, reference: &ReferenceArgs) -> InputOptio
 }
 
 /// The reference values, range-checked.
-pub fn references(reference: &ReferenceArgs) -> Result<References, ReferenceError> {
-    References::checked(reference.gravity, reference.field_ut, reference.gyro_scale)
+pub fn references(reference: &ReferenceArgs) -> Result<References, UsageError> {
+    Ok(References::checked(
+        reference.gravity,
+        reference.field_ut,
+        reference.gyro_scale,
+    )?)
 }
 
 /// Still-detection settings from the command line.
