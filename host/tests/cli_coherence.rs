@@ -161,6 +161,46 @@ fn an_option_value_or_combination_the_command_cannot_take_exits_with_the_usage_s
 }
 
 #[test]
+fn a_direction_angle_of_90_degrees_or_more_is_refused_with_its_range() {
+    let dir = scratch("direction-angle");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    // The angle is compared through its cosine: 400° used to act as 40°.
+    for command in ["fit", "still"] {
+        for angle in ["400", "90", "-10"] {
+            let out = imucal_in(
+                &dir,
+                &[
+                    command,
+                    &recording,
+                    "--gyro-unit",
+                    "dps",
+                    "--direction-angle",
+                    angle,
+                ],
+            );
+            let message = stderr(&out);
+            assert_eq!(out.status.code(), Some(2), "{command} {angle}: {message}");
+            assert!(
+                message.contains("more than 0 and less than 90"),
+                "{command} {angle}: {message}"
+            );
+        }
+    }
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--direction-angle",
+            "45",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
 fn report_refuses_a_report_directory_saying_what_it_is() {
     let dir = scratch("report");
     let recording = real("imucal_nilspod_ferraris.csv").display().to_string();

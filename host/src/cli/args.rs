@@ -193,8 +193,9 @@ pub struct InputArgs {
     /// the data).
     #[arg(long, value_parser = at_least_one)]
     pub still_margin: Option<f64>,
-    /// Holds whose gravity directions are within this angle (degrees) count as one direction.
-    #[arg(long, default_value_t = 10.0, value_parser = positive)]
+    /// Holds whose gravity directions are within this angle (degrees, more than 0 and less
+    /// than 90) count as one direction.
+    #[arg(long, default_value_t = 10.0, value_parser = direction_angle)]
     pub direction_angle: f64,
 }
 
@@ -221,6 +222,17 @@ fn non_negative(text: &str) -> Result<f64, String> {
 
 fn at_least_one(text: &str) -> Result<f64, String> {
     number_that(text, |v| v >= 1.0, "at least 1")
+}
+
+/// `--direction-angle`: below 90°, since adjacent faces of a box (90° apart) must stay distinct
+/// directions; the angle is otherwise taken through its cosine, so 400 would act as 40.
+fn direction_angle(text: &str) -> Result<f64, String> {
+    number_that(
+        text,
+        |v| v > 0.0 && v < 90.0,
+        "an angle in degrees more than 0 and less than 90 (at 90 or more, holds on adjacent \
+         faces would count as one direction)",
+    )
 }
 
 /// `--method`: a method's name, checked here so that a misspelling is a usage error said
