@@ -55,6 +55,16 @@ fn requested(args: &FitArgs, recording: &Recording) -> anyhow::Result<Vec<Sensor
         None => recording.sensors(),
     };
     for sensor in &wanted {
+        let from_stdin = args.input.recording.as_os_str() == "-";
+        if *sensor == Sensor::Mag && from_stdin && !recording.has(Sensor::Mag) {
+            // The sibling `<name>_mag.csv` is looked for next to a file, and stdin has no name.
+            bail!(
+                "standard input has no mag data (columns {}), and a magnetometer file next to \
+                 it (`<name>_mag.csv` beside a recording file) cannot be found for standard \
+                 input; name that file with --mag-file, or choose another --sensor",
+                sensor.columns().join(" ")
+            );
+        }
         if !recording.has(*sensor) {
             bail!(
                 "`{}` has no {sensor} data (columns {}); choose another --sensor",
