@@ -201,6 +201,77 @@ fn a_direction_angle_of_90_degrees_or_more_is_refused_with_its_range() {
 }
 
 #[test]
+fn an_input_option_the_recording_makes_moot_is_said_to_be_ignored() {
+    let dir = scratch("moot");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let accel_only = "--columns=t_s=t_s,ax=ax,ay=ay,az=az";
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &[
+                "fit",
+                "--gyro-unit",
+                "dps",
+                "--gyro-scale",
+                "0.001",
+                "--sensor",
+                "accel",
+            ],
+            "--gyro-scale 0.001 is ignored: it converts counts to rad/s, and the gyroscope \
+             data are in °/s",
+        ),
+        (
+            &["still", "--gyro-unit", "dps", "--imutk-time-unit", "ms"],
+            "--imutk-time-unit ms is ignored",
+        ),
+        (
+            &["fit", accel_only, "--gyro-unit", "dps"],
+            "--gyro-unit dps is ignored: --columns maps no gyro columns",
+        ),
+        (
+            &["still", "--gyro-unit", "dps", "--mag-unit", "gauss"],
+            "--mag-unit gauss is ignored: `",
+        ),
+    ];
+    for (options, expected) in cases {
+        let args = [&options[..1], &[recording.as_str()], &options[1..]].concat();
+        let out = imucal_in(&dir, &args);
+        let message = stderr(&out);
+        assert!(out.status.success(), "{args:?}: {message}");
+        assert!(message.contains(expected), "{args:?}: {message}");
+    }
+    // Where the option acts, nothing is said: IMU-TK text with its time unit, and units of
+    // sensors the recording has.
+    let imutk = dir.join("accel.txt");
+    let rows: String = (0..400)
+        .map(|i| format!("{} 0.01 0.02 9.81\n", i * 10))
+        .collect();
+    std::fs::write(&imutk, rows).expect("an IMU-TK file");
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &imutk.display().to_string(),
+            "--imutk-time-unit",
+            "ms",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("is ignored"), "{}", stderr(&out));
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--accel-unit",
+            "mps2",
+        ],
+    );
+    assert!(!stderr(&out).contains("is ignored"), "{}", stderr(&out));
+}
+
+#[test]
 fn report_refuses_a_report_directory_saying_what_it_is() {
     let dir = scratch("report");
     let recording = real("imucal_nilspod_ferraris.csv").display().to_string();

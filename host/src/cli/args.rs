@@ -151,15 +151,15 @@ pub struct InputArgs {
     /// Recording file (CSV with a header, or IMU-TK accelerometer text file); `-` reads standard
     /// input, and a FIFO or `<(command)` is read once as a stream.
     pub recording: PathBuf,
-    /// Unit of the accelerometer columns.
-    #[arg(long, value_enum, default_value = "mps2")]
-    pub accel_unit: AccelUnitArg,
-    /// Unit of the gyroscope columns.
-    #[arg(long, value_enum, default_value = "rads")]
-    pub gyro_unit: GyroUnitArg,
-    /// Unit of the magnetometer columns.
-    #[arg(long, value_enum, default_value = "ut")]
-    pub mag_unit: MagUnitArg,
+    /// Unit of the accelerometer columns (default: mps2).
+    #[arg(long, value_enum)]
+    pub accel_unit: Option<AccelUnitArg>,
+    /// Unit of the gyroscope columns (default: rads).
+    #[arg(long, value_enum)]
+    pub gyro_unit: Option<GyroUnitArg>,
+    /// Unit of the magnetometer columns (default: ut).
+    #[arg(long, value_enum)]
+    pub mag_unit: Option<MagUnitArg>,
     /// Sample rate in Hz for files without a `t_s` column.
     #[arg(long)]
     pub rate: Option<f64>,
@@ -180,9 +180,9 @@ pub struct InputArgs {
     /// IMU-TK: the gyroscope file paired row by row with the accelerometer file.
     #[arg(long)]
     pub gyro_file: Option<PathBuf>,
-    /// IMU-TK: unit of the time stamps.
-    #[arg(long, value_enum, default_value = "s")]
-    pub imutk_time_unit: TimeUnitArg,
+    /// IMU-TK: unit of the time stamps (default: s; other formats name their own).
+    #[arg(long, value_enum)]
+    pub imutk_time_unit: Option<TimeUnitArg>,
     /// Still detection: window length in seconds.
     #[arg(long, default_value_t = 0.5, value_parser = positive)]
     pub window: f64,
@@ -282,7 +282,8 @@ pub struct ReferenceArgs {
     /// the fitted raw radius is checked against it.
     #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
     pub location: Option<imucal::geomag::Location>,
-    /// Gyroscope scale in rad/s per count, for `--gyro-unit counts`.
+    /// Gyroscope scale in rad/s per count, for `--gyro-unit counts` (with another unit it has
+    /// no effect, and a warning says so).
     #[arg(long)]
     pub gyro_scale: Option<f64>,
     /// Magnetometer fits use at most this many samples, evenly thinned (0, the default, = all:
