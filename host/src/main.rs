@@ -108,7 +108,11 @@ fn run(cli: Cli) -> ExitCode {
                 return output_failure(io);
             }
             say!("imucal: {error:#}");
-            ExitCode::FAILURE
+            if error.chain().any(|cause| cause.is::<cli::UsageError>()) {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

@@ -88,6 +88,190 @@ fn fit_and_still_read_a_session_directory_as_its_recording() {
 }
 
 #[test]
+fn fit_and_still_on_a_session_without_its_recording_point_to_analyze_and_report() {
+    let dir = scratch("pose-session");
+    // What `calibrate` leaves: the poses it averaged and its parameters, no recording.
+    let session = dir.join("S");
+    std::fs::create_dir(&session).expect("session directory");
+    std::fs::write(session.join("poses.json"), "[]").expect("poses");
+    std::fs::write(session.join("params.json"), "{}").expect("params");
+    for command in ["fit", "still"] {
+        let out = imucal_in(&dir, &[command, "S"]);
+        let message = stderr(&out);
+        assert!(!out.status.success(), "{command}: {message}");
+        assert!(
+            message.contains("`S` is a session directory of `imucal calibrate`")
+                && message.contains("no recording (recording.csv)")
+                && message.contains("`imucal analyze S`")
+                && message.contains("`imucal report S`"),
+            "{command}: {message}"
+        );
+        assert!(
+            !message.contains("pass a recording file, or a session"),
+            "{message}"
+        );
+    }
+}
+
+#[test]
+fn an_option_value_or_combination_the_command_cannot_take_exits_with_the_usage_status() {
+    let dir = scratch("usage");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    for (options, named) in [
+        (
+            &["--method", "bogus"][..],
+            "unknown method `bogus`; choose one of",
+        ),
+        (&["--gravity", "0"], "--gravity 0 is outside 9.7–9.9 m/s²"),
+        (&["--field-ut", "-5"], "--field-ut -5 is outside 1–5000 µT"),
+        (&["--gyro-scale", "-1"], "--gyro-scale -1 is outside"),
+        (
+            &["--sensor", "gyro", "--method", "chen"],
+            "method `chen` does not apply to the gyro",
+        ),
+    ] {
+        let out = imucal_in(
+            &dir,
+            &[&["fit", &recording, "--gyro-unit", "dps"], options].concat(),
+        );
+        let message = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{options:?}: {message}");
+        assert!(message.contains(named), "{options:?}: {message}");
+    }
+    // Said before the recording is read: a missing file does not hide it.
+    let out = imucal_in(
+        &dir,
+        &[
+            "fit",
+            "none.csv",
+            "--sensor",
+            "mag",
+            "--method",
+            "six-position",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("does not apply to the mag"),
+        "{}",
+        stderr(&out)
+    );
+    let out = imucal_in(&dir, &["calibrate", "--sim", "--yes", "--sim-faulty", "2"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+}
+
+#[test]
+fn a_direction_angle_of_90_degrees_or_more_is_refused_with_its_range() {
+    let dir = scratch("direction-angle");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    // The angle is compared through its cosine: 400° used to act as 40°.
+    for command in ["fit", "still"] {
+        for angle in ["400", "90", "-10"] {
+            let out = imucal_in(
+                &dir,
+                &[
+                    command,
+                    &recording,
+                    "--gyro-unit",
+                    "dps",
+                    "--direction-angle",
+                    angle,
+                ],
+            );
+            let message = stderr(&out);
+            assert_eq!(out.status.code(), Some(2), "{command} {angle}: {message}");
+            assert!(
+                message.contains("more than 0 and less than 90"),
+                "{command} {angle}: {message}"
+            );
+        }
+    }
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--direction-angle",
+            "45",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn an_input_option_the_recording_makes_moot_is_said_to_be_ignored() {
+    let dir = scratch("moot");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let accel_only = "--columns=t_s=t_s,ax=ax,ay=ay,az=az";
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &[
+                "fit",
+                "--gyro-unit",
+                "dps",
+                "--gyro-scale",
+                "0.001",
+                "--sensor",
+                "accel",
+            ],
+            "--gyro-scale 0.001 is ignored: it converts counts to rad/s, and the gyroscope \
+             data are in °/s",
+        ),
+        (
+            &["still", "--gyro-unit", "dps", "--imutk-time-unit", "ms"],
+            "--imutk-time-unit ms is ignored",
+        ),
+        (
+            &["fit", accel_only, "--gyro-unit", "dps"],
+            "--gyro-unit dps is ignored: --columns maps no gyro columns",
+        ),
+        (
+            &["still", "--gyro-unit", "dps", "--mag-unit", "gauss"],
+            "--mag-unit gauss is ignored: `",
+        ),
+    ];
+    for (options, expected) in cases {
+        let args = [&options[..1], &[recording.as_str()], &options[1..]].concat();
+        let out = imucal_in(&dir, &args);
+        let message = stderr(&out);
+        assert!(out.status.success(), "{args:?}: {message}");
+        assert!(message.contains(expected), "{args:?}: {message}");
+    }
+    // Where the option acts, nothing is said: IMU-TK text with its time unit, and units of
+    // sensors the recording has.
+    let imutk = dir.join("accel.txt");
+    let rows: String = (0..400)
+        .map(|i| format!("{} 0.01 0.02 9.81\n", i * 10))
+        .collect();
+    std::fs::write(&imutk, rows).expect("an IMU-TK file");
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &imutk.display().to_string(),
+            "--imutk-time-unit",
+            "ms",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("is ignored"), "{}", stderr(&out));
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--accel-unit",
+            "mps2",
+        ],
+    );
+    assert!(!stderr(&out).contains("is ignored"), "{}", stderr(&out));
+}
+
+#[test]
 fn report_refuses_a_report_directory_saying_what_it_is() {
     let dir = scratch("report");
     let recording = real("imucal_nilspod_ferraris.csv").display().to_string();

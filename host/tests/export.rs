@@ -505,3 +505,58 @@ fn a_reason_read_from_the_parameter_file_cannot_end_the_generated_comment() {
         }
     }
 }
+
+#[test]
+fn export_of_a_session_file_or_directory_names_the_sessions_parameter_file() {
+    let dir = scratch("session-files");
+    let session = dir.join("S");
+    std::fs::create_dir_all(&session).expect("session directory");
+    let params = imucal::device::ParamsFile::from(&plain_set());
+    std::fs::write(session.join("params.json"), params.to_json()).expect("params");
+    // The shapes `calibrate` writes next to it: a summary object and a list of poses.
+    std::fs::write(
+        session.join("summary.json"),
+        r#"{"verified": true, "accel_rest_error_mg": 0.3, "verdict": {}, "params": {}}"#,
+    )
+    .expect("summary");
+    std::fs::write(
+        session.join("poses.json"),
+        r#"[{"target": "+Z up", "target_index": 0, "stats": {"n": 72}}]"#,
+    )
+    .expect("poses");
+    let expected_params = format!("`{}`", session.join("params.json").display());
+    for (given, what) in [
+        (
+            "summary.json",
+            "is not a parameter file but the summary of a calibration session",
+        ),
+        (
+            "poses.json",
+            "is not a parameter file but the poses of a calibration session",
+        ),
+        ("", "is a directory, not a parameter file"),
+    ] {
+        let path = if given.is_empty() {
+            session.clone()
+        } else {
+            session.join(given)
+        };
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["export", &path.display().to_string()])
+            .output()
+            .expect("the binary runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{given}: {stderr}");
+        assert!(
+            stderr.contains(what) && stderr.contains(&expected_params),
+            "{given}: {stderr}"
+        );
+        assert!(
+            !stderr.contains("is not a parameter file key")
+                && !stderr.contains("invalid type")
+                && !stderr.contains("os error"),
+            "{given}: {stderr}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

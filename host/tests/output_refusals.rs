@@ -28,8 +28,13 @@ fn scratch(name: &str) -> PathBuf {
 
 /// The command failed with `expected` in its message, before it touched the (missing) board.
 fn refused(out: &Output, expected: &[&str]) {
+    refused_with(out, 1, expected);
+}
+
+/// [`refused`] with the exit status `code` (2 for an option value the command cannot take).
+fn refused_with(out: &Output, code: i32, expected: &[&str]) {
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(out.status.code(), Some(code), "{stderr}");
     for part in expected {
         assert!(stderr.contains(part), "missing {part:?} in: {stderr}");
     }
@@ -74,9 +79,9 @@ fn calibrate_checks_gravity_and_field_as_fit_does_before_the_board_is_opened() {
             &["calibrate", "--port", NO_BOARD, "--yes", flag, value],
             &dir,
         );
-        refused(&out, &[expected]);
+        refused_with(&out, 2, &[expected]);
         let fit = imucal(&["fit", "none.csv", flag, value], &dir);
-        refused(&fit, &[expected]);
+        refused_with(&fit, 2, &[expected]);
     }
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -178,6 +183,48 @@ fn fit_params_out_onto_the_recording_is_refused_before_the_recording_is_read() {
     assert_eq!(
         std::fs::read_to_string(dir.join("rec.csv")).unwrap(),
         "not a recording"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A hard link is the input under a name of its own: neither its path nor a link resolves to
+/// the input's, so only the file's identity tells them apart.
+#[cfg(unix)]
+#[test]
+fn an_output_hard_linked_to_an_input_is_refused_even_with_force() {
+    let dir = scratch("hard-link");
+    std::fs::create_dir(dir.join("rec")).unwrap();
+    std::fs::write(dir.join("rec/n.csv"), "not a recording").unwrap();
+    std::fs::hard_link(dir.join("rec/n.csv"), dir.join("hard.json")).unwrap();
+    let fit = imucal(
+        &[
+            "fit",
+            "rec/n.csv",
+            "--gyro-unit",
+            "dps",
+            "--params-out",
+            "hard.json",
+            "--force",
+        ],
+        &dir,
+    );
+    refused(&fit, &["`hard.json` is also the input `rec/n.csv`"]);
+    std::fs::create_dir(dir.join("out")).unwrap();
+    std::fs::hard_link(dir.join("rec/n.csv"), dir.join("out/report.html")).unwrap();
+    let report = imucal(&["report", "rec/n.csv", "-o", "out", "--force"], &dir);
+    refused(&report, &["is also the input `rec/n.csv`"]);
+    let params = imucal::device::ParamsFile::from(&imucal_protocol::CalibrationSet::identity());
+    std::fs::write(dir.join("p.json"), params.to_json()).unwrap();
+    std::fs::hard_link(dir.join("p.json"), dir.join("p.h")).unwrap();
+    let export = imucal(&["export", "p.json", "-o", "p.h", "--force"], &dir);
+    refused(&export, &["`p.h` is also the input `p.json`"]);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("rec/n.csv")).unwrap(),
+        "not a recording"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("p.json")).unwrap(),
+        params.to_json()
     );
     std::fs::remove_dir_all(&dir).ok();
 }

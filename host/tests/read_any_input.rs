@@ -152,3 +152,29 @@ fn a_semicolon_separated_file_is_refused_with_the_columns_option_that_reads_it()
         assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{a} vs {b}");
     }
 }
+
+#[test]
+fn standard_input_without_magnetometer_columns_points_to_mag_file() {
+    // A recording whose magnetometer is in a file of its own: next to a file it is found as
+    // `<name>_mag.csv`, but standard input has no name to put it next to.
+    let accel = "t_s,ax,ay,az\n0.00,0,0,9.8\n0.01,0,0,9.8\n0.02,0,0,9.8\n";
+    let error = fit_mag("-", Some(accel)).expect_err("no magnetometer data");
+    assert!(
+        error.contains("standard input has no mag data")
+            && error.contains("cannot be found for standard input")
+            && error.contains("--mag-file"),
+        "{error}"
+    );
+    assert!(!error.contains("`-`"), "{error}");
+    let mag = scratch("stdin-mag").join("rec_mag.csv");
+    std::fs::write(&mag, mag_recording()).expect("writable");
+    let named = fit_mag_with(
+        "-",
+        Some(accel),
+        &["--mag-file", &mag.display().to_string()],
+    );
+    assert_eq!(
+        offset(&named.expect("--mag-file fits")),
+        offset(&file_fit())
+    );
+}

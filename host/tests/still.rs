@@ -68,6 +68,7 @@ fn six_face_recording(seed: u64, hold_s: f64) -> (Recording, Vec<(f64, f64, Vec3
         labels: None,
         ignored_columns: Vec::new(),
         units: Units::default(),
+        read_as_imutk: false,
     };
     (rec, truth)
 }

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use super::board::BoardProtocol;
+use super::UsageError;
 
 /// IMU calibration: fit calibration models to recordings and inspect still intervals.
 #[derive(Debug, Parser)]
@@ -150,15 +151,15 @@ pub struct InputArgs {
     /// Recording file (CSV with a header, or IMU-TK accelerometer text file); `-` reads standard
     /// input, and a FIFO or `<(command)` is read once as a stream.
     pub recording: PathBuf,
-    /// Unit of the accelerometer columns.
-    #[arg(long, value_enum, default_value = "mps2")]
-    pub accel_unit: AccelUnitArg,
-    /// Unit of the gyroscope columns.
-    #[arg(long, value_enum, default_value = "rads")]
-    pub gyro_unit: GyroUnitArg,
-    /// Unit of the magnetometer columns.
-    #[arg(long, value_enum, default_value = "ut")]
-    pub mag_unit: MagUnitArg,
+    /// Unit of the accelerometer columns (default: mps2).
+    #[arg(long, value_enum)]
+    pub accel_unit: Option<AccelUnitArg>,
+    /// Unit of the gyroscope columns (default: rads).
+    #[arg(long, value_enum)]
+    pub gyro_unit: Option<GyroUnitArg>,
+    /// Unit of the magnetometer columns (default: ut).
+    #[arg(long, value_enum)]
+    pub mag_unit: Option<MagUnitArg>,
     /// Sample rate in Hz for files without a `t_s` column.
     #[arg(long)]
     pub rate: Option<f64>,
@@ -179,9 +180,9 @@ pub struct InputArgs {
     /// IMU-TK: the gyroscope file paired row by row with the accelerometer file.
     #[arg(long)]
     pub gyro_file: Option<PathBuf>,
-    /// IMU-TK: unit of the time stamps.
-    #[arg(long, value_enum, default_value = "s")]
-    pub imutk_time_unit: TimeUnitArg,
+    /// IMU-TK: unit of the time stamps (default: s; other formats name their own).
+    #[arg(long, value_enum)]
+    pub imutk_time_unit: Option<TimeUnitArg>,
     /// Still detection: window length in seconds.
     #[arg(long, default_value_t = 0.5, value_parser = positive)]
     pub window: f64,
@@ -192,8 +193,9 @@ pub struct InputArgs {
     /// the data).
     #[arg(long, value_parser = at_least_one)]
     pub still_margin: Option<f64>,
-    /// Holds whose gravity directions are within this angle (degrees) count as one direction.
-    #[arg(long, default_value_t = 10.0, value_parser = positive)]
+    /// Holds whose gravity directions are within this angle (degrees, more than 0 and less
+    /// than 90) count as one direction.
+    #[arg(long, default_value_t = 10.0, value_parser = direction_angle)]
     pub direction_angle: f64,
 }
 
@@ -220,6 +222,31 @@ fn non_negative(text: &str) -> Result<f64, String> {
 
 fn at_least_one(text: &str) -> Result<f64, String> {
     number_that(text, |v| v >= 1.0, "at least 1")
+}
+
+/// `--direction-angle`: below 90°, since adjacent faces of a box (90° apart) must stay distinct
+/// directions; the angle is otherwise taken through its cosine, so 400 would act as 40.
+fn direction_angle(text: &str) -> Result<f64, String> {
+    number_that(
+        text,
+        |v| v > 0.0 && v < 90.0,
+        "an angle in degrees more than 0 and less than 90 (at 90 or more, holds on adjacent \
+         faces would count as one direction)",
+    )
+}
+
+/// `--method`: a method's name, checked here so that a misspelling is a usage error said
+/// before any data is read (whether it suits the sensor is checked with the sensor).
+fn method_name(text: &str) -> Result<String, String> {
+    use imucal::pipeline::methods::{method_by_name, ALL_METHODS};
+    if method_by_name(text).is_some() {
+        return Ok(text.to_string());
+    }
+    let all: Vec<&str> = ALL_METHODS.iter().map(|m| m.name()).collect();
+    Err(format!(
+        "unknown method `{text}`; choose one of {}",
+        all.join(", ")
+    ))
 }
 
 /// `--max-mag-samples`: 0 (every sample) or enough for an ellipsoid fit. A smaller cap would
@@ -255,7 +282,8 @@ pub struct ReferenceArgs {
     /// the fitted raw radius is checked against it.
     #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
     pub location: Option<imucal::geomag::Location>,
-    /// Gyroscope scale in rad/s per count, for `--gyro-unit counts`.
+    /// Gyroscope scale in rad/s per count, for `--gyro-unit counts` (with another unit it has
+    /// no effect, and a warning says so).
     #[arg(long)]
     pub gyro_scale: Option<f64>,
     /// Magnetometer fits use at most this many samples, evenly thinned (0, the default, = all:
@@ -281,7 +309,7 @@ pub struct FitArgs {
     /// magnetometer, `gyro-bias` for the gyroscope). One of: gyro-bias, gyro-scale, minmax,
     /// axis-aligned, six-position, chen, li, lm, frosio, merayo. Without --sensor it is fitted
     /// to the sensors it is a method for; the others keep their default.
-    #[arg(long)]
+    #[arg(long, value_parser = method_name)]
     pub method: Option<String>,
     /// Print a JSON object keyed by sensor instead of a table.
     #[arg(long)]
@@ -397,22 +425,25 @@ impl CalibrateArgs {
     pub fn check_combination(&self) -> anyhow::Result<()> {
         anyhow::ensure!(
             self.sim_faulty == 0 || self.sim_boards.is_some(),
-            "--sim-faulty {} chooses faulty boards among --sim-boards, which is not given; add \
-             --sim-boards N (N ≥ {}) or leave --sim-faulty out",
-            self.sim_faulty,
-            self.sim_faulty
+            UsageError(format!(
+                "--sim-faulty {} chooses faulty boards among --sim-boards, which is not given; \
+                 add --sim-boards N (N ≥ {}) or leave --sim-faulty out",
+                self.sim_faulty, self.sim_faulty
+            ))
         );
         if let Some(rate) = self.sketch_rate {
             anyhow::ensure!(
                 self.talks_motioncal(),
-                "--sketch-rate {rate} is the reading rate of a MotionCal sketch board, but this \
-                 session talks to imucal's firmware, which states its own rate; leave \
-                 --sketch-rate out, or add {} motioncal for a sketch board",
-                if self.sim {
-                    "--sim-protocol"
-                } else {
-                    "--protocol"
-                }
+                UsageError(format!(
+                    "--sketch-rate {rate} is the reading rate of a MotionCal sketch board, but \
+                     this session talks to imucal's firmware, which states its own rate; leave \
+                     --sketch-rate out, or add {} motioncal for a sketch board",
+                    if self.sim {
+                        "--sim-protocol"
+                    } else {
+                        "--protocol"
+                    }
+                ))
             );
         }
         Ok(())

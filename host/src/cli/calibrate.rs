@@ -115,7 +115,8 @@ pub(super) fn field_reference(args: &CalibrateArgs) -> anyhow::Result<Option<f64
 /// `--gravity` and `--field-ut` checked as `fit`, `analyze` and `report` check them (gravity on
 /// the Earth's surface, fields a magnetometer can measure).
 fn checked_references(args: &CalibrateArgs) -> anyhow::Result<References> {
-    Ok(References::checked(args.gravity, args.field_ut, None)?)
+    let checked = References::checked(args.gravity, args.field_ut, None);
+    Ok(checked.map_err(super::UsageError::from)?)
 }
 
 /// The session's options from the command line.

@@ -32,20 +32,39 @@ use imucal::report::gain::{gain, gain_text_of, Estimated};
 
 use super::args::{FitArgs, SensorChoice};
 use super::write_policy::{check_outputs, Output};
+use super::UsageError;
 
 /// A 3×3 matrix as rows, the layout of the parameter file.
 fn rows(m: &Mat3) -> [[f64; 3]; 3] {
     [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)]))
 }
 
+/// The one sensor `--sensor` names; `None` for every sensor of the recording.
+fn chosen_sensor(choice: SensorChoice) -> Option<Sensor> {
+    match choice {
+        SensorChoice::Accel => Some(Sensor::Accel),
+        SensorChoice::Gyro => Some(Sensor::Gyro),
+        SensorChoice::Mag => Some(Sensor::Mag),
+        SensorChoice::All => None,
+    }
+}
+
 fn requested(args: &FitArgs, recording: &Recording) -> anyhow::Result<Vec<Sensor>> {
-    let wanted = match args.sensor {
-        SensorChoice::Accel => vec![Sensor::Accel],
-        SensorChoice::Gyro => vec![Sensor::Gyro],
-        SensorChoice::Mag => vec![Sensor::Mag],
-        SensorChoice::All => recording.sensors(),
+    let wanted = match chosen_sensor(args.sensor) {
+        Some(sensor) => vec![sensor],
+        None => recording.sensors(),
     };
     for sensor in &wanted {
+        let from_stdin = args.input.recording.as_os_str() == "-";
+        if *sensor == Sensor::Mag && from_stdin && !recording.has(Sensor::Mag) {
+            // The sibling `<name>_mag.csv` is looked for next to a file, and stdin has no name.
+            bail!(
+                "standard input has no mag data (columns {}), and a magnetometer file next to \
+                 it (`<name>_mag.csv` beside a recording file) cannot be found for standard \
+                 input; name that file with --mag-file, or choose another --sensor",
+                sensor.columns().join(" ")
+            );
+        }
         if !recording.has(*sensor) {
             bail!(
                 "`{}` has no {sensor} data (columns {}); choose another --sensor",
@@ -79,7 +98,7 @@ fn methods_for(
     let first_refusal = each.iter().find_map(|(_, m)| m.as_ref().err());
     match first_refusal {
         None => Ok(applies),
-        Some(why) if !all_sensors || applies.is_empty() => bail!("{why}"),
+        Some(why) if !all_sensors || applies.is_empty() => Err(UsageError(why.clone()).into()),
         Some(_) => {
             let others: Vec<&str> = each
                 .iter()
@@ -463,7 +482,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         )?;
     }
     let references = super::references(&args.reference)?;
-    let recording = super::load(&args.input)?;
+    // A method named for one sensor is checked before the data are read.
+    if let (Some(name), Some(sensor)) = (&args.method, chosen_sensor(args.sensor)) {
+        methods_for(name, &[sensor], false)?;
+    }
+    let recording = super::load(&args.input, args.reference.gyro_scale)?;
     let sensors = requested(args, &recording)?;
     // A wrong --method is an argument error: report it before anything about the data.
     let methods: Vec<(Sensor, Method)> = match &args.method {

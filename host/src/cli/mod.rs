@@ -25,13 +25,28 @@ mod write_policy;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use clap::ValueEnum;
 use imucal::pipeline::{InputOptions, ReferenceError, References};
-use imucal::recording::{AccelUnit, Format, GyroUnit, LoadOptions, MagUnit, Recording, Units};
+use imucal::recording::{
+    AccelUnit, Format, GyroUnit, LoadOptions, MagUnit, Recording, Sensor, Units,
+};
 use imucal::still::StillOptions;
 
 use args::{
     AccelUnitArg, FormatArg, GyroUnitArg, InputArgs, MagUnitArg, ReferenceArgs, TimeUnitArg,
 };
+
+/// An option value, or a combination of options, the command cannot run with, found after
+/// parsing: it ends the command with exit status 2, the status of clap's own usage errors.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+impl From<ReferenceError> for UsageError {
+    fn from(error: ReferenceError) -> Self {
+        Self(error.to_string())
+    }
+}
 
 /// The recording file a path names: the file itself, or a session directory's `recording.csv`
 /// (so every command that reads a recording takes a session of `imucal calibrate` alike).
@@ -43,33 +58,49 @@ pub fn recording_file(path: &Path) -> anyhow::Result<PathBuf> {
     if candidate.is_file() {
         return Ok(candidate);
     }
+    let shown = path.display();
+    // `calibrate` keeps only the poses it averaged, not the stream they came from.
+    if path.join("poses.json").is_file() {
+        anyhow::bail!(
+            "`{shown}` is a session directory of `imucal calibrate` that holds its poses \
+             (poses.json) but no recording (recording.csv); this command reads a continuous \
+             recording, so study the session with `imucal analyze {shown}` or `imucal report \
+             {shown}`, or pass a recording file"
+        );
+    }
     anyhow::bail!(
-        "`{}` is a directory without a recording.csv; pass a recording file, or a session \
-         directory of `imucal calibrate` (sessions saved without their recording can be studied \
-         by `imucal analyze` and `imucal report` from their poses)",
-        path.display()
+        "`{shown}` is a directory without a recording.csv; pass a recording file, or a session \
+         directory of `imucal calibrate` that holds one"
     )
 }
 
-/// Read the recording named on the command line (a file, or a session directory's).
-pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
+/// Read the recording named on the command line (a file, or a session directory's);
+/// `gyro_scale` is `--gyro-scale` for the commands that take it, said to be moot when it is.
+pub fn load(input: &InputArgs, gyro_scale: Option<f64>) -> anyhow::Result<Recording> {
     let units = Units {
-        accel: match input.accel_unit {
+        accel: match input.accel_unit.unwrap_or(AccelUnitArg::Mps2) {
             AccelUnitArg::Mps2 => AccelUnit::Mps2,
             AccelUnitArg::G => AccelUnit::G,
             AccelUnitArg::Counts => AccelUnit::Counts,
         },
-        gyro: match input.gyro_unit {
+        gyro: match input.gyro_unit.unwrap_or(GyroUnitArg::Rads) {
             GyroUnitArg::Rads => GyroUnit::Rads,
             GyroUnitArg::Dps => GyroUnit::Dps,
             GyroUnitArg::Counts => GyroUnit::Counts,
         },
-        mag: match input.mag_unit {
+        mag: match input.mag_unit.unwrap_or(MagUnitArg::Ut) {
             MagUnitArg::Ut => MagUnit::Ut,
             MagUnitArg::Gauss => MagUnit::Gauss,
             MagUnitArg::Counts => MagUnit::Counts,
         },
     };
+    let recording = read(input, units)?;
+    warn_moot_options(input, &recording, units, gyro_scale);
+    Ok(recording)
+}
+
+/// The recording as the input options read it.
+fn read(input: &InputArgs, units: Units) -> anyhow::Result<Recording> {
     if let Some(recording) = import::load(input, units)? {
         return Ok(recording);
     }
@@ -86,7 +117,7 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
             FormatArg::Motioncal => Format::Auto,
         },
         gyro_file: input.gyro_file.clone(),
-        imutk_time_scale: Some(match input.imutk_time_unit {
+        imutk_time_scale: Some(match input.imutk_time_unit.unwrap_or(TimeUnitArg::S) {
             TimeUnitArg::S => 1.0,
             TimeUnitArg::Ms => 1e-3,
             TimeUnitArg::Us => 1e-6,
@@ -117,6 +148,75 @@ pub fn load(input: &InputArgs) -> anyhow::Result<Recording> {
         );
     }
     Ok(recording)
+}
+
+/// Says which options given for the input the recording makes moot (a unit of a sensor it
+/// does not have or whose unit its format fixes, the IMU-TK time unit for another format, a
+/// gyroscope scale for data not in counts): a user who gives one expects it to act.
+fn warn_moot_options(
+    input: &InputArgs,
+    recording: &Recording,
+    asked: Units,
+    gyro_scale: Option<f64>,
+) {
+    let shown = input.recording.display();
+    let given = [
+        (
+            Sensor::Accel,
+            "--accel-unit",
+            input.accel_unit.map(value_name),
+        ),
+        (Sensor::Gyro, "--gyro-unit", input.gyro_unit.map(value_name)),
+        (Sensor::Mag, "--mag-unit", input.mag_unit.map(value_name)),
+    ];
+    for (sensor, flag, value) in given {
+        let Some(value) = value else {
+            continue;
+        };
+        if !recording.has(sensor) {
+            let read_as = match &input.columns {
+                Some(_) => format!("--columns maps no {sensor} columns of `{shown}`"),
+                None => format!(
+                    "`{shown}` has no {sensor} data (columns {})",
+                    sensor.columns().join(" ")
+                ),
+            };
+            say!("imucal: warning: {flag} {value} is ignored: {read_as}");
+        } else if recording.units.symbol(sensor) != asked.symbol(sensor) {
+            say!(
+                "imucal: warning: {flag} {value} is ignored: the format of `{shown}` gives its \
+                 {sensor} data in {}",
+                recording.units.symbol(sensor)
+            );
+        }
+    }
+    if let (Some(unit), false) = (input.imutk_time_unit, recording.read_as_imutk) {
+        say!(
+            "imucal: warning: --imutk-time-unit {} is ignored: it is the unit of IMU-TK time \
+             stamps, and `{shown}` was not read as IMU-TK text",
+            value_name(unit)
+        );
+    }
+    let Some(scale) = gyro_scale else {
+        return;
+    };
+    if !recording.has(Sensor::Gyro) {
+        say!("imucal: warning: --gyro-scale {scale} is ignored: `{shown}` has no gyro data");
+    } else if !recording.units.is_counts(Sensor::Gyro) {
+        say!(
+            "imucal: warning: --gyro-scale {scale} is ignored: it converts counts to rad/s, and \
+             the gyroscope data are in {}; give --gyro-unit counts for data in counts, or leave \
+             --gyro-scale out",
+            recording.units.symbol(Sensor::Gyro)
+        );
+    }
+}
+
+/// A flag value as it is typed.
+fn value_name(value: impl ValueEnum) -> String {
+    value
+        .to_possible_value()
+        .map_or_else(String::new, |v| v.get_name().to_string())
 }
 
 /// The files a command reads for `input`: the recording (or a session directory's files), its
@@ -157,8 +257,12 @@ pub fn input_options(input: &InputArgs, reference: &ReferenceArgs) -> InputOptio
 }
 
 /// The reference values, range-checked.
-pub fn references(reference: &ReferenceArgs) -> Result<References, ReferenceError> {
-    References::checked(reference.gravity, reference.field_ut, reference.gyro_scale)
+pub fn references(reference: &ReferenceArgs) -> Result<References, UsageError> {
+    Ok(References::checked(
+        reference.gravity,
+        reference.field_ut,
+        reference.gyro_scale,
+    )?)
 }
 
 /// Still-detection settings from the command line.

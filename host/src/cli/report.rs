@@ -46,7 +46,7 @@ fn from_recording(
     bar: &ProgressBar,
 ) -> anyhow::Result<ReportData> {
     let references = super::references(&args.reference)?;
-    let recording = super::load(&args.input)?;
+    let recording = super::load(&args.input, args.reference.gyro_scale)?;
     bar.inc(1);
     bar.set_message("checking the recording and finding still intervals");
     let sensors = recording.sensors();

@@ -41,6 +41,41 @@ const MAX_REFERENCE_GRAVITY: f64 = 100.0;
 /// Largest reference field accepted, µT (a magnetometer's range is a few mT at most).
 const MAX_REFERENCE_FIELD_UT: f64 = 10_000.0;
 
+/// What to pass instead of something that is not a parameter file.
+const PASS_PARAMS: &str =
+    "pass a parameter file (the params.json of `imucal calibrate` or `imucal fit --params-out`)";
+
+/// What `value` is when it is JSON of another kind than a parameter file (` but …`, or a
+/// note of why not); `None` for anything that may be a parameter file (one with a misspelled
+/// key is told about that key instead).
+fn other_json(value: &serde_json::Value) -> Option<String> {
+    match value {
+        serde_json::Value::Array(items) => {
+            let poses = items
+                .first()
+                .is_some_and(|p| p.get("target").is_some() && p.get("stats").is_some());
+            Some(if poses {
+                " but the poses of a calibration session".to_string()
+            } else {
+                " but a JSON list".to_string()
+            })
+        }
+        serde_json::Value::Object(map) => {
+            if map.keys().any(|key| KNOWN_KEYS.contains(&key.as_str())) {
+                None
+            } else if map.contains_key("accel_rest_error_mg") && map.contains_key("verdict") {
+                Some(" but the summary of a calibration session".to_string())
+            } else {
+                Some(
+                    " (it has none of a parameter file's keys, such as `format` or `accel`)"
+                        .to_string(),
+                )
+            }
+        }
+        _ => Some(" but a single JSON value".to_string()),
+    }
+}
+
 /// Oldest parameter file format this tool reads.
 pub const OLDEST_PARAMS_FILE_FORMAT: u16 = 1;
 
@@ -54,6 +89,24 @@ pub enum ParamsFileError {
         path: String,
         /// The operating system's error.
         cause: std::io::Error,
+    },
+    /// A directory stands where a parameter file is named.
+    #[error("`{path}` is a directory, not a parameter file; {fix}")]
+    Directory {
+        /// The directory.
+        path: String,
+        /// The file to pass instead.
+        fix: String,
+    },
+    /// JSON of another kind: a session's summary or poses, say.
+    #[error("`{path}` is not a parameter file{what}; {fix}")]
+    NotParameterFile {
+        /// The file.
+        path: String,
+        /// What the file is, when it can be told (` but …`), else empty.
+        what: String,
+        /// The file to pass instead.
+        fix: String,
     },
     /// The file is not valid parameter JSON.
     #[error("`{path}` is not a valid parameter file: {cause}; it should be the JSON written by `imucal calibrate`")]
@@ -402,6 +455,13 @@ impl ParamsFile {
             cause,
         };
         let value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
+        if let Some(what) = other_json(&value) {
+            return Err(ParamsFileError::NotParameterFile {
+                path: path.to_string(),
+                what,
+                fix: PASS_PARAMS.to_string(),
+            });
+        }
         let keys: Vec<String> = value
             .as_object()
             .map(|o| o.keys().cloned().collect())
@@ -472,14 +532,45 @@ impl ParamsFile {
         Ok(())
     }
 
-    /// Reads and parses a parameter file.
+    /// Reads and parses a parameter file. A session directory, or another file of one, is
+    /// refused with the session's `params.json` named.
     pub fn load(path: &Path) -> Result<Self, ParamsFileError> {
         let shown = path.display().to_string();
+        if path.is_dir() {
+            let inside = path.join("params.json");
+            return Err(ParamsFileError::Directory {
+                path: shown,
+                fix: if inside.is_file() {
+                    format!("pass the parameter file in it, `{}`", inside.display())
+                } else {
+                    PASS_PARAMS.to_string()
+                },
+            });
+        }
         let text = std::fs::read_to_string(path).map_err(|cause| ParamsFileError::Io {
             path: shown.clone(),
             cause,
         })?;
-        Self::from_json(&text, &shown)
+        Self::from_json(&text, &shown).map_err(|error| match error {
+            ParamsFileError::NotParameterFile { path: p, what, .. } => {
+                let beside = path
+                    .parent()
+                    .map(|dir| dir.join("params.json"))
+                    .filter(|params| params.is_file() && params.file_name() != path.file_name());
+                ParamsFileError::NotParameterFile {
+                    path: p,
+                    what,
+                    fix: match beside {
+                        Some(params) => format!(
+                            "the parameters of its session are in `{}`; pass that file",
+                            params.display()
+                        ),
+                        None => PASS_PARAMS.to_string(),
+                    },
+                }
+            }
+            other => other,
+        })
     }
 
     /// The file bound to the board that sent `welcome` (its id, sensors, ranges, firmware).

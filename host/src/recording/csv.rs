@@ -346,6 +346,7 @@ pub(super) fn load(
         ignored_columns: table.header.ignored,
         units: options.units,
         time,
+        read_as_imutk: false,
     };
     for (sensor, samples) in table.sensors {
         match sensor {

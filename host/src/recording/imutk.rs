@@ -143,5 +143,6 @@ pub(super) fn load(
         labels: None,
         ignored_columns: Vec::new(),
         units: options.units,
+        read_as_imutk: true,
     })
 }

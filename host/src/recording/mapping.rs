@@ -343,6 +343,7 @@ pub fn parse(
         labels: labels.map(|(_, interner)| interner.finish()),
         ignored_columns: Vec::new(),
         units,
+        read_as_imutk: false,
     })
 }
 

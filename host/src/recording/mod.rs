@@ -289,6 +289,9 @@ pub struct Recording {
     pub ignored_columns: Vec<String>,
     /// Units of the sensor columns.
     pub units: Units,
+    /// True when the main file was read as IMU-TK text, whose time stamps are in the unit
+    /// [`LoadOptions::imutk_time_scale`] gives (other formats name theirs).
+    pub read_as_imutk: bool,
 }
 
 /// File format of a recording.

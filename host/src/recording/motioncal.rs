@@ -136,6 +136,7 @@ fn parse_lines(
             gyro: GyroUnit::Dps,
             mag: MagUnit::Ut,
         },
+        read_as_imutk: false,
     })
 }
 

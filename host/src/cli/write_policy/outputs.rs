@@ -1,8 +1,8 @@
 //! Whether a command may write its output files: checked before it opens a board or fits
 //! anything, so a refusal costs nothing. An existing file or a non-empty session directory is
-//! kept unless `--force`; an output that is also an input (same canonical path) is never written,
-//! since writing it would destroy what is being read; a place that cannot be written is refused
-//! up front rather than after the work is done.
+//! kept unless `--force`; an output that is also an input (the same file, by any path or link)
+//! is never written, since writing it would destroy what is being read; a place that cannot be
+//! written is refused up front rather than after the work is done.
 
 use std::path::{Path, PathBuf};
 
@@ -158,17 +158,31 @@ fn holds_entries(dir: &Path) -> bool {
     std::fs::read_dir(dir).is_ok_and(|mut entries| entries.next().is_some())
 }
 
-/// The input that is the same file as `output`, compared by canonical path (so `./a.json`,
-/// `a.json` and a link to it are one file). Inputs that cannot be resolved (`-`, a missing
+/// The input that is the same file as `output`. Inputs that cannot be resolved (`-`, a missing
 /// file) cannot be overwritten by it.
 fn same_input<'i>(output: &Path, inputs: &'i [PathBuf]) -> Option<&'i PathBuf> {
-    let target = canonical_target(output)?;
-    inputs
-        .iter()
-        .find(|input| std::fs::canonicalize(input).is_ok_and(|c| c == target))
+    inputs.iter().find(|input| same_file(output, input))
+}
+
+/// Whether `output` and `input` are one file on disk: the same device and inode, so another
+/// spelling, a symbolic link and a hard link are all caught (a hard link has its own path).
+#[cfg(unix)]
+fn same_file(output: &Path, input: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (std::fs::metadata(output), std::fs::metadata(input)) {
+        (Ok(o), Ok(i)) => o.dev() == i.dev() && o.ino() == i.ino(),
+        _ => false,
+    }
+}
+
+/// Whether `output` and `input` are one file, by canonical path (without inodes to compare).
+#[cfg(not(unix))]
+fn same_file(output: &Path, input: &Path) -> bool {
+    canonical_target(output).is_some_and(|t| std::fs::canonicalize(input).is_ok_and(|c| c == t))
 }
 
 /// Where writing `path` would land: its canonical path, or its canonical directory and name.
+#[cfg(not(unix))]
 fn canonical_target(path: &Path) -> Option<PathBuf> {
     if let Ok(c) = std::fs::canonicalize(path) {
         return Some(c);
