@@ -158,6 +158,39 @@ fn an_option_value_or_combination_the_command_cannot_take_exits_with_the_usage_s
     );
     let out = imucal_in(&dir, &["calibrate", "--sim", "--yes", "--sim-faulty", "2"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    // Session values checked as they are parsed, before a board is opened.
+    for (options, named) in [
+        (&["--hold", "-1"][..], "--hold"),
+        (&["--speed", "0"], "--speed"),
+        (&["--pose-timeout", "0"], "--pose-timeout"),
+        (&["--sim-temperature", "bogus"], "sweep:10:40:90"),
+    ] {
+        let out = imucal_in(
+            &dir,
+            &[&["calibrate", "--sim", "--yes"][..], options].concat(),
+        );
+        let message = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{options:?}: {message}");
+        assert!(message.contains(named), "{options:?}: {message}");
+    }
+    // The binary MotionCal packet needs a file to go to.
+    let params = dir.join("p.json").display().to_string();
+    let fitted = imucal_in(
+        &dir,
+        &[
+            "fit",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--params-out",
+            &params,
+            "--no-history",
+        ],
+    );
+    assert!(fitted.status.success(), "{}", stderr(&fitted));
+    let out = imucal_in(&dir, &["export", &params, "--format", "motioncal"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("-o cal.bin"), "{}", stderr(&out));
 }
 
 #[test]

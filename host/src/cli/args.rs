@@ -224,6 +224,53 @@ fn at_least_one(text: &str) -> Result<f64, String> {
     number_that(text, |v| v >= 1.0, "at least 1")
 }
 
+/// `--sim-temperature`: the simulated board's die temperature.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SimTemperature {
+    /// The simulated person's ambient temperature throughout.
+    Constant,
+    /// A triangle from `low_c` to `high_c` and back every `period_s`.
+    Sweep {
+        /// Lowest temperature, °C.
+        low_c: f64,
+        /// Highest temperature, °C.
+        high_c: f64,
+        /// Seconds per cycle.
+        period_s: f64,
+    },
+}
+
+/// `--sim-temperature`: `constant`, `sweep` (10–40 °C every 90 s) or `sweep:LOW:HIGH:PERIOD`.
+fn sim_temperature(text: &str) -> Result<SimTemperature, String> {
+    if text == "constant" {
+        return Ok(SimTemperature::Constant);
+    }
+    let values: Option<Vec<f64>> = match text.strip_prefix("sweep") {
+        Some("") => Some(vec![10.0, 40.0, 90.0]),
+        Some(rest) => rest
+            .strip_prefix(':')
+            .and_then(|r| r.split(':').map(|n| n.parse().ok()).collect()),
+        None => None,
+    };
+    match values.as_deref() {
+        Some(&[low_c, high_c, period_s])
+            if [low_c, high_c, period_s].iter().all(|v| v.is_finite())
+                && low_c < high_c
+                && period_s > 0.0 =>
+        {
+            Ok(SimTemperature::Sweep {
+                low_c,
+                high_c,
+                period_s,
+            })
+        }
+        _ => Err(format!(
+            "`{text}` is not understood; give `constant`, `sweep`, or `sweep:LOW:HIGH:PERIOD` \
+             with LOW < HIGH in °C and PERIOD > 0 in s, e.g. sweep:10:40:90"
+        )),
+    }
+}
+
 /// `--direction-angle`: below 90°, since adjacent faces of a box (90° apart) must stay distinct
 /// directions; the angle is otherwise taken through its cosine, so 400 would act as 40.
 fn direction_angle(text: &str) -> Result<f64, String> {
@@ -503,7 +550,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub sketch_rate: Option<f64>,
     /// Simulator: simulated seconds per wall second.
-    #[arg(long, default_value_t = 15.0, requires = "simulated")]
+    #[arg(long, default_value_t = 15.0, requires = "simulated", value_parser = positive)]
     pub speed: f64,
     /// Simulator: the LSM9DS1 converts on its own clock, this relative error off its nominal
     /// output data rates (e.g. -0.005), so reads repeat or miss conversions as on hardware and
@@ -512,8 +559,8 @@ pub struct CalibrateArgs {
     pub sim_odr_error: Option<f64>,
     /// Simulator: die temperature, `constant` (the person's ambient) or `sweep[:LOW:HIGH:PERIOD]`
     /// (°C, °C, s; `sweep` alone is 10–40 °C every 90 s).
-    #[arg(long, default_value = "constant", requires = "simulated")]
-    pub sim_temperature: String,
+    #[arg(long, default_value = "constant", requires = "simulated", value_parser = sim_temperature)]
+    pub sim_temperature: SimTemperature,
     /// Capture the twelve positions this many times over (the simulated person repeats them).
     /// Spreading the poses over time and temperature lets `--analyze` see temperature effects;
     /// the accelerometer's analysis needs at least two rounds.
@@ -567,16 +614,53 @@ pub struct CalibrateArgs {
     /// Magnetic Model's field there today is the magnetometer reference unless --field-ut is given.
     #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
     pub location: Option<imucal::geomag::Location>,
-    /// Still time averaged per position, s.
-    #[arg(long, default_value_t = 1.5)]
+    /// Longest still time averaged per position, s. Each position is averaged until the mean
+    /// of |a| is as precise as the accelerometer's budget asks, from the noise measured just
+    /// before it (at least 0.3 s), and never longer than this.
+    #[arg(long, default_value_t = 1.5, value_parser = positive)]
     pub hold: f64,
     /// Longest wait for the next position, s.
-    #[arg(long, default_value_t = 180.0)]
+    #[arg(long, default_value_t = 180.0, value_parser = positive)]
     pub pose_timeout: f64,
     /// Longest magnetometer phase, s.
-    #[arg(long, default_value_t = 180.0)]
+    #[arg(long, default_value_t = 180.0, value_parser = positive)]
     pub mag_timeout: f64,
     /// Longest wait for the board to lie still at the end, s.
-    #[arg(long, default_value_t = 120.0)]
+    #[arg(long, default_value_t = 120.0, value_parser = positive)]
     pub rest_timeout: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{sim_temperature, SimTemperature};
+
+    #[test]
+    fn sweep_profiles_are_read_with_defaults_or_given_numbers() {
+        let sweep = |low_c, high_c, period_s| SimTemperature::Sweep {
+            low_c,
+            high_c,
+            period_s,
+        };
+        assert_eq!(sim_temperature("constant"), Ok(SimTemperature::Constant));
+        assert_eq!(sim_temperature("sweep"), Ok(sweep(10.0, 40.0, 90.0)));
+        assert_eq!(
+            sim_temperature("sweep:-5:55.5:120"),
+            Ok(sweep(-5.0, 55.5, 120.0))
+        );
+    }
+
+    #[test]
+    fn malformed_or_inverted_sweeps_are_refused_with_an_example() {
+        for bad in [
+            "sweepx:1:2:3",
+            "sweep:40:10:90",
+            "sweep:10:40:0",
+            "sweep:10:40",
+            "sweep:10:NaN:90",
+            "hot",
+        ] {
+            let error = sim_temperature(bad).expect_err(bad);
+            assert!(error.contains("sweep:10:40:90"), "{bad}: {error}");
+        }
+    }
 }

@@ -3,39 +3,24 @@
 
 use anyhow::Context;
 
-use super::args::CalibrateArgs;
+use super::args::{CalibrateArgs, SimTemperature};
 
 #[cfg(feature = "sim")]
 pub(super) fn temperature_profile(
-    text: &str,
-) -> anyhow::Result<Option<imucal_hil_sim::world::TemperatureProfile>> {
+    temperature: SimTemperature,
+) -> Option<imucal_hil_sim::world::TemperatureProfile> {
     use imucal_hil_sim::world::TemperatureProfile;
-    if text == "constant" {
-        return Ok(None);
-    }
-    let values: Option<Vec<f64>> = match text.strip_prefix("sweep") {
-        Some("") => Some(vec![10.0, 40.0, 90.0]),
-        Some(rest) => rest
-            .strip_prefix(':')
-            .and_then(|r| r.split(':').map(|n| n.parse().ok()).collect()),
-        None => None,
-    };
-    match values.as_deref() {
-        Some(&[low_c, high_c, period_s])
-            if [low_c, high_c, period_s].iter().all(|v| v.is_finite())
-                && low_c < high_c
-                && period_s > 0.0 =>
-        {
-            Ok(Some(TemperatureProfile::Sweep {
-                low_c,
-                high_c,
-                period_s,
-            }))
-        }
-        _ => anyhow::bail!(
-            "--sim-temperature {text} is not understood; give `constant`, `sweep`, or \
-             `sweep:LOW:HIGH:PERIOD` with LOW < HIGH in °C and PERIOD > 0 in s, e.g. sweep:10:40:90"
-        ),
+    match temperature {
+        SimTemperature::Constant => None,
+        SimTemperature::Sweep {
+            low_c,
+            high_c,
+            period_s,
+        } => Some(TemperatureProfile::Sweep {
+            low_c,
+            high_c,
+            period_s,
+        }),
     }
 }
 
@@ -74,7 +59,7 @@ impl Simulated {
             );
             options.board.lsm9ds1_odr_error = Some(error);
         }
-        options.board.temperature = temperature_profile(&args.sim_temperature)?;
+        options.board.temperature = temperature_profile(args.sim_temperature);
         if args.rounds > 1 {
             options.schedule = imucal_hil_sim::board::PersonSchedule::Rounds(args.rounds);
         }
@@ -156,46 +141,5 @@ impl Simulated {
 
     pub(super) fn save_truth(&self, _path: &std::path::Path) -> anyhow::Result<()> {
         match *self {}
-    }
-}
-
-#[cfg(all(test, feature = "sim"))]
-mod tests {
-    use super::temperature_profile;
-    use imucal_hil_sim::world::TemperatureProfile;
-
-    #[test]
-    fn sweep_profiles_are_read_with_defaults_or_given_numbers() {
-        let sweep = |low_c, high_c, period_s| {
-            Some(TemperatureProfile::Sweep {
-                low_c,
-                high_c,
-                period_s,
-            })
-        };
-        assert_eq!(temperature_profile("constant").ok(), Some(None));
-        assert_eq!(
-            temperature_profile("sweep").ok(),
-            Some(sweep(10.0, 40.0, 90.0))
-        );
-        assert_eq!(
-            temperature_profile("sweep:-5:55.5:120").ok(),
-            Some(sweep(-5.0, 55.5, 120.0))
-        );
-    }
-
-    #[test]
-    fn malformed_or_inverted_sweeps_are_refused_with_an_example() {
-        for bad in [
-            "sweepx:1:2:3",
-            "sweep:40:10:90",
-            "sweep:10:40:0",
-            "sweep:10:40",
-            "sweep:10:NaN:90",
-            "hot",
-        ] {
-            let error = temperature_profile(bad).expect_err(bad).to_string();
-            assert!(error.contains("sweep:10:40:90"), "{bad}: {error}");
-        }
     }
 }

@@ -144,7 +144,10 @@ fn export_adafruit(set: &CalibrationSet, args: &ExportArgs) -> anyhow::Result<()
         return write_output(args.out.as_deref(), text.as_bytes());
     }
     let Some(out) = args.out.as_deref() else {
-        anyhow::bail!("the MotionCal packet is binary; name a file with `-o cal.bin`");
+        return Err(super::UsageError(
+            "the MotionCal packet is binary; name a file with `-o cal.bin`".into(),
+        )
+        .into());
     };
     write_output(Some(out), &encode_packet(&conversion.calibration)?)
 }
