@@ -261,6 +261,12 @@ impl MotionCalBoard {
         self.physics.truth()
     }
 
+    /// The Earth's field magnitude at the simulated site, µT: what a host looks up for the
+    /// board's location.
+    pub fn site_field_ut(&self) -> f64 {
+        self.poses.earth_field.magnitude_ut
+    }
+
     /// Simulated seconds the schedule takes (twelve holds, then the tumble).
     pub fn schedule_duration_s(&self) -> f64 {
         self.poses.trajectory.duration_s() + self.tumble.trajectory.duration_s()

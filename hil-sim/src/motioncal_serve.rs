@@ -37,6 +37,7 @@ pub struct MotionCalHandle {
     observed: Arc<Mutex<Observed>>,
     thread: Option<JoinHandle<Result<(), ServeError>>>,
     truth: ImuTruth,
+    site_field_ut: f64,
     schedule_s: f64,
 }
 
@@ -48,6 +49,7 @@ impl MotionCalHandle {
         }
         let board = MotionCalBoard::new(seed)?;
         let truth = *board.truth();
+        let site_field_ut = board.site_field_ut();
         let schedule_s = board.schedule_duration_s();
         let (master, slave, port_path) = open_pty()?;
         let stop = Arc::new(AtomicBool::new(false));
@@ -67,6 +69,7 @@ impl MotionCalHandle {
             observed,
             thread: Some(thread),
             truth,
+            site_field_ut,
             schedule_s,
         })
     }
@@ -79,6 +82,11 @@ impl MotionCalHandle {
     /// The board's true sensor parameters.
     pub fn truth(&self) -> &ImuTruth {
         &self.truth
+    }
+
+    /// The Earth's field magnitude at the simulated site, µT.
+    pub fn site_field_ut(&self) -> f64 {
+        self.site_field_ut
     }
 
     /// Simulated seconds of the person's schedule (twelve holds and the tumble).

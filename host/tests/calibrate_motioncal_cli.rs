@@ -75,5 +75,11 @@ fn the_simulated_sketch_board_is_calibrated_end_to_end_and_stores_the_fitted_pac
         let error = f64::from(sent.mag_hardiron[axis]) - truth.mag.b_true[axis];
         assert!(error.abs() < 0.5, "hard iron axis {axis} off by {error} µT");
     }
+    // Without --field-ut the simulated site's field is the reference, as with imucal's
+    // firmware: the set and the packet carry it, not the sensor's mean radius.
+    let site = MotionCalBoard::new(SEED).unwrap().site_field_ut();
+    let written: serde_json::Value = serde_json::from_str(&read(&out.join("params.json"))).unwrap();
+    assert_eq!(written["reference"]["field_ut"].as_f64(), Some(site));
+    assert_eq!(sent.mag_field, site as f32);
     std::fs::remove_dir_all(&tmp).ok();
 }

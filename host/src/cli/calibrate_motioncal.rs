@@ -35,13 +35,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
          start it again"
     );
     let dir = checked_session_dir(args)?;
-    let field_ut = field_reference(args)?;
-    let options = MotionCalOptions {
-        session: session_options(args, field_ut)?,
-        sample_rate_hz: args.sketch_rate_hz(),
-        accept_poor: args.accept_poor,
-        echo_timeout: ECHO_TIMEOUT,
-    };
+    let given_field = field_reference(args)?;
+    // Checked before a simulated board starts.
+    session_options(args, given_field)?;
     let simulated = if args.sim {
         Some(SimulatedSketch::start(args)?)
     } else {
@@ -51,13 +47,28 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         Some(sim) => sim.port(),
         None => given_or_only_board(args.port.first().map(String::as_str))?,
     };
+    // As with imucal's firmware: without a given field the simulated site's stands for the one
+    // a user would look up for the location.
+    let field_ut = given_field.or(simulated.as_ref().map(SimulatedSketch::site_field_ut));
     if simulated.is_some() {
         say!(
-            "Simulated MotionCal sketch board (seed {}, {}× real time) on {port}",
+            "Simulated MotionCal sketch board (seed {}, {}× real time) on {port}; field {:.2} µT{}",
             args.sim_seed,
-            args.speed
+            args.speed,
+            field_ut.unwrap_or_default(),
+            if given_field.is_some() {
+                " (given)"
+            } else {
+                " (the simulated site's, as if looked up for the location)"
+            }
         );
     }
+    let options = MotionCalOptions {
+        session: session_options(args, field_ut)?,
+        sample_rate_hz: args.sketch_rate_hz(),
+        accept_poor: args.accept_poor,
+        echo_timeout: ECHO_TIMEOUT,
+    };
     let mut client = MotionCalClient::open(&port, RawAccelScaling::AdafruitSketch)?;
     say!(
         "Connected to {port}: a MotionCal sketch board ({} readings/s assumed). It cannot detect \
@@ -156,6 +167,11 @@ impl SimulatedSketch {
         self.handle.port_path().to_string()
     }
 
+    /// The simulated site's field, µT.
+    fn site_field_ut(&self) -> f64 {
+        self.handle.site_field_ut()
+    }
+
     /// What the simulated board's EEPROM holds, as JSON (null when nothing was stored).
     fn save_eeprom(&self, path: &std::path::Path) -> anyhow::Result<()> {
         let value = self.handle.eeprom().map(|e| {
@@ -188,6 +204,10 @@ impl SimulatedSketch {
     }
 
     fn port(&self) -> String {
+        match *self {}
+    }
+
+    fn site_field_ut(&self) -> f64 {
         match *self {}
     }
 

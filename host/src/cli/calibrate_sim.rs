@@ -1,9 +1,12 @@
 //! `imucal calibrate --sim`: the simulated board started in-process behind a pseudo-terminal,
 //! with its temperature profile; a stub without the `sim` feature.
 
+#[cfg(feature = "sim")]
 use anyhow::Context;
 
-use super::args::{CalibrateArgs, SimTemperature};
+use super::args::CalibrateArgs;
+#[cfg(feature = "sim")]
+use super::args::SimTemperature;
 
 #[cfg(feature = "sim")]
 pub(super) fn temperature_profile(
