@@ -102,3 +102,45 @@ fn a_batch_of_eight_on_an_empty_history_verifies_seven_and_refuses_the_faulty_on
         assert_eq!(listed["findings"][0]["parameter"], "accel.b.x", "{listed}");
     }
 }
+
+#[test]
+fn a_first_batch_too_small_to_compare_holds_each_board_to_the_datasheet_bounds() {
+    // Three boards on an empty history: no fleet, and too few for the within-batch test. The
+    // faulty one (0.3 g of accelerometer offset, beyond the widest datasheet's 0.25 g) must not
+    // be written; the two sound ones are.
+    let location = databases("first-batch")
+        .into_iter()
+        .next()
+        .expect("a SQLite database");
+    let db = url(&location);
+    let out_dir = scratch_dir("first-batch-sessions");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim-boards", "3", "--sim-faulty", "1"])
+        .args(["--speed", SPEED, "--yes", "--json", "--db", &db, "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("imucal runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("JSON on stdout ({e}): {stderr}"));
+    let boards = report["boards"].as_array().expect("boards");
+    let faults = report["simulated_faults"].as_array().expect("faults");
+    assert_eq!(report["verified"], 2, "{report}\n{stderr}");
+    for (board, fault) in boards.iter().zip(faults) {
+        assert_eq!(board["outlier_check"]["basis"], "part_limits", "{board}");
+        if fault.is_null() {
+            assert_eq!(board["status"], "verified", "{board}\n{stderr}");
+        } else {
+            assert_eq!(board["status"], "refused_outlier", "{board}\n{stderr}");
+            let finding = &board["outlier_check"]["findings"][0];
+            assert_eq!(finding["parameter"], "accel.b.x", "{board}");
+            assert!(
+                finding["likely_cause"]
+                    .as_str()
+                    .is_some_and(|c| c.contains("beyond the ±2.4517 m/s² of every common part")),
+                "{finding}"
+            );
+        }
+    }
+}

@@ -9,7 +9,7 @@ use anyhow::Context;
 use imucal::device::{list_ports, BoardMatch};
 use imucal::history::FleetOptions;
 use imucal::session::batch::{run_batch, BatchOptions, BatchReport, BoardStatus};
-use imucal::session::batch_gate::GateOptions;
+use imucal::session::batch_gate::{GateOptions, OutlierBasis};
 use imucal::session::SessionEvent;
 use serde::Serialize;
 
@@ -191,13 +191,16 @@ fn batch_table(report: &BatchReport) -> String {
             .error
             .clone()
             .or_else(|| {
-                let check = &board.outlier_check.as_ref()?.check;
+                let outlier_check = board.outlier_check.as_ref()?;
+                let check = &outlier_check.check;
                 if check.outlier {
-                    check.findings.first().map(|f| {
-                        format!(
+                    check.findings.first().map(|f| match outlier_check.basis {
+                        // The finding's phrase names the parameter, its value and the bound.
+                        OutlierBasis::PartLimits => f.likely_cause.clone(),
+                        _ => format!(
                             "{} (z = {:.1}): {}",
                             f.parameter, f.robust_z, f.likely_cause
-                        )
+                        ),
                     })
                 } else if !check.tested {
                     check.note.clone()

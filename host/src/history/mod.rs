@@ -20,6 +20,7 @@
 pub mod changes;
 pub mod fleet;
 pub mod location;
+pub mod part_limits;
 pub mod plot;
 pub mod postgres;
 pub mod record;

@@ -350,13 +350,18 @@ fn record_attempt<L>(
     record.operator.clone_from(&options.operator);
     record.station.clone_from(&options.station);
     let refusal = match result.status {
-        BoardStatus::RefusedOutlier => Some(format!(
-            "not written: outlier against the {}",
+        BoardStatus::RefusedOutlier => Some(
             match result.outlier_check.as_ref().map(|c| &c.basis) {
-                Some(super::batch_gate::OutlierBasis::Batch) => "other boards of the batch",
-                _ => "fleet",
+                Some(super::batch_gate::OutlierBasis::Batch) => {
+                    "not written: outlier against the other boards of the batch"
+                }
+                Some(super::batch_gate::OutlierBasis::PartLimits) => {
+                    "not written: beyond the bounds of every common part's datasheet"
+                }
+                _ => "not written: outlier against the fleet",
             }
-        )),
+            .to_string(),
+        ),
         BoardStatus::RefusedPoorVerdict => Some("not written: poor verdict".into()),
         _ => None,
     };

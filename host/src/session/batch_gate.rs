@@ -5,6 +5,9 @@
 //! sensor's axes of one kind, and its threshold widens with fewer values; seven other boards
 //! are the fewest it tests with).
 //!
+//! With neither (a new line's first, small batch), each board is held to the bounds of every
+//! common part's datasheet ([`crate::history::part_limits`]), which catch gross faults only.
+//!
 //! Boards that fail before their fit ("depart") do not hold the others; a board that never comes
 //! (hung link) is waited for at most [`WriteGate::new`]'s timeout, after which the boards present
 //! are compared as they are.
@@ -15,8 +18,9 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use crate::history::fleet::FleetModel;
+use crate::history::part_limits::beyond_part_limits;
 use crate::history::{
-    is_outlier_against_fleet, CalibrationRecord, FleetCheck, FleetOptions, HistoryStore,
+    is_outlier_against_fleet, CalibrationRecord, Finding, FleetCheck, FleetOptions, HistoryStore,
 };
 
 /// What a board was compared with before its parameters were written.
@@ -27,6 +31,9 @@ pub enum OutlierBasis {
     Fleet,
     /// The other boards of this batch (the fleet was too small).
     Batch,
+    /// Neither was possible: the bounds of every common part's datasheet
+    /// ([`crate::history::part_limits`]).
+    PartLimits,
     /// No test was possible; `note` says why.
     None,
 }
@@ -184,10 +191,43 @@ impl WriteGate {
                     },
                 }
             }
-            Err(why) => untested(format!(
-                "no fleet test was possible: {fleet_note}; nor within the batch: {why}"
-            )),
+            Err(why) => held_to_part_limits(
+                record,
+                format!("no fleet test was possible: {fleet_note}; nor within the batch: {why}"),
+            ),
         }
+    }
+}
+
+/// A board with nothing to be compared with, held to the bounds of every common part's
+/// datasheet: a gross fault is not written on the first boards of a line.
+fn held_to_part_limits(record: &CalibrationRecord, why_not_compared: String) -> OutlierCheck {
+    let findings: Vec<Finding> = beyond_part_limits(record)
+        .into_iter()
+        .map(|f| Finding {
+            likely_cause: f.phrase(),
+            fleet_median: if f.unit == "relative" { 1.0 } else { 0.0 },
+            // In units of the bound: 1 is at it.
+            robust_z: f.times_limit(),
+            threshold_z: 1.0,
+            parameter: f.parameter,
+            value: f.value,
+        })
+        .collect();
+    OutlierCheck {
+        basis: OutlierBasis::PartLimits,
+        check: FleetCheck {
+            tested: true,
+            outlier: !findings.is_empty(),
+            fleet_boards: 0,
+            threshold_z: 1.0,
+            findings,
+            note: Some(format!(
+                "{why_not_compared}; held to the bounds of every common part's datasheet \
+                 instead (accelerometer offset and gain, gyroscope offset), which catch gross \
+                 faults only"
+            )),
+        },
     }
 }
 
