@@ -33,6 +33,11 @@ pub const MAX_GYRO_OFFSET_DPS: f64 = 30.0;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 
+/// `|value| ≤ limit`; false for a value that is not a number, which no working part gives.
+fn within(value: f64, limit: f64) -> bool {
+    value.abs() <= limit
+}
+
 /// A parameter beyond what any working common part shows.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PartLimitFinding {
@@ -90,7 +95,7 @@ pub fn beyond_part_limits(record: &CalibrationRecord) -> Vec<PartLimitFinding> {
         let offset_limit = MAX_ACCEL_OFFSET_G * gravity_mps2;
         for (axis, name) in AXES.iter().enumerate() {
             let offset = accel.b[axis];
-            if !(offset.abs() <= offset_limit) {
+            if !within(offset, offset_limit) {
                 findings.push(PartLimitFinding {
                     parameter: format!("accel.b.{name}"),
                     value: offset,
@@ -101,7 +106,7 @@ pub fn beyond_part_limits(record: &CalibrationRecord) -> Vec<PartLimitFinding> {
                 });
             }
             let gain = accel.a[axis].iter().map(|v| v * v).sum::<f64>().sqrt();
-            if !((gain - 1.0).abs() <= MAX_ACCEL_GAIN_ERROR) {
+            if !within(gain - 1.0, MAX_ACCEL_GAIN_ERROR) {
                 findings.push(PartLimitFinding {
                     parameter: format!("accel.gain.{name}"),
                     value: gain,
@@ -116,7 +121,7 @@ pub fn beyond_part_limits(record: &CalibrationRecord) -> Vec<PartLimitFinding> {
         let limit = MAX_GYRO_OFFSET_DPS.to_radians();
         for (axis, name) in AXES.iter().enumerate() {
             let offset = record.params.gyro.b[axis];
-            if !(offset.abs() <= limit) {
+            if !within(offset, limit) {
                 findings.push(PartLimitFinding {
                     parameter: format!("gyro.b.{name}"),
                     value: offset,
