@@ -102,3 +102,62 @@ fn a_batch_of_eight_on_an_empty_history_verifies_seven_and_refuses_the_faulty_on
         assert_eq!(listed["findings"][0]["parameter"], "accel.b.x", "{listed}");
     }
 }
+
+/// The table and progress lines of a small batch with a board that fails: the failed row shows
+/// its own wall and CPU time (never NaN), a verified write names its CRC in hex and the store
+/// sequence in words, and counts of boards agree in number ("1 board", "3 boards").
+#[test]
+fn a_small_batch_with_a_failed_board_prints_figures_crcs_and_counts_in_words() {
+    let dir = scratch_dir("batch-table");
+    let db = format!("sqlite://{}", dir.join("history.sqlite").display());
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim-boards", "3", "--sim-faulty", "1"])
+        .args(["--sim-seed", "20", "--speed", SPEED, "--yes", "--db", &db])
+        // The faulty board never reaches a position; its session fails after this long.
+        .args(["--pose-timeout", "40", "--out"])
+        .arg(dir.join("sessions"))
+        .output()
+        .expect("imucal runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(!stdout.contains("NaN"), "{stdout}");
+    let failed = stdout
+        .lines()
+        .find(|l| l.contains(" failed "))
+        .unwrap_or_else(|| panic!("a failed row: {stdout}\n{stderr}"));
+    // port, device, status, verdict, outlier, wall s, cpu s.
+    let columns: Vec<&str> = failed.split_whitespace().collect();
+    let wall: f64 = columns[5].parse().expect("wall seconds");
+    let cpu: f64 = columns[6].parse().expect("CPU seconds");
+    assert!(wall >= 40.0 && cpu > 0.0 && cpu < wall, "{failed}");
+    let verified: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.contains("] written and verified"))
+        .collect();
+    assert_eq!(verified.len(), 2, "{stderr}");
+    for line in verified {
+        let crc = line
+            .split("CRC 0x")
+            .nth(1)
+            .and_then(|rest| rest.get(..8))
+            .unwrap_or_else(|| panic!("a hex CRC: {line}"));
+        assert!(crc.chars().all(|c| c.is_ascii_hexdigit()), "{line}");
+        assert!(line.ends_with(", store sequence 1"), "{line}");
+    }
+    assert!(!stderr.contains("ParamStatus"), "{stderr}");
+    // The two boards that reached the write gate compared with each other: a fleet of one.
+    assert!(stdout.contains("the fleet holds 1 board;"), "{stdout}");
+    assert!(
+        !format!("{stdout}{stderr}").contains(" 1 boards"),
+        "{stdout}{stderr}"
+    );
+    assert!(
+        stdout.contains("2 of 3 boards written and verified"),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("1 of 3 boards not written and verified"),
+        "{stderr}"
+    );
+}

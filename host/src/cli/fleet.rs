@@ -2,6 +2,7 @@
 //! board, and the boards that are robust outliers with the likely cause.
 
 use clap::Args;
+use imucal::history::fleet::count_boards;
 use imucal::history::{fleet_report, FleetOptions, HistoryStore};
 
 /// Arguments of `imucal fleet`.
@@ -52,8 +53,8 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "Fleet of {} boards in {}\nMethod: {}\nThreshold |z| > {:.2} at most (false-alarm rate {} per board)\n",
-        report.boards,
+        "Fleet of {} in {}\nMethod: {}\nThreshold |z| > {:.2} at most (false-alarm rate {} per board)\n",
+        count_boards(report.boards),
         store.location().display(),
         report.method,
         report.threshold_z,
@@ -83,7 +84,7 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         );
     }
     let outliers: Vec<_> = report.results.iter().filter(|b| b.outlier).collect();
-    println!("\n{} outlying boards", outliers.len());
+    println!("\n{} outlying", count_boards(outliers.len()));
     for board in outliers {
         println!("{} (calibration #{})", board.device_id, board.record_id);
         for f in &board.findings {

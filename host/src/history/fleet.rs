@@ -185,13 +185,18 @@ pub enum FleetError {
     #[error(transparent)]
     History(#[from] HistoryError),
     /// Too few boards for a robust spread.
-    #[error("the fleet holds {boards} boards; the outlier test needs at least {needed} for a trustworthy spread (the three axes of a sensor pooled), so calibrate more boards first")]
+    #[error("the fleet holds {}; the outlier test needs at least {needed} for a trustworthy spread (the three axes of a sensor pooled), so calibrate more boards first", count_boards(*.boards))]
     TooFewBoards {
         /// Boards found.
         boards: usize,
         /// Boards needed.
         needed: usize,
     },
+}
+
+/// `1 board`, `7 boards`.
+pub fn count_boards(n: usize) -> String {
+    format!("{n} board{}", if n == 1 { "" } else { "s" })
 }
 
 /// Whether a parameter is compared as a logarithm.

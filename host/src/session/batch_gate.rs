@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use crate::history::fleet::FleetModel;
+use crate::history::fleet::{count_boards, FleetModel};
 use crate::history::{
     is_outlier_against_fleet, CalibrationRecord, FleetCheck, FleetOptions, HistoryStore,
 };
@@ -177,9 +177,9 @@ impl WriteGate {
                         threshold_z: model.threshold_z(),
                         findings,
                         note: Some(format!(
-                            "fleet too small ({fleet_note}); compared with the other {} boards \
-                             of this batch",
-                            others.len()
+                            "fleet too small ({fleet_note}); compared with the other {} of \
+                             this batch",
+                            count_boards(others.len())
                         )),
                     },
                 }
