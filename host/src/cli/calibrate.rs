@@ -248,7 +248,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let mut rest_failure = None;
     if let Some(Ok(Closed::Written { set, status, rest })) = closed.as_ref() {
         final_summary.base_params_crc = Some(final_summary.params_crc.clone());
-        final_summary.params = ParamsFile::from(set);
+        final_summary.params = ParamsFile::from(&**set);
         final_summary.params_crc = format!("{:#010x}", status.active_crc);
         final_summary.on_board_after = rest.as_ref().ok().copied();
         rest_failure = rest.as_ref().err().map(|e| format!("{e:#}"));

@@ -23,8 +23,8 @@ pub(super) enum Closed {
     RefusedPoor(PathBuf),
     /// The extended set is on the board.
     Written {
-        /// The set written.
-        set: CalibrationSet,
+        /// The set written (boxed: a whole parameter set beside the small variants).
+        set: Box<CalibrationSet>,
         /// The store's state after the commit.
         status: ParamStatus,
         /// The errors at rest with it, or why they could not be measured (the set is on the
@@ -133,7 +133,7 @@ pub(super) fn close_the_loop(
             .context("no calibrated samples arrived for the check at rest")
     });
     Ok(Closed::Written {
-        set: extended.set,
+        set: Box::new(extended.set),
         status,
         rest,
     })
