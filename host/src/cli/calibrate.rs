@@ -263,6 +263,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let mut record =
         imucal::history::CalibrationRecord::from_session(&final_summary, &outcome.poses);
     record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    if !outcome.written {
+        let reason = match terminal.decision {
+            Some(WriteDecision::RefusedPoor) => "poor verdict",
+            _ => "declined at the prompt",
+        };
+        record.board = imucal::history::BoardWrite::NotWritten {
+            reason: reason.into(),
+        };
+    }
     // A failed write is returned after the summary is printed, so nothing is hidden.
     let recorded = super::history::record(&args.history, record);
     let closed = closed.transpose()?;

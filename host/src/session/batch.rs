@@ -2,8 +2,8 @@
 //! guided through the positions together, each captured on its own thread, then fitted, tested
 //! against the fleet ([`super::batch_gate`]), written, verified, saved and recorded on its own.
 //! A board that fails (disconnects, poor verdict, refused as an outlier) does not stop the
-//! others; every attempt that reached a fit is recorded in the history, refused ones with the
-//! reason in their verdict.
+//! others; every attempt that reached a fit is recorded in the history, refused ones marked as
+//! not written, with the reason.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -18,7 +18,7 @@ use super::{
     SessionObserver, SessionOptions, SessionSummary, VerdictLevel,
 };
 use crate::device::{DeviceClient, ParamsFile};
-use crate::history::{record_calibration, CalibrationRecord, RecordId, RecordVerdict};
+use crate::history::{record_calibration, BoardWrite, CalibrationRecord, RecordId};
 
 /// Settings of a batch.
 #[derive(Debug, Clone)]
@@ -346,7 +346,7 @@ fn bind_saved_params(path: &std::path::Path, welcome: &Welcome) -> Result<(), St
         .map_err(|e| format!("could not write {}: {e}", path.display()))
 }
 
-/// Record the attempt (refused ones with the reason added to their verdict).
+/// Record the attempt (refused ones marked as not written, with the reason).
 fn record_attempt<L>(
     result: &mut BoardResult,
     poses: &[super::CapturedPose],
@@ -368,21 +368,17 @@ fn record_attempt<L>(
     record.station.clone_from(&options.station);
     let refusal = match result.status {
         BoardStatus::RefusedOutlier => Some(format!(
-            "not written: outlier against the {}",
+            "outlier against the {}",
             match result.outlier_check.as_ref().map(|c| &c.basis) {
                 Some(super::batch_gate::OutlierBasis::Batch) => "other boards of the batch",
                 _ => "fleet",
             }
         )),
-        BoardStatus::RefusedPoorVerdict => Some("not written: poor verdict".into()),
+        BoardStatus::RefusedPoorVerdict => Some("poor verdict".into()),
         _ => None,
     };
-    if let Some(refusal) = refusal {
-        let verdict = record.verdict.get_or_insert_with(|| RecordVerdict {
-            level: "poor".into(),
-            reasons: Vec::new(),
-        });
-        verdict.reasons.push(refusal);
+    if let Some(reason) = refusal {
+        record.board = BoardWrite::NotWritten { reason };
     }
     let start = Instant::now();
     let written = record_calibration(options.gate.db.as_deref(), &record);
