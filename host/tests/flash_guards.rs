@@ -196,3 +196,33 @@ fn implausible_metadata_is_refused_naming_the_field() {
         "the board was not touched"
     );
 }
+
+#[test]
+fn a_file_of_another_board_written_by_force_is_recorded_as_from_that_boards_session() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let path = temp_file("foreign-recorded.json");
+    foreign_file(&path);
+    let db = temp_file("forced-history.sqlite");
+    let _ = std::fs::remove_file(&db);
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .arg("flash")
+        .arg(&path)
+        .args(["--port", &fake.path, "--force-other-device", "--db"])
+        .arg(format!("sqlite://{}", db.display()))
+        .output()
+        .expect("the imucal binary runs");
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let records =
+        imucal::history::HistoryStore::open(&imucal::history::DbLocation::Sqlite(db.clone()))
+            .and_then(|mut store| store.records(None))
+            .expect("the history reads back");
+    let _ = std::fs::remove_file(&db);
+    assert_eq!(records.len(), 1);
+    assert_eq!(
+        records[0].record.board,
+        imucal::history::BoardWrite::FromOtherBoard {
+            measured_on: "00000000000000000000000000001234".into()
+        }
+    );
+}

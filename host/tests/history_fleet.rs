@@ -9,7 +9,8 @@ use std::process::Command;
 use history_support::{board_record, databases, url};
 use imucal::history::fleet::FleetModel;
 use imucal::history::{
-    fleet_report, is_outlier_against_fleet, CalibrationRecord, FleetOptions, HistoryStore,
+    fleet_report, is_outlier_against_fleet, BoardWrite, CalibrationRecord, FleetOptions,
+    HistoryStore,
 };
 
 /// Healthy boards in the seeded fleet.
@@ -322,4 +323,81 @@ fn six_boards_are_too_few_to_test() {
     let refs: Vec<&CalibrationRecord> = records.iter().collect();
     let error = FleetModel::fit(&refs, &FleetOptions::default()).expect_err("too few");
     assert!(error.to_string().contains("at least 7"), "{error}");
+}
+
+/// Attempts refused before their write are tested against the fleet and listed with the
+/// reason, but the fleet's statistics count only the sets on boards; `imucal history` says
+/// plainly that such a set was not written, and why.
+#[test]
+fn sets_not_written_are_labelled_and_not_counted_in_the_fleet() {
+    for location in databases("not_written") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        seed(&mut store);
+        let refusal = BoardWrite::NotWritten {
+            reason: "outlier against the fleet".into(),
+        };
+        // A new board refused as an outlier (a magnet near it), and a healthy board of the
+        // fleet whose later attempt was refused: its earlier set stays on it.
+        let mut newcomer = board_record(HEALTHY + 100);
+        (FAULTS[2].apply)(&mut newcomer);
+        newcomer.board = refusal.clone();
+        store.record(&newcomer).expect("write");
+        let mut retry = board_record(3);
+        retry.recorded_unix_ms += 1000;
+        (FAULTS[0].apply)(&mut retry);
+        retry.board = refusal.clone();
+        store.record(&retry).expect("write");
+
+        let report = fleet_report(&mut store, &FleetOptions::default()).expect("report");
+        assert_eq!(report.boards, 60, "the 60 sets on boards only");
+        let offsets = report
+            .parameters
+            .iter()
+            .find(|p| p.parameter == "mag.b.x")
+            .expect("magnetometer offsets are compared");
+        assert_eq!(offsets.boards, 60);
+        let newcomer_result: Vec<_> = report
+            .results
+            .iter()
+            .filter(|b| b.device_id == newcomer.device_id)
+            .collect();
+        assert_eq!(newcomer_result.len(), 1);
+        assert!(newcomer_result[0].outlier);
+        assert_eq!(
+            newcomer_result[0].not_written.as_deref(),
+            Some("outlier against the fleet")
+        );
+        let retried: Vec<_> = report
+            .results
+            .iter()
+            .filter(|b| b.device_id == retry.device_id)
+            .map(|b| (b.outlier, b.not_written.is_some()))
+            .collect();
+        assert_eq!(
+            retried.len(),
+            2,
+            "the set on the board and the refused attempt"
+        );
+        assert!(retried.contains(&(false, false)) && retried.contains(&(true, true)));
+
+        // The check before a write compares with the sets on boards only.
+        let check = is_outlier_against_fleet(
+            &board_record(HEALTHY + 101),
+            &mut store,
+            &FleetOptions::default(),
+        )
+        .expect("check");
+        assert_eq!(check.fleet_boards, 60);
+
+        let db = url(&location);
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["history", &newcomer.device_id, "--db", &db])
+            .output()
+            .expect("imucal runs");
+        let table = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            table.contains("NOT WRITTEN to the board: outlier against the fleet"),
+            "{table}"
+        );
+    }
 }

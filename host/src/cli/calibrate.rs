@@ -27,7 +27,7 @@ use imucal_protocol::Welcome;
 
 use super::args::CalibrateArgs;
 use super::board::given_or_only_board;
-use super::calibrate_extend::close_the_loop;
+use super::calibrate_extend::{close_the_loop, Closed};
 use super::calibrate_sim::Simulated;
 use super::calibrate_view::{before_after_table, Terminal};
 use super::write_policy::{check_outputs, refused_poor, Output, WriteDecision, WritePolicy};
@@ -230,12 +230,6 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(sim) = &simulated {
         sim.save_truth(&dir.join("truth.json"))?;
     }
-    // Recorded only once the session directory holds the calibration.
-    let mut record =
-        imucal::history::CalibrationRecord::from_session(&summary(&outcome), &outcome.poses);
-    record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
-    // A failed write is returned after the summary is printed, so nothing is hidden.
-    let recorded = super::history::record(&args.history, record);
     let closed = if args.analyze {
         Some(close_the_loop(
             &mut client,
@@ -244,21 +238,50 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             &dir,
             args.json,
             policy,
-        )?)
+        ))
     } else {
         None
     };
-
-    // The summary names the set on the board now: the extended one when `--analyze` wrote it.
+    // The summary and the history name the set on the board now: the extended one when
+    // `--analyze` wrote it over the base set.
     let mut final_summary = summary(&outcome);
-    if let Some(Ok(Some(errors))) = &closed {
-        final_summary.on_board_after = Some(*errors);
+    let mut rest_failure = None;
+    if let Some(Ok(Closed::Written { set, status, rest })) = closed.as_ref() {
+        final_summary.base_params_crc = Some(final_summary.params_crc.clone());
+        final_summary.params = ParamsFile::from(&**set);
+        final_summary.params_crc = format!("{:#010x}", status.active_crc);
+        final_summary.on_board_after = rest.as_ref().ok().copied();
+        rest_failure = rest.as_ref().err().map(|e| format!("{e:#}"));
         let path = dir.join("summary.json");
         let text = serde_json::to_string_pretty(&final_summary)
             .context("the summary could not be encoded")?;
         std::fs::write(&path, text + "\n")
             .with_context(|| format!("could not write {}", path.display()))?;
     }
+    // Recorded only once the session directory holds the calibration, and also when the
+    // analysis failed: the board holds a set either way.
+    let mut record =
+        imucal::history::CalibrationRecord::from_session(&final_summary, &outcome.poses);
+    record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    if !outcome.written {
+        let reason = match terminal.decision {
+            Some(WriteDecision::RefusedPoor) => "poor verdict",
+            _ => "declined at the prompt",
+        };
+        record.board = imucal::history::BoardWrite::NotWritten {
+            reason: reason.into(),
+        };
+    }
+    // A failed write is returned after the summary is printed, so nothing is hidden.
+    let recorded = super::history::record(&args.history, record);
+    let closed = closed.transpose()?;
+    let on_board_after = match &closed {
+        Some(Closed::Written {
+            rest: Ok(errors), ..
+        }) => Some(errors),
+        _ => None,
+    };
+
     if args.json {
         println!(
             "{}",
@@ -267,16 +290,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     } else {
         println!();
-        print!(
-            "{}",
-            before_after_table(
-                &outcome,
-                closed
-                    .as_ref()
-                    .and_then(|c| c.as_ref().ok())
-                    .and_then(Option::as_ref)
-            )
-        );
+        print!("{}", before_after_table(&outcome, on_board_after));
         // The stream's measured rate: a sensor off its nominal rate shows here first.
         let lost = match outcome.lost_samples {
             0 => "no sample lost".to_string(),
@@ -313,11 +327,17 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     recorded?;
+    if let Some(why) = rest_failure {
+        anyhow::bail!(
+            "the extended set is on the board, but its check at rest failed: {why}; check the \
+             board with `imucal stream --calibrated`"
+        );
+    }
     // Nothing written because of the verdict is a failure for scripts, after all is saved.
     if terminal.decision == Some(WriteDecision::RefusedPoor) {
         return Err(refused_poor("The calibration", &dir.join("params.json")));
     }
-    if let Some(Err(params)) = closed {
+    if let Some(Closed::RefusedPoor(params)) = closed {
         return Err(refused_poor("The extended set", &params));
     }
     Ok(())

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use imucal::device::{list_ports, BoardMatch};
+use imucal::history::fleet::count_boards;
 use imucal::history::FleetOptions;
 use imucal::session::batch::{run_batch, BatchOptions, BatchReport, BoardStatus};
 use imucal::session::batch_gate::{GateOptions, OutlierBasis};
@@ -115,8 +116,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         station: args.history.station.clone(),
     };
     say!(
-        "Batch of {} boards on one fixture; sessions in {}",
-        ports.len(),
+        "Batch of {} on one fixture; sessions in {}",
+        count_boards(ports.len()),
         out_dir.display()
     );
     if !simulated.is_empty() {
@@ -161,11 +162,23 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         .iter()
         .filter(|b| b.history_error.is_some())
         .count();
+    let mut failures = Vec::new();
+    if not_written > 0 {
+        failures.push(format!(
+            "{not_written} of {} not written and verified",
+            count_boards(report.boards.len())
+        ));
+    }
+    if unrecorded > 0 {
+        failures.push(match unrecorded {
+            1 => "1 attempt not recorded".to_string(),
+            n => format!("{n} attempts not recorded"),
+        });
+    }
     anyhow::ensure!(
-        not_written == 0 && unrecorded == 0,
-        "{not_written} of {} boards were not written and verified, {unrecorded} attempts were not \
-         recorded; the table says why per board",
-        report.boards.len()
+        failures.is_empty(),
+        "{}; the table says why per board",
+        failures.join(", ")
     );
     Ok(())
 }
@@ -216,21 +229,25 @@ fn batch_table(report: &BatchReport) -> String {
             BoardStatus::RefusedPoorVerdict => "refused: poor fit",
             BoardStatus::Failed => "failed",
         };
+        // A time the platform or a stopped thread could not tell is a dash, not a number.
+        let seconds = |value: Option<f64>, decimals: usize| {
+            value.map_or_else(|| "—".to_string(), |v| format!("{v:.decimals$}"))
+        };
         out += &format!(
-            "{:<24} {:<34} {:<20} {:<10} {:<8} {:>7.1} {:>7.2}  {why}\n",
+            "{:<24} {:<34} {:<20} {:<10} {:<8} {:>7} {:>7}  {why}\n",
             board.port,
             board.device_id.as_deref().unwrap_or("-"),
             status,
             verdict,
             test,
-            board.wall_seconds,
-            board.host_cpu_seconds.unwrap_or(f64::NAN),
+            seconds(board.wall_seconds, 1),
+            seconds(board.host_cpu_seconds, 2),
         );
     }
     out += &format!(
-        "{} of {} boards written and verified in {:.1} s\n",
+        "{} of {} written and verified in {:.1} s\n",
         report.verified,
-        report.boards.len(),
+        count_boards(report.boards.len()),
         report.wall_seconds
     );
     out

@@ -11,13 +11,30 @@ use imucal::session::{
     analyse_poses, extend_set, rest_errors, stream_for, RestErrors, SessionOptions, SessionOutcome,
 };
 use imucal_protocol::StreamKind;
+use imucal_protocol::{CalibrationSet, ParamStatus};
 
 use super::write_policy::{WriteDecision, WritePolicy};
 
+/// How `--analyze` ended: which set the board holds afterwards.
+pub(super) enum Closed {
+    /// The board keeps the base set (nothing to add, declined, or the base set not written).
+    BaseStays,
+    /// The extended set's verdict kept it off the board; the path of the saved set.
+    RefusedPoor(PathBuf),
+    /// The extended set is on the board.
+    Written {
+        /// The set written (boxed: a whole parameter set beside the small variants).
+        set: Box<CalibrationSet>,
+        /// The store's state after the commit.
+        status: ParamStatus,
+        /// The errors at rest with it, or why they could not be measured (the set is on the
+        /// board either way, so the caller records it before reporting this).
+        rest: anyhow::Result<RestErrors>,
+    },
+}
+
 /// `--analyze`: the residual analysis of the poses, and the extended set written and checked at
-/// rest when it adds anything and `policy` allows its verdict. Returns the at-rest errors with
-/// the extended set, if written, or `Err(path)` of the saved set when its verdict kept it off
-/// the board.
+/// rest when it adds anything and `policy` allows its verdict.
 pub(super) fn close_the_loop(
     client: &mut DeviceClient,
     options: &SessionOptions,
@@ -25,7 +42,7 @@ pub(super) fn close_the_loop(
     dir: &std::path::Path,
     json: bool,
     policy: WritePolicy,
-) -> anyhow::Result<Result<Option<RestErrors>, PathBuf>> {
+) -> anyhow::Result<Closed> {
     let analysis = analyse_poses(&outcome.poses, options.gravity_mps2);
     std::fs::write(
         dir.join("analysis.json"),
@@ -60,7 +77,7 @@ pub(super) fn close_the_loop(
     }
     if !extended.extended() {
         say!("The analysis accepted no effect the firmware applies; the base set stays.");
-        return Ok(Ok(None));
+        return Ok(Closed::BaseStays);
     }
     say!("Extended terms added: {}", extended.added.join(", "));
     let base_path = dir.join("params-base.json");
@@ -85,7 +102,7 @@ pub(super) fn close_the_loop(
              writes it",
             params_path.display()
         );
-        return Ok(Ok(None));
+        return Ok(Closed::BaseStays);
     }
     // The extended terms come from the same poses, so the base fit's verdict is theirs too.
     let question = format!("Write the extended set to the board on {}", outcome.port);
@@ -93,9 +110,9 @@ pub(super) fn close_the_loop(
         WriteDecision::Write => {}
         WriteDecision::Declined => {
             say!("The extended set was not written; the board keeps the base set");
-            return Ok(Ok(None));
+            return Ok(Closed::BaseStays);
         }
-        WriteDecision::RefusedPoor => return Ok(Err(params_path)),
+        WriteDecision::RefusedPoor => return Ok(Closed::RefusedPoor(params_path)),
     }
     let status = client.write_params_verified(&extended.set)?;
     say!(
@@ -104,13 +121,20 @@ pub(super) fn close_the_loop(
         status.active_crc,
         status.active_seq
     );
-    let samples = stream_for(
+    let rest = stream_for(
         client,
         StreamKind::Calibrated,
         options.rest_measure_s,
         options.read_timeout,
-    )?;
-    let errors = rest_errors(&samples, outcome.fit.gravity_mps2, outcome.fit.field_ut)
-        .context("no calibrated samples arrived for the check at rest")?;
-    Ok(Ok(Some(errors)))
+    )
+    .map_err(anyhow::Error::from)
+    .and_then(|samples| {
+        rest_errors(&samples, outcome.fit.gravity_mps2, outcome.fit.field_ut)
+            .context("no calibrated samples arrived for the check at rest")
+    });
+    Ok(Closed::Written {
+        set: Box::new(extended.set),
+        status,
+        rest,
+    })
 }

@@ -228,7 +228,7 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     }
     let mut set = file.to_calibration_set(&shown)?;
     let (mut client, _board) = connect(&args.port)?;
-    check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
+    let measured_on = check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
     merge_with_active(&mut client, &file, &mut set, &args.reset, &shown)?;
     let status = client.write_params_verified(&set)?;
     println!(
@@ -245,16 +245,20 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
         status.active_crc,
     );
     record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    if let Some(measured_on) = measured_on {
+        record.board = imucal::history::BoardWrite::FromOtherBoard { measured_on };
+    }
     super::history::record(&args.history, record)
 }
 
 /// Refuses a file made for another board unless `force`; notes a file that names no board.
+/// Returns the other board's id when `force` lets its file through.
 fn check_binding(
     file: &ParamsFile,
     welcome: &Welcome,
     shown: &str,
     force: bool,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Option<String>> {
     let board = welcome.device_id.to_string();
     let mut mismatches = match &file.device {
         Some(device) => {
@@ -276,14 +280,17 @@ fn check_binding(
         Some(_) => {}
     }
     if mismatches.is_empty() {
-        return Ok(());
+        return Ok(None);
     }
     if force {
         say!(
             "imucal: warning: writing `{shown}` although {} (--force-other-device)",
             mismatches.join("; ")
         );
-        return Ok(());
+        return Ok(file
+            .device_id()
+            .filter(|id| *id != board)
+            .map(str::to_string));
     }
     anyhow::bail!(
         "`{shown}` is not for this board: {}; calibrate this board, or pass \

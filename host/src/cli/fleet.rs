@@ -2,6 +2,7 @@
 //! board, and the boards that are robust outliers with the likely cause.
 
 use clap::Args;
+use imucal::history::fleet::count_boards;
 use imucal::history::{fleet_report, FleetOptions, HistoryStore};
 
 /// Arguments of `imucal fleet`.
@@ -52,8 +53,8 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "Fleet of {} boards in {}\nMethod: {}\nThreshold |z| > {:.2} at most (false-alarm rate {} per board)\n",
-        report.boards,
+        "Fleet of {} (the set on each board) in {}\nMethod: {}\nThreshold |z| > {:.2} at most (false-alarm rate {} per board)\n",
+        count_boards(report.boards),
         store.location().display(),
         report.method,
         report.threshold_z,
@@ -82,10 +83,33 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
             board.not_compared.join(", ")
         );
     }
+    let attempts = report
+        .results
+        .iter()
+        .filter(|b| b.not_written.is_some())
+        .count();
+    if attempts > 0 {
+        println!(
+            "\n{attempts} newer attempt{} not written to {} tested against the fleet but \
+             not counted in it",
+            if attempts == 1 { "" } else { "s" },
+            if attempts == 1 {
+                "its board is"
+            } else {
+                "their boards are"
+            }
+        );
+    }
     let outliers: Vec<_> = report.results.iter().filter(|b| b.outlier).collect();
-    println!("\n{} outlying boards", outliers.len());
+    println!("\n{} outlying", count_boards(outliers.len()));
     for board in outliers {
-        println!("{} (calibration #{})", board.device_id, board.record_id);
+        match &board.not_written {
+            Some(why) => println!(
+                "{} (calibration #{}, NOT WRITTEN to the board: {why})",
+                board.device_id, board.record_id
+            ),
+            None => println!("{} (calibration #{})", board.device_id, board.record_id),
+        }
         for f in &board.findings {
             println!(
                 "  {:<14} {:>12.5} (fleet {:.5}), z = {:+.1}: {}",

@@ -165,6 +165,9 @@ fn print_entry(entry: &RecordChanges, shown: usize) {
         r.verdict.as_ref().map_or("-", |v| v.level.as_str()),
         who.join(", ")
     );
+    if let Some(label) = r.board.label() {
+        println!("       {label}");
+    }
     match entry.previous {
         None => println!("       first calibration of this board"),
         Some(previous) => {

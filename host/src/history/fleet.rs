@@ -1,5 +1,7 @@
 //! Fleet statistics and the robust outlier test: is a board's calibration far outside the
-//! population of boards calibrated before it (or of the other boards of its batch)?
+//! population of boards calibrated before it (or of the other boards of its batch)? The
+//! population is the set on each board: an attempt that was not written (refused as an outlier
+//! or for a poor verdict) is tested against it and listed, but never counted in it.
 //!
 //! Method: per parameter, the fleet's centre is the median and its spread the scaled median
 //! absolute deviation `s = 1.4826·MAD` (a consistent estimate of σ for normal data). Both have a
@@ -34,7 +36,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use super::record::CalibrationRecord;
+use super::record::{BoardWrite, CalibrationRecord};
 use super::stats::{median, t_upper_quantile};
 use super::store::{HistoryStore, RecordId, StoredRecord};
 use super::HistoryError;
@@ -141,12 +143,15 @@ pub struct BoardResult {
     /// from raw counts (`input_unit`) has an `A` and `b` in counts, which no board calibrated in
     /// the nominal units can be compared with.
     pub not_compared: Vec<String>,
+    /// Why the tested set is not on the board, for an attempt that was not written (tested
+    /// against the fleet, not counted in it); `null` for the set on the board.
+    pub not_written: Option<String>,
 }
 
 /// The fleet's statistics and every board's test.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FleetReport {
-    /// Boards in the fleet (newest record of each).
+    /// Boards in the fleet: the newest set on each board (attempts not written are not counted).
     pub boards: usize,
     /// The method, in words.
     pub method: String,
@@ -157,7 +162,8 @@ pub struct FleetReport {
     pub threshold_z: f64,
     /// Per parameter.
     pub parameters: Vec<ParameterStats>,
-    /// Per board, outliers first.
+    /// Per board, outliers first: the set on each board, and each board's attempt not
+    /// written since (`not_written` says why).
     pub results: Vec<BoardResult>,
 }
 
@@ -185,13 +191,18 @@ pub enum FleetError {
     #[error(transparent)]
     History(#[from] HistoryError),
     /// Too few boards for a robust spread.
-    #[error("the fleet holds {boards} boards; the outlier test needs at least {needed} for a trustworthy spread (the three axes of a sensor pooled), so calibrate more boards first")]
+    #[error("the fleet holds {}; the outlier test needs at least {needed} for a trustworthy spread (the three axes of a sensor pooled), so calibrate more boards first", count_boards(*.boards))]
     TooFewBoards {
         /// Boards found.
         boards: usize,
         /// Boards needed.
         needed: usize,
     },
+}
+
+/// `1 board`, `7 boards`.
+pub fn count_boards(n: usize) -> String {
+    format!("{n} board{}", if n == 1 { "" } else { "s" })
 }
 
 /// Whether a parameter is compared as a logarithm.
@@ -411,15 +422,44 @@ pub fn likely_cause(parameter: &str) -> String {
     }
 }
 
-/// The fleet now (newest record of every board), its statistics and every board's test.
+/// The fleet now: the newest set on the board of every device, and each device's attempts
+/// since that were not written (refused sets describe no board, so they are tested against the
+/// fleet but never counted in it).
+fn fleet_now(
+    store: &mut HistoryStore,
+) -> Result<(Vec<StoredRecord>, Vec<StoredRecord>), HistoryError> {
+    let mut on_board: BTreeMap<String, StoredRecord> = BTreeMap::new();
+    let mut not_written: BTreeMap<String, StoredRecord> = BTreeMap::new();
+    // Records come oldest first, so the last one seen per device wins.
+    for stored in store.records(None)? {
+        let device = stored.record.device_id.clone();
+        if stored.record.board.on_board() {
+            not_written.remove(&device);
+            on_board.insert(device, stored);
+        } else {
+            not_written.insert(device, stored);
+        }
+    }
+    Ok((
+        on_board.into_values().collect(),
+        not_written.into_values().collect(),
+    ))
+}
+
+/// The fleet now (the newest set on every board), its statistics and every board's test, with
+/// the attempts not written since tested against it and labelled.
 pub fn fleet_report(
     store: &mut HistoryStore,
     options: &FleetOptions,
 ) -> Result<FleetReport, FleetError> {
-    let latest = store.latest_per_device()?;
-    let records: Vec<&CalibrationRecord> = latest.iter().map(|s| &s.record).collect();
+    let (on_board, not_written) = fleet_now(store)?;
+    let records: Vec<&CalibrationRecord> = on_board.iter().map(|s| &s.record).collect();
     let model = FleetModel::fit(&records, options)?;
-    let mut results: Vec<BoardResult> = latest.iter().map(|s| board_result(&model, s)).collect();
+    let mut results: Vec<BoardResult> = on_board
+        .iter()
+        .chain(&not_written)
+        .map(|s| board_result(&model, s))
+        .collect();
     results.sort_by(|a, b| {
         b.outlier
             .cmp(&a.outlier)
@@ -463,6 +503,10 @@ fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
             .into_iter()
             .map(|(sensor, unit)| format!("{sensor} (fitted from {unit})"))
             .collect(),
+        not_written: match &stored.record.board {
+            BoardWrite::NotWritten { reason } => Some(reason.clone()),
+            _ => None,
+        },
     }
 }
 
@@ -485,14 +529,14 @@ fn comparable_parameters(record: &CalibrationRecord) -> BTreeMap<String, f64> {
     parameters
 }
 
-/// Test `record` against the fleet in `store` (the newest record of every other board) before
+/// Test `record` against the fleet in `store` (the newest set on every other board) before
 /// its parameters are written. Too small a fleet gives `tested: false` with the reason.
 pub fn is_outlier_against_fleet(
     record: &CalibrationRecord,
     store: &mut HistoryStore,
     options: &FleetOptions,
 ) -> Result<FleetCheck, HistoryError> {
-    let latest = store.latest_per_device()?;
+    let (latest, _) = fleet_now(store)?;
     let others: Vec<&CalibrationRecord> = latest
         .iter()
         .map(|s| &s.record)

@@ -35,7 +35,7 @@ pub use fleet::{
     FleetReport,
 };
 pub use location::DbLocation;
-pub use record::{CalibrationRecord, RecordSource, RecordVerdict, TemperatureSpan};
+pub use record::{BoardWrite, CalibrationRecord, RecordSource, RecordVerdict, TemperatureSpan};
 pub use store::{record_calibration, HistoryStore, RecordId, StoredRecord};
 
 /// Why the history could not be opened, written or read.

@@ -55,7 +55,12 @@ impl Backend for PostgresBackend {
             .try_get(0)
             .map_err(failed)?;
         if found < SCHEMA_VERSION {
-            for statement in schema::migration_v1(Dialect::Postgres) {
+            let mut statements = Vec::new();
+            if found < 1 {
+                statements.extend(schema::migration_v1(Dialect::Postgres));
+            }
+            statements.extend(schema::migration_v2());
+            for statement in statements {
                 tx.batch_execute(&statement).map_err(failed)?;
             }
             tx.execute(

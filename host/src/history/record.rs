@@ -15,7 +15,8 @@ use crate::session::{CapturedPose, SessionFit, SessionSummary, Uncertainties};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RecordSource {
-    /// A guided session (`imucal calibrate`) that fitted, wrote and verified the set.
+    /// A guided session (`imucal calibrate`) that fitted the set; [`CalibrationRecord::board`]
+    /// says whether it was written.
     Guided,
     /// `imucal fit --params-out`: a set fitted from a recording.
     Fit,
@@ -53,6 +54,44 @@ pub struct TemperatureSpan {
     pub mean_c: f64,
     /// Highest.
     pub max_c: f64,
+}
+
+/// Whether a record's set went onto the board it names.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(tag = "state", rename_all = "snake_case")]
+pub enum BoardWrite {
+    /// Written to the board (for `fit`: saved to a file to be written).
+    #[default]
+    Written,
+    /// Written to the board, but measured in the session of another board
+    /// (`flash --force-other-device`).
+    FromOtherBoard {
+        /// The board whose session produced the set.
+        measured_on: String,
+    },
+    /// Not written: the board keeps its earlier set.
+    NotWritten {
+        /// Why, e.g. `outlier against the fleet`.
+        reason: String,
+    },
+}
+
+impl BoardWrite {
+    /// Whether the set is on the board.
+    pub fn on_board(&self) -> bool {
+        !matches!(self, Self::NotWritten { .. })
+    }
+
+    /// The state in words for tables (`None` for an ordinary written set).
+    pub fn label(&self) -> Option<String> {
+        match self {
+            Self::Written => None,
+            Self::FromOtherBoard { measured_on } => Some(format!(
+                "written from the session of another board ({measured_on})"
+            )),
+            Self::NotWritten { reason } => Some(format!("NOT WRITTEN to the board: {reason}")),
+        }
+    }
 }
 
 /// Verdict of the fit, when the producer judged it.
@@ -97,6 +136,10 @@ pub struct CalibrationRecord {
     pub operator: Option<String>,
     /// Which station or fixture.
     pub station: Option<String>,
+    /// Whether the set went onto the board (records made before this was kept read as written,
+    /// unless their verdict says "not written").
+    #[serde(default)]
+    pub board: BoardWrite,
 }
 
 /// Axis letters used in parameter names.
@@ -138,6 +181,7 @@ impl CalibrationRecord {
             verdict: None,
             operator: None,
             station: None,
+            board: BoardWrite::Written,
         }
     }
 

@@ -2,7 +2,7 @@
 //! same text for SQLite and PostgreSQL (`$N` parameters, `CAST`, `RETURNING`); only the key
 //! column and the append-only triggers differ per dialect.
 
-use super::record::{CalibrationRecord, RecordSource};
+use super::record::{BoardWrite, CalibrationRecord, RecordSource};
 use super::HistoryError;
 use crate::device::ParamsFile;
 
@@ -32,7 +32,7 @@ pub enum ColumnKind {
 }
 
 /// The data columns in storage order (the key `id` comes first in every `SELECT`).
-pub const COLUMNS: [(&str, ColumnKind); 15] = [
+pub const COLUMNS: [(&str, ColumnKind); 16] = [
     ("device_id", ColumnKind::Text),
     ("recorded_unix_ms", ColumnKind::Int),
     ("tool_version", ColumnKind::Text),
@@ -48,7 +48,12 @@ pub const COLUMNS: [(&str, ColumnKind); 15] = [
     ("operator", ColumnKind::OptText),
     ("station", ColumnKind::OptText),
     ("verdict_level", ColumnKind::OptText),
+    // Schema version 2.
+    ("board_write_json", ColumnKind::OptText),
 ];
+
+/// Columns of schema version 1 (the first of [`COLUMNS`]).
+const COLUMNS_V1: usize = 15;
 
 /// What a database connection must do; both databases run the statements of
 /// this module, so the store's logic is shared. Errors are the database's message.
@@ -71,7 +76,7 @@ pub enum Dialect {
 }
 
 /// Schema version this build writes and reads.
-pub const SCHEMA_VERSION: i64 = 1;
+pub const SCHEMA_VERSION: i64 = 2;
 
 /// The statements that create schema version 1 in `dialect`.
 pub fn migration_v1(dialect: Dialect) -> Vec<String> {
@@ -79,7 +84,7 @@ pub fn migration_v1(dialect: Dialect) -> Vec<String> {
         Dialect::Sqlite => "id INTEGER PRIMARY KEY AUTOINCREMENT",
         Dialect::Postgres => "id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY",
     };
-    let columns: Vec<String> = COLUMNS
+    let columns: Vec<String> = COLUMNS[..COLUMNS_V1]
         .iter()
         .map(|(name, kind)| {
             let ty = match kind {
@@ -127,6 +132,14 @@ pub fn migration_v1(dialect: Dialect) -> Vec<String> {
         }
     }
     statements
+}
+
+/// The statements that upgrade schema version 1 to 2: whether each set went onto its board.
+pub fn migration_v2() -> Vec<String> {
+    vec![format!(
+        "ALTER TABLE {TABLE} ADD COLUMN {} TEXT",
+        COLUMNS[COLUMNS_V1].0
+    )]
 }
 
 /// The table holding the schema version.
@@ -180,6 +193,7 @@ pub fn to_row(record: &CalibrationRecord) -> Vec<SqlValue> {
         opt_text(record.operator.clone()),
         opt_text(record.station.clone()),
         opt_text(record.verdict.as_ref().map(|v| v.level.clone())),
+        SqlValue::Text(json(&record.board)),
     ]
 }
 
@@ -257,6 +271,24 @@ pub fn from_row(values: Vec<SqlValue>) -> Result<(i64, CalibrationRecord), Histo
     let params_text = row.text("params_json")?;
     let params = ParamsFile::from_json(&params_text, &format!("history record {id}"))
         .map_err(|e| corrupt(id, e.to_string()))?;
+    let sigma = row.json("sigma_json")?;
+    let residuals = row.json("residuals_json")?;
+    let noise = row.json("noise_json")?;
+    let temperatures = row.opt_json("temperatures_json")?;
+    let verdict: Option<super::RecordVerdict> = row.opt_json("verdict_json")?;
+    let operator = row.opt_text("operator")?;
+    let station = row.opt_text("station")?;
+    let _level = row.opt_text("verdict_level")?;
+    // Version 1 rows kept a refused batch attempt's reason in the verdict only.
+    let board = row.opt_json("board_write_json")?.unwrap_or_else(|| {
+        verdict
+            .iter()
+            .flat_map(|v| &v.reasons)
+            .find_map(|r| r.strip_prefix("not written: "))
+            .map_or(BoardWrite::Written, |reason| BoardWrite::NotWritten {
+                reason: reason.to_string(),
+            })
+    });
     Ok((
         id,
         CalibrationRecord {
@@ -267,13 +299,14 @@ pub fn from_row(values: Vec<SqlValue>) -> Result<(i64, CalibrationRecord), Histo
             source,
             params,
             params_crc,
-            sigma: row.json("sigma_json")?,
-            residuals: row.json("residuals_json")?,
-            noise: row.json("noise_json")?,
-            temperatures: row.opt_json("temperatures_json")?,
-            verdict: row.opt_json("verdict_json")?,
-            operator: row.opt_text("operator")?,
-            station: row.opt_text("station")?,
+            sigma,
+            residuals,
+            noise,
+            temperatures,
+            verdict,
+            operator,
+            station,
+            board,
         },
     ))
 }

@@ -95,7 +95,12 @@ impl Backend for SqliteBackend {
             )
             .map_err(failed)?;
         if found < SCHEMA_VERSION {
-            for statement in schema::migration_v1(Dialect::Sqlite) {
+            let mut statements = Vec::new();
+            if found < 1 {
+                statements.extend(schema::migration_v1(Dialect::Sqlite));
+            }
+            statements.extend(schema::migration_v2());
+            for statement in statements {
                 tx.execute(&statement, []).map_err(failed)?;
             }
             tx.execute(

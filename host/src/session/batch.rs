@@ -2,8 +2,8 @@
 //! guided through the positions together, each captured on its own thread, then fitted, tested
 //! against the fleet ([`super::batch_gate`]), written, verified, saved and recorded on its own.
 //! A board that fails (disconnects, poor verdict, refused as an outlier) does not stop the
-//! others; every attempt that reached a fit is recorded in the history, refused ones with the
-//! reason in their verdict.
+//! others; every attempt that reached a fit is recorded in the history, refused ones marked as
+//! not written, with the reason.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -18,7 +18,7 @@ use super::{
     SessionObserver, SessionOptions, SessionSummary, VerdictLevel,
 };
 use crate::device::{DeviceClient, ParamsFile};
-use crate::history::{record_calibration, CalibrationRecord, RecordId, RecordVerdict};
+use crate::history::{record_calibration, BoardWrite, CalibrationRecord, RecordId};
 
 /// Settings of a batch.
 #[derive(Debug, Clone)]
@@ -80,8 +80,9 @@ pub struct BoardResult {
     pub history_write_seconds: Option<f64>,
     /// The session's summary (fit, verdict, errors at rest).
     pub summary: Option<SessionSummary>,
-    /// Wall time of this board's session, s.
-    pub wall_seconds: f64,
+    /// Wall time of this board's session, s (also of a failed one; `None` when its thread
+    /// stopped unexpectedly).
+    pub wall_seconds: Option<f64>,
     /// CPU time of this board's host thread, s (None where the platform cannot tell).
     pub host_cpu_seconds: Option<f64>,
 }
@@ -142,7 +143,10 @@ impl SessionObserver for BoardObserver<'_> {
             SessionEvent::MagPrompt => "magnetometer: turning".into(),
             SessionEvent::RestPrompt => "at rest".into(),
             SessionEvent::Fitted(fit) => format!("fitted, verdict {:?}", fit.verdict.level),
-            SessionEvent::Verified(status) => format!("written and verified ({status:?})"),
+            SessionEvent::Verified(status) => format!(
+                "written and verified: CRC {:#010x}, store sequence {}",
+                status.active_crc, status.active_seq
+            ),
             _ => return,
         };
         (self.log)(self.port, &line);
@@ -235,11 +239,12 @@ fn failed(port: &str, device_id: Option<String>, error: String) -> BoardResult {
         history_error: None,
         history_write_seconds: None,
         summary: None,
-        wall_seconds: 0.0,
+        wall_seconds: None,
         host_cpu_seconds: None,
     }
 }
 
+/// [`board_session`] with its wall and CPU time, failed or not.
 fn run_board(
     index: usize,
     port: &str,
@@ -250,6 +255,22 @@ fn run_board(
 ) -> BoardResult {
     let start = Instant::now();
     let cpu_start = thread_cpu_seconds();
+    let mut result = board_session(index, port, gate, options, log, show);
+    result.wall_seconds = Some(start.elapsed().as_secs_f64());
+    result.host_cpu_seconds = thread_cpu_seconds()
+        .zip(cpu_start)
+        .map(|(end, begin)| end - begin);
+    result
+}
+
+fn board_session(
+    index: usize,
+    port: &str,
+    gate: &WriteGate,
+    options: &BatchOptions,
+    log: &(dyn Fn(&str, &str) + Sync),
+    show: &(dyn Fn(&str, &SessionEvent<'_>) + Sync),
+) -> BoardResult {
     let mut client = match DeviceClient::open(port) {
         Ok(client) => client,
         Err(e) => return failed(port, None, e.to_string()),
@@ -306,16 +327,12 @@ fn run_board(
         history_error: None,
         history_write_seconds: None,
         summary: Some(summary),
-        wall_seconds: 0.0,
+        wall_seconds: None,
         host_cpu_seconds: None,
     };
     if options.record_history {
         record_attempt(&mut result, &outcome.poses, options, &client);
     }
-    result.wall_seconds = start.elapsed().as_secs_f64();
-    result.host_cpu_seconds = thread_cpu_seconds()
-        .zip(cpu_start)
-        .map(|(end, begin)| end - begin);
     result
 }
 
@@ -329,7 +346,7 @@ fn bind_saved_params(path: &std::path::Path, welcome: &Welcome) -> Result<(), St
         .map_err(|e| format!("could not write {}: {e}", path.display()))
 }
 
-/// Record the attempt (refused ones with the reason added to their verdict).
+/// Record the attempt (refused ones marked as not written, with the reason).
 fn record_attempt<L>(
     result: &mut BoardResult,
     poses: &[super::CapturedPose],
@@ -353,24 +370,20 @@ fn record_attempt<L>(
         BoardStatus::RefusedOutlier => Some(
             match result.outlier_check.as_ref().map(|c| &c.basis) {
                 Some(super::batch_gate::OutlierBasis::Batch) => {
-                    "not written: outlier against the other boards of the batch"
+                    "outlier against the other boards of the batch"
                 }
                 Some(super::batch_gate::OutlierBasis::PartLimits) => {
-                    "not written: beyond the bounds of every common part's datasheet"
+                    "beyond the bounds of every common part's datasheet"
                 }
-                _ => "not written: outlier against the fleet",
+                _ => "outlier against the fleet",
             }
             .to_string(),
         ),
-        BoardStatus::RefusedPoorVerdict => Some("not written: poor verdict".into()),
+        BoardStatus::RefusedPoorVerdict => Some("poor verdict".into()),
         _ => None,
     };
-    if let Some(refusal) = refusal {
-        let verdict = record.verdict.get_or_insert_with(|| RecordVerdict {
-            level: "poor".into(),
-            reasons: Vec::new(),
-        });
-        verdict.reasons.push(refusal);
+    if let Some(reason) = refusal {
+        record.board = BoardWrite::NotWritten { reason };
     }
     let start = Instant::now();
     let written = record_calibration(options.gate.db.as_deref(), &record);

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use crate::history::fleet::FleetModel;
+use crate::history::fleet::{count_boards, FleetModel};
 use crate::history::part_limits::beyond_part_limits;
 use crate::history::{
     is_outlier_against_fleet, CalibrationRecord, Finding, FleetCheck, FleetOptions, HistoryStore,
@@ -184,9 +184,9 @@ impl WriteGate {
                         threshold_z: model.threshold_z(),
                         findings,
                         note: Some(format!(
-                            "fleet too small ({fleet_note}); compared with the other {} boards \
-                             of this batch",
-                            others.len()
+                            "fleet too small ({fleet_note}); compared with the other {} of \
+                             this batch",
+                            count_boards(others.len())
                         )),
                     },
                 }

@@ -35,10 +35,15 @@ pub struct SessionSummary {
     pub session_seconds: f64,
     /// Wall time of the same span, s.
     pub wall_seconds: f64,
-    /// The set written.
+    /// The set the board holds at the end of the session: the extended set when `--analyze`
+    /// wrote one over the base set, else the fitted set (also when it was not written; then
+    /// `verified` is false).
     pub params: ParamsFile,
-    /// CRC-32 of the set written.
+    /// CRC-32 of `params`.
     pub params_crc: String,
+    /// CRC-32 of the base set the session wrote first, when `--analyze` then replaced it with
+    /// the extended set (`params-base.json`); `null` otherwise.
+    pub base_params_crc: Option<String>,
     /// Errors at rest without calibration (raw readings).
     pub before: RestErrors,
     /// Errors at rest with the written set.
@@ -97,6 +102,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         wall_seconds: outcome.wall_seconds,
         params: ParamsFile::from(&outcome.fit.set),
         params_crc: format!("{:#010x}", outcome.fit.set.crc32()),
+        base_params_crc: None,
         before: outcome.before,
         after: outcome.after,
         on_board_after: outcome.after,
