@@ -10,8 +10,8 @@ use std::sync::Arc;
 use imucal::device::DeviceClient;
 use imucal::fit::Vec3;
 use imucal::session::{
-    load_poses, load_progress, run_session_with, save_session, SessionControl, SessionError,
-    SessionEvent, SessionObserver, SessionOptions, PROGRESS_FILE,
+    load_mag_samples, load_poses, load_progress, run_session_with, save_session, SessionControl,
+    SessionError, SessionEvent, SessionObserver, SessionOptions, PROGRESS_FILE,
 };
 use imucal_hil_sim::link_faults::ParamTamper;
 use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
@@ -99,8 +99,8 @@ fn sabotaged_session(
     };
     let control = SessionControl {
         save_dir: Some(dir.to_path_buf()),
-        resume: Vec::new(),
         interrupt: Some(interrupt),
+        ..SessionControl::default()
     };
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
     let result = run_session_with(&mut client, &options_for(sim), &mut observer, &control);
@@ -165,7 +165,7 @@ fn a_corrupted_read_back_after_the_commit_says_the_board_holds_the_new_set() {
 }
 
 #[test]
-fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_again() {
+fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking_for_them_again() {
     let sim = board(33);
     let dir = session_dir("resume");
     let (result, _) = sabotaged_session(&sim, Sabotage::InterruptAfter(5), &dir);
@@ -179,6 +179,8 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
     let first = load_poses(&dir.join("poses.json")).expect("the poses are saved");
     assert_eq!(first.len(), 5, "the poses captured before the interrupt");
     assert!(load_progress(&dir).is_ok());
+    let first_mag = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
+    assert!(!first_mag.is_empty());
 
     // Resume on the same board: the five positions are neither prompted for nor captured again.
     let mut observer = Saboteur {
@@ -190,6 +192,7 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
     let control = SessionControl {
         save_dir: Some(dir.clone()),
         resume: first.clone(),
+        resume_mag: first_mag.clone(),
         interrupt: None,
     };
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
@@ -209,7 +212,12 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
         assert_eq!(again, 1, "{} captured once", pose.target.name);
     }
     assert!(outcome.poses.len() >= 12 && outcome.verified);
+    // The samples of the first run are kept ahead of the new ones, on disk too.
+    assert!(outcome.mag_samples.len() > first_mag.len());
+    assert_eq!(outcome.mag_samples[..first_mag.len()], first_mag[..]);
     save_session(&outcome, &dir).expect("the finished session is saved");
+    let saved = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
+    assert_eq!(saved.len(), outcome.mag_samples.len());
     assert!(
         !dir.join(PROGRESS_FILE).exists(),
         "a finished session has no progress file"

@@ -20,8 +20,8 @@ use anyhow::Context;
 use imucal::device::{DeviceClient, ParamsFile};
 use imucal::pipeline::References;
 use imucal::session::{
-    load_poses, load_progress, run_session_with, save_session, summary, CapturedPose,
-    SessionControl, SessionEvent, SessionOptions, Tapped,
+    load_mag_samples, load_poses, load_progress, run_session_with, save_session, summary,
+    CapturedPose, MagSample, SessionControl, SessionEvent, SessionOptions, Tapped,
 };
 use imucal_protocol::Welcome;
 
@@ -46,8 +46,12 @@ pub(super) fn unix_now() -> u64 {
         .map_or(0, |d| d.as_secs())
 }
 
-/// The poses of the unfinished session in `dir`, refused when it was started on another board.
-fn resumed_poses(dir: &Path, device_id: &str) -> anyhow::Result<Vec<CapturedPose>> {
+/// What an unfinished session in `dir` measured: its poses and magnetometer samples, refused
+/// when it was started on another board.
+fn resumed_session(
+    dir: &Path,
+    device_id: &str,
+) -> anyhow::Result<(Vec<CapturedPose>, Vec<MagSample>)> {
     let progress = load_progress(dir)?;
     anyhow::ensure!(
         progress.device_id == device_id,
@@ -56,17 +60,30 @@ fn resumed_poses(dir: &Path, device_id: &str) -> anyhow::Result<Vec<CapturedPose
         dir.display(),
         progress.device_id
     );
-    let poses = load_poses(&dir.join("poses.json"))?;
+    // A session stopped before its first pose has no poses.json, and possibly no samples.
+    let poses_path = dir.join("poses.json");
+    let poses = if poses_path.exists() {
+        load_poses(&poses_path)?
+    } else {
+        Vec::new()
+    };
+    let mag_path = dir.join("mag_samples.csv");
+    let mag = if mag_path.exists() {
+        load_mag_samples(&mag_path)?
+    } else {
+        Vec::new()
+    };
     let names: Vec<&str> = poses.iter().map(|p| p.target.name.as_str()).collect();
     say!(
         "Resuming {} (stopped: {}): {} positions already captured ({}); they are not asked for \
-         again",
+         again. The {} magnetometer samples saved are kept.",
         dir.display(),
         progress.stopped_because,
         poses.len(),
-        names.join(", ")
+        names.join(", "),
+        mag.len()
     );
-    Ok(poses)
+    Ok((poses, mag))
 }
 
 /// A flag set by the first Ctrl-C, which the session notices at its next batch of samples (it
@@ -192,11 +209,13 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         welcome.firmware_version.patch,
         welcome.scales.sample_rate_hz
     );
+    let (resume, resume_mag) = match &args.resume {
+        Some(dir) => resumed_session(dir, &welcome.device_id.to_string())?,
+        None => (Vec::new(), Vec::new()),
+    };
     let control = SessionControl {
-        resume: match &args.resume {
-            Some(dir) => resumed_poses(dir, &welcome.device_id.to_string())?,
-            None => Vec::new(),
-        },
+        resume,
+        resume_mag,
         save_dir: Some(dir.clone()),
         interrupt: Some(interrupt_flag()?),
     };
