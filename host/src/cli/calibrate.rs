@@ -213,6 +213,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         Some(dir) => resumed_session(dir, &welcome.device_id.to_string())?,
         None => (Vec::new(), Vec::new()),
     };
+    if let Some(sim) = &simulated {
+        sim.resumed(&resume);
+    }
     let control = SessionControl {
         resume,
         resume_mag,
