@@ -244,6 +244,21 @@ fn calibrate_command(dir: &Path) -> std::process::Command {
     command
 }
 
+/// The command `imucal` says continues the session, from its error output, as a user would
+/// paste it (the session directory in the tests needs no quoting).
+fn printed_resume_command(stderr: &str) -> std::process::Command {
+    let line = stderr
+        .split("Continue with `")
+        .nth(1)
+        .and_then(|rest| rest.split('`').next())
+        .unwrap_or_else(|| panic!("no command to continue with: {stderr}"));
+    let mut words = line.split_whitespace();
+    assert_eq!(words.next(), Some("imucal"), "{line}");
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"));
+    command.args(words);
+    command
+}
+
 #[test]
 fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     let dir = session_dir("sigint");
@@ -279,21 +294,10 @@ fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     let saved_mag = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
     assert_eq!(saved_mag.len(), progress.mag_samples);
 
-    // `--resume` on the same simulated board does not ask for the saved positions again and
-    // keeps the saved samples: the simulated person, like a user reading the list of positions
-    // already captured, skips them.
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
-        .args([
-            "calibrate",
-            "--sim",
-            "--sim-seed",
-            "5",
-            "--yes",
-            "--speed",
-            "10",
-            "--resume",
-        ])
-        .arg(&dir)
+    // The command printed continues the session as pasted (the same simulated board, by its
+    // seed), does not ask for the saved positions again, and keeps the saved samples: the
+    // simulated person, like a user reading the list of positions already captured, skips them.
+    let out = printed_resume_command(&stderr)
         .env("IMUCAL_DB", dir.with_extension("db"))
         .output()
         .expect("run imucal");

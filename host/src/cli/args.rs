@@ -456,6 +456,19 @@ impl CalibrateArgs {
     }
 }
 
+/// `calibrate --speed` unless given: simulated seconds per wall second.
+pub const DEFAULT_SPEED: f64 = 15.0;
+/// `calibrate --gravity` unless given, m/s² (standard gravity).
+pub const DEFAULT_GRAVITY: f64 = 9.806_65;
+/// `calibrate --hold` unless given, s.
+pub const DEFAULT_HOLD_S: f64 = 1.5;
+/// `calibrate --pose-timeout` unless given, s.
+pub const DEFAULT_POSE_TIMEOUT_S: f64 = 180.0;
+/// `calibrate --mag-timeout` unless given, s.
+pub const DEFAULT_MAG_TIMEOUT_S: f64 = 180.0;
+/// `calibrate --rest-timeout` unless given, s.
+pub const DEFAULT_REST_TIMEOUT_S: f64 = 120.0;
+
 /// Arguments of `imucal calibrate`.
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("simulated").args(["sim", "sim_boards"])))]
@@ -503,7 +516,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub sketch_rate: Option<f64>,
     /// Simulator: simulated seconds per wall second.
-    #[arg(long, default_value_t = 15.0, requires = "simulated")]
+    #[arg(long, default_value_t = DEFAULT_SPEED, requires = "simulated")]
     pub speed: f64,
     /// Simulator: the LSM9DS1 converts on its own clock, this relative error off its nominal
     /// output data rates (e.g. -0.005), so reads repeat or miss conversions as on hardware and
@@ -557,7 +570,7 @@ pub struct CalibrateArgs {
     #[command(flatten)]
     pub history: super::history::RecordArgs,
     /// Local gravity, m/s².
-    #[arg(long, default_value_t = 9.806_65)]
+    #[arg(long, default_value_t = DEFAULT_GRAVITY)]
     pub gravity: f64,
     /// Local field magnitude, µT (e.g. from a geomagnetic model). Without it the magnetometer
     /// keeps its mean sensitivity (with `--sim`: the simulated site's field).
@@ -568,15 +581,15 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "LAT,LON[,ALT_M]", allow_hyphen_values = true)]
     pub location: Option<imucal::geomag::Location>,
     /// Still time averaged per position, s.
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, default_value_t = DEFAULT_HOLD_S)]
     pub hold: f64,
     /// Longest wait for the next position, s.
-    #[arg(long, default_value_t = 180.0)]
+    #[arg(long, default_value_t = DEFAULT_POSE_TIMEOUT_S)]
     pub pose_timeout: f64,
     /// Longest magnetometer phase, s.
-    #[arg(long, default_value_t = 180.0)]
+    #[arg(long, default_value_t = DEFAULT_MAG_TIMEOUT_S)]
     pub mag_timeout: f64,
     /// Longest wait for the board to lie still at the end, s.
-    #[arg(long, default_value_t = 120.0)]
+    #[arg(long, default_value_t = DEFAULT_REST_TIMEOUT_S)]
     pub rest_timeout: f64,
 }
