@@ -29,6 +29,10 @@ enum Sabotage {
     Nothing,
     /// Raise the interrupt flag once this many positions are captured.
     InterruptAfter(usize),
+    /// Raise the interrupt flag when the set is fitted (no samples are read until the write).
+    InterruptWhenFitted,
+    /// Raise the interrupt flag when the written set is verified (before the check at rest).
+    InterruptWhenVerified,
 }
 
 struct Saboteur<'a> {
@@ -46,6 +50,10 @@ impl SessionObserver for Saboteur<'_> {
             (SessionEvent::Captured { captured, .. }, Sabotage::InterruptAfter(n))
                 if captured >= n =>
             {
+                self.interrupt.store(true, Ordering::SeqCst);
+            }
+            (SessionEvent::Fitted(_), Sabotage::InterruptWhenFitted)
+            | (SessionEvent::Verified(_), Sabotage::InterruptWhenVerified) => {
                 self.interrupt.store(true, Ordering::SeqCst);
             }
             _ => {}
@@ -165,6 +173,50 @@ fn a_corrupted_read_back_after_the_commit_says_the_board_holds_the_new_set() {
 }
 
 #[test]
+fn an_interrupt_between_reads_stops_at_the_next_stage_and_saves() {
+    // Interrupted while fitting: nothing is written, and the session stops as usual.
+    let sim = board(34);
+    let dir = session_dir("fitted");
+    let (result, _) = sabotaged_session(&sim, Sabotage::InterruptWhenFitted, &dir);
+    let error = result.expect_err("the interrupt stops the session before the write");
+    assert!(
+        matches!(&error, SessionError::Stopped { cause, board_holds, .. }
+            if matches!(**cause, SessionError::Interrupted)
+                && board_holds.contains("nothing was written")),
+        "{error}"
+    );
+    let progress = load_progress(&dir).expect("the progress is saved");
+    assert_eq!(progress.stage, "stopped");
+    assert!(
+        progress.stopped_because.contains("stage `fitted`"),
+        "{}",
+        progress.stopped_because
+    );
+    assert!(progress.params_crc.is_some() && progress.mag_samples > 0);
+    let _ = std::fs::remove_dir_all(&dir);
+
+    // Interrupted once the set is verified: the check at rest is not run, and the board is
+    // said to hold the new set.
+    let sim = board(35);
+    let dir = session_dir("verified");
+    let (result, _) = sabotaged_session(&sim, Sabotage::InterruptWhenVerified, &dir);
+    let error = result.expect_err("the interrupt stops the check at rest");
+    assert!(
+        matches!(&error, SessionError::Stopped { cause, board_holds, .. }
+            if matches!(**cause, SessionError::Interrupted)
+                && board_holds.starts_with("the new set")),
+        "{error}"
+    );
+    let progress = load_progress(&dir).expect("the progress is saved");
+    assert!(
+        progress.stopped_because.contains("stage `after`"),
+        "{}",
+        progress.stopped_because
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking_for_them_again() {
     let sim = board(33);
     let dir = session_dir("resume");
@@ -276,14 +328,24 @@ fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
         );
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
-    let sent = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("send SIGINT");
-    assert!(sent.success());
+    let interrupt = || {
+        std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .expect("send SIGINT")
+    };
+    assert!(interrupt().success());
+    // `timeout` and a kill of the process group deliver one Ctrl-C twice: it stops the session
+    // once, as one Ctrl-C, and does not quit without saving.
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let _ = interrupt();
     let out = child.wait_with_output().expect("imucal ends");
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "an interrupted session fails");
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "an interrupted session fails: {stderr}"
+    );
     assert!(stderr.contains("stopped by the user"), "{stderr}");
     assert!(stderr.contains("nothing was written"), "{stderr}");
     assert!(stderr.contains("--resume"), "{stderr}");

@@ -14,7 +14,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
 use imucal::device::{DeviceClient, ParamsFile};
@@ -194,16 +194,24 @@ pub(super) fn resume_command(args: &CalibrateArgs, dir: &Path) -> String {
     words.join(" ")
 }
 
-/// A flag set by the first Ctrl-C, which the session notices at its next batch of samples (it
-/// then stops the stream and saves); a second Ctrl-C ends the program at once.
+/// A second SIGINT within this time of the first is the same Ctrl-C: `timeout` and `kill` on a
+/// process group deliver one interrupt to the process and again to its group.
+const SAME_CTRL_C: Duration = Duration::from_millis(500);
+
+/// A flag set by the first Ctrl-C, which the session notices at its next batch of samples or
+/// stage (it then stops the stream and saves); a second Ctrl-C ends the program at once.
 fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     let handler_flag = Arc::clone(&flag);
-    ctrlc::set_handler(move || {
-        if handler_flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
+    let mut first: Option<Instant> = None;
+    ctrlc::set_handler(move || match first {
+        None => {
+            first = Some(Instant::now());
+            handler_flag.store(true, Ordering::SeqCst);
+            say!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
         }
-        say!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
+        Some(at) if at.elapsed() < SAME_CTRL_C => {}
+        Some(_) => std::process::exit(130),
     })
     .context("the Ctrl-C handler could not be installed")?;
     Ok(flag)

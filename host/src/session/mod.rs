@@ -238,11 +238,11 @@ fn run_phases<L: Read + Write>(
     let gyro_turns_note = runner.gyro_turns(&mut captured)?;
     runner.observer.event(&SessionEvent::Note(gyro_turns_note));
 
-    runner.journal.stage("magnetometer", &runner.mag)?;
+    runner.stage("magnetometer")?;
     let coverage = runner.magnetometer()?;
-    runner.journal.stage("rest", &runner.mag)?;
+    runner.stage("rest")?;
     let raw_rest = runner.measure_at_rest()?;
-    runner.journal.stage("fitting", &runner.mag)?;
+    runner.stage("fitting")?;
 
     // Every moving sample shows a field direction: those of the moves between the positions and
     // of the tumble.
@@ -300,11 +300,14 @@ fn run_phases<L: Read + Write>(
         fit,
         gyro_scale,
     };
+    // An interrupt during the fit stops the session before the write is offered or started.
+    runner.check_interrupt()?;
     if runner.observer.confirm_write(&outcome.fit) {
+        runner.check_interrupt()?;
         runner.write_started = Some(outcome.fit.set.crc32());
         runner.journal.stage("writing", &runner.mag)?;
         let status = runner.client.write_params_verified(&outcome.fit.set)?;
-        runner.journal.stage("after", &runner.mag)?;
+        runner.stage("after")?;
         outcome.written = true;
         outcome.verified = true;
         outcome.param_status = Some(status);
