@@ -291,7 +291,7 @@ fn six_position_reports_the_same_norm_residual_as_its_held_out_error_and_the_oth
     let mut r = rng(43);
     let level = directions(&mut r, PoseSet::SixFaces);
     let dirs = perturb_directions(&mut r, &level, 3.0);
-    let faces: Vec<Vec3> = dirs.iter().map(|d| face_axis(d)).collect();
+    let faces: Vec<Vec3> = dirs.iter().map(face_axis).collect();
     let poses = accel_poses(&mut r, &truth, &dirs, G, 0.0, 1);
     let fit = fit_six_position(&poses, Some(&faces), G).expect("fit");
     for (pose, residual) in poses.iter().zip(&fit.residuals) {
