@@ -149,6 +149,8 @@ struct Shared {
     faults: Mutex<FaultStats>,
     notes: Mutex<Vec<String>>,
     screen: Mutex<Screen>,
+    /// Up directions of the positions a resumed session holds, until the board has them.
+    held: Mutex<Option<Vec<[f64; 3]>>>,
 }
 
 /// Starts simulated boards.
@@ -178,6 +180,7 @@ impl SimServer {
             faults: Mutex::new(FaultStats::default()),
             notes: Mutex::new(Vec::new()),
             screen: Mutex::new(Screen::Unknown),
+            held: Mutex::new(None),
         });
         let (commands, receiver) = mpsc::channel();
         let thread_shared = Arc::clone(&shared);
@@ -295,6 +298,16 @@ impl SimHandle {
             .screen
             .lock()
             .unwrap_or_else(PoisonError::into_inner) = screen;
+    }
+
+    /// Tell the simulated person which positions a resumed session already holds (body-frame
+    /// up directions), as the host lists them when it resumes: the person skips them.
+    pub fn tell_held(&self, ups: Vec<[f64; 3]>) {
+        *self
+            .shared
+            .held
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = Some(ups);
     }
 
     /// Close the pseudo-terminal now, as when the board is unplugged: the host's reads and
@@ -484,6 +497,14 @@ fn serve(
         let target_us = sim_start_us.saturating_add((wall_s * speed * 1e6) as u64);
         let step_to = target_us.min(board.time_us().saturating_add(MAX_STEP_US));
         board.show(*shared.screen.lock().unwrap_or_else(PoisonError::into_inner));
+        if let Some(ups) = shared
+            .held
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take()
+        {
+            board.tell_held(&ups);
+        }
         board.advance_to(step_to)?;
         let lag_s = target_us.saturating_sub(step_to) as f64 * 1e-6;
 

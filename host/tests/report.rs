@@ -576,3 +576,80 @@ fn a_gyroscope_only_recording_gets_a_report_of_the_bias_fit_finds() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The `progress.json` of a session `calibrate` stopped in `stage`.
+fn write_progress(dir: &std::path::Path, stage: &str) {
+    let progress = serde_json::json!({
+        "device_id": "03000000004d49530000000000000000",
+        "stage": "stopped",
+        "stopped_because": format!("the session was stopped by the user (Ctrl-C) (during stage `{stage}`)"),
+        "board_holds": "its earlier calibration: nothing was written",
+        "poses": 12,
+        "mag_samples": 600,
+        "params_crc": null
+    });
+    std::fs::write(dir.join("progress.json"), progress.to_string()).unwrap();
+}
+
+#[test]
+fn a_session_with_a_motioncal_sketch_is_reported_and_says_why_samples_and_checks_are_missing() {
+    // `calibrate --sim-protocol motioncal` saves no magnetometer samples and no summary.json;
+    // its verdict is in motioncal.json.
+    let dir = scratch("motioncal");
+    write_session(&dir);
+    std::fs::remove_file(dir.join("mag_samples.csv")).unwrap();
+    std::fs::remove_file(dir.join("summary.json")).unwrap();
+    let summary = serde_json::json!({
+        "verdict": {"level": "marginal", "reasons": ["the sketch applies no misalignment"]},
+        "poses": 12
+    });
+    std::fs::write(dir.join("motioncal.json"), summary.to_string()).unwrap();
+    let data = from_session_dir(&dir).expect("a MotionCal session is reported");
+    assert!(data.mag.is_none());
+    assert_eq!(data.accel.as_ref().map(|a| a.calibrated.len()), Some(12));
+    assert_eq!(data.verdict_level, "marginal");
+    let notes = data.notes.join("\n");
+    assert!(notes.contains("mag_samples.csv is missing"), "{notes}");
+    assert!(notes.contains("MotionCal sketch"), "{notes}");
+    render_html(&data).expect("renders");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn an_unfinished_session_is_reported_when_fitted_and_otherwise_refused_saying_how_to_finish() {
+    // Stopped after the fit: reported, saying that it did not finish.
+    let dir = scratch("unfinished-fitted");
+    write_session(&dir);
+    std::fs::remove_file(dir.join("summary.json")).unwrap();
+    write_progress(&dir, "after");
+    let data = from_session_dir(&dir).expect("a fitted unfinished session is reported");
+    let notes = data.notes.join("\n");
+    assert!(notes.contains("did not finish"), "{notes}");
+    assert!(notes.contains("stage `after`"), "{notes}");
+    let _ = std::fs::remove_dir_all(dir);
+
+    // Stopped before the fit: poses.json is there, params.json is not.
+    let dir = scratch("unfinished-positions");
+    write_session(&dir);
+    std::fs::remove_file(dir.join("summary.json")).unwrap();
+    std::fs::remove_file(dir.join("params.json")).unwrap();
+    write_progress(&dir, "positions");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .arg("report")
+        .arg(&dir)
+        .output()
+        .expect("run imucal");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("stopped before its calibration was fitted"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("no params.json to report"), "{stderr}");
+    assert!(
+        !stderr.contains("poses.json"),
+        "poses.json is there: {stderr}"
+    );
+    assert!(stderr.contains("--resume"), "{stderr}");
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -10,8 +10,8 @@ use std::sync::Arc;
 use imucal::device::DeviceClient;
 use imucal::fit::Vec3;
 use imucal::session::{
-    load_poses, load_progress, run_session_with, save_session, SessionControl, SessionError,
-    SessionEvent, SessionObserver, SessionOptions, PROGRESS_FILE,
+    load_mag_samples, load_poses, load_progress, run_session_with, save_session, SessionControl,
+    SessionError, SessionEvent, SessionObserver, SessionOptions, PROGRESS_FILE,
 };
 use imucal_hil_sim::link_faults::ParamTamper;
 use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
@@ -29,6 +29,10 @@ enum Sabotage {
     Nothing,
     /// Raise the interrupt flag once this many positions are captured.
     InterruptAfter(usize),
+    /// Raise the interrupt flag when the set is fitted (no samples are read until the write).
+    InterruptWhenFitted,
+    /// Raise the interrupt flag when the written set is verified (before the check at rest).
+    InterruptWhenVerified,
 }
 
 struct Saboteur<'a> {
@@ -46,6 +50,10 @@ impl SessionObserver for Saboteur<'_> {
             (SessionEvent::Captured { captured, .. }, Sabotage::InterruptAfter(n))
                 if captured >= n =>
             {
+                self.interrupt.store(true, Ordering::SeqCst);
+            }
+            (SessionEvent::Fitted(_), Sabotage::InterruptWhenFitted)
+            | (SessionEvent::Verified(_), Sabotage::InterruptWhenVerified) => {
                 self.interrupt.store(true, Ordering::SeqCst);
             }
             _ => {}
@@ -99,8 +107,8 @@ fn sabotaged_session(
     };
     let control = SessionControl {
         save_dir: Some(dir.to_path_buf()),
-        resume: Vec::new(),
         interrupt: Some(interrupt),
+        ..SessionControl::default()
     };
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
     let result = run_session_with(&mut client, &options_for(sim), &mut observer, &control);
@@ -165,7 +173,51 @@ fn a_corrupted_read_back_after_the_commit_says_the_board_holds_the_new_set() {
 }
 
 #[test]
-fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_again() {
+fn an_interrupt_between_reads_stops_at_the_next_stage_and_saves() {
+    // Interrupted while fitting: nothing is written, and the session stops as usual.
+    let sim = board(34);
+    let dir = session_dir("fitted");
+    let (result, _) = sabotaged_session(&sim, Sabotage::InterruptWhenFitted, &dir);
+    let error = result.expect_err("the interrupt stops the session before the write");
+    assert!(
+        matches!(&error, SessionError::Stopped { cause, board_holds, .. }
+            if matches!(**cause, SessionError::Interrupted)
+                && board_holds.contains("nothing was written")),
+        "{error}"
+    );
+    let progress = load_progress(&dir).expect("the progress is saved");
+    assert_eq!(progress.stage, "stopped");
+    assert!(
+        progress.stopped_because.contains("stage `fitted`"),
+        "{}",
+        progress.stopped_because
+    );
+    assert!(progress.params_crc.is_some() && progress.mag_samples > 0);
+    let _ = std::fs::remove_dir_all(&dir);
+
+    // Interrupted once the set is verified: the check at rest is not run, and the board is
+    // said to hold the new set.
+    let sim = board(35);
+    let dir = session_dir("verified");
+    let (result, _) = sabotaged_session(&sim, Sabotage::InterruptWhenVerified, &dir);
+    let error = result.expect_err("the interrupt stops the check at rest");
+    assert!(
+        matches!(&error, SessionError::Stopped { cause, board_holds, .. }
+            if matches!(**cause, SessionError::Interrupted)
+                && board_holds.starts_with("the new set")),
+        "{error}"
+    );
+    let progress = load_progress(&dir).expect("the progress is saved");
+    assert!(
+        progress.stopped_because.contains("stage `after`"),
+        "{}",
+        progress.stopped_because
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking_for_them_again() {
     let sim = board(33);
     let dir = session_dir("resume");
     let (result, _) = sabotaged_session(&sim, Sabotage::InterruptAfter(5), &dir);
@@ -179,6 +231,8 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
     let first = load_poses(&dir.join("poses.json")).expect("the poses are saved");
     assert_eq!(first.len(), 5, "the poses captured before the interrupt");
     assert!(load_progress(&dir).is_ok());
+    let first_mag = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
+    assert!(!first_mag.is_empty());
 
     // Resume on the same board: the five positions are neither prompted for nor captured again.
     let mut observer = Saboteur {
@@ -190,6 +244,7 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
     let control = SessionControl {
         save_dir: Some(dir.clone()),
         resume: first.clone(),
+        resume_mag: first_mag.clone(),
         interrupt: None,
     };
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
@@ -209,7 +264,12 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
         assert_eq!(again, 1, "{} captured once", pose.target.name);
     }
     assert!(outcome.poses.len() >= 12 && outcome.verified);
+    // The samples of the first run are kept ahead of the new ones, on disk too.
+    assert!(outcome.mag_samples.len() > first_mag.len());
+    assert_eq!(outcome.mag_samples[..first_mag.len()], first_mag[..]);
     save_session(&outcome, &dir).expect("the finished session is saved");
+    let saved = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
+    assert_eq!(saved.len(), outcome.mag_samples.len());
     assert!(
         !dir.join(PROGRESS_FILE).exists(),
         "a finished session has no progress file"
@@ -218,20 +278,43 @@ fn an_interrupted_session_keeps_its_poses_and_resumes_without_asking_for_them_ag
 }
 
 /// `imucal calibrate --sim` in `dir` with the history in a temporary database.
-fn calibrate_command(dir: &Path, resume: bool) -> std::process::Command {
+fn calibrate_command(dir: &Path) -> std::process::Command {
     let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"));
     command
-        .args(["calibrate", "--sim", "--yes", "--speed", "10"])
-        .arg(if resume { "--resume" } else { "-o" })
+        .args([
+            "calibrate",
+            "--sim",
+            "--sim-seed",
+            "5",
+            "--yes",
+            "--speed",
+            "10",
+        ])
+        .arg("-o")
         .arg(dir)
         .env("IMUCAL_DB", dir.with_extension("db"));
+    command
+}
+
+/// The command `imucal` says continues the session, from its error output, as a user would
+/// paste it (the session directory in the tests needs no quoting).
+fn printed_resume_command(stderr: &str) -> std::process::Command {
+    let line = stderr
+        .split("Continue with `")
+        .nth(1)
+        .and_then(|rest| rest.split('`').next())
+        .unwrap_or_else(|| panic!("no command to continue with: {stderr}"));
+    let mut words = line.split_whitespace();
+    assert_eq!(words.next(), Some("imucal"), "{line}");
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"));
+    command.args(words);
     command
 }
 
 #[test]
 fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     let dir = session_dir("sigint");
-    let child = calibrate_command(&dir, false)
+    let child = calibrate_command(&dir)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -245,14 +328,24 @@ fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
         );
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
-    let sent = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("send SIGINT");
-    assert!(sent.success());
+    let interrupt = || {
+        std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .expect("send SIGINT")
+    };
+    assert!(interrupt().success());
+    // `timeout` and a kill of the process group deliver one Ctrl-C twice: it stops the session
+    // once, as one Ctrl-C, and does not quit without saving.
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let _ = interrupt();
     let out = child.wait_with_output().expect("imucal ends");
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "an interrupted session fails");
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "an interrupted session fails: {stderr}"
+    );
     assert!(stderr.contains("stopped by the user"), "{stderr}");
     assert!(stderr.contains("nothing was written"), "{stderr}");
     assert!(stderr.contains("--resume"), "{stderr}");
@@ -260,37 +353,33 @@ fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     assert!(progress.poses >= 2, "{progress:?}");
     let saved = load_poses(&dir.join("poses.json")).expect("the poses are saved");
     assert_eq!(saved.len(), progress.poses);
+    let saved_mag = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
+    assert_eq!(saved_mag.len(), progress.mag_samples);
 
-    // `--resume` does not ask for the saved positions again. A fresh simulated board's person
-    // waits in the first position, which is already captured, until asked for a pose there; so
-    // the resumed run stops at its pose timeout, which saves too and names only the others.
-    let out = calibrate_command(&dir, true)
-        .args(["--pose-timeout", "20"])
+    // The command printed continues the session as pasted (the same simulated board, by its
+    // seed), does not ask for the saved positions again, and keeps the saved samples: the
+    // simulated person, like a user reading the list of positions already captured, skips them.
+    let out = printed_resume_command(&stderr)
+        .env("IMUCAL_DB", dir.with_extension("db"))
         .output()
         .expect("run imucal");
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "{stderr}");
+    assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("already captured"), "{stderr}");
-    let missing = stderr
-        .split("still needed: ")
-        .nth(1)
-        .and_then(|rest| rest.split(". ").next())
-        .unwrap_or_else(|| panic!("the timeout names the positions still needed: {stderr}"));
-    let missing: Vec<&str> = missing.split(", ").collect();
-    assert_eq!(missing.len(), 12 - saved.len(), "{missing:?}");
     for pose in &saved {
         assert!(
-            !missing.contains(&pose.target.name.as_str()),
-            "{} is asked for again",
+            !stderr.contains(&format!("hold the board {} ", pose.target.name)),
+            "{} is asked for again: {stderr}",
             pose.target.name
         );
     }
-    let kept = load_poses(&dir.join("poses.json")).expect("the poses are still saved");
-    assert_eq!(kept, saved);
-    assert!(load_progress(&dir)
-        .expect("the progress is saved")
-        .stopped_because
-        .contains("no new orientation"));
+    let kept = load_poses(&dir.join("poses.json")).expect("the poses are saved");
+    assert_eq!(kept[..saved.len()], saved[..]);
+    assert!(kept.len() >= 12, "{} poses", kept.len());
+    let mag = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
+    assert!(mag.len() > saved_mag.len());
+    assert_eq!(mag[..saved_mag.len()], saved_mag[..]);
+    assert!(!dir.join(PROGRESS_FILE).exists(), "the session is finished");
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(dir.with_extension("db"));
 }

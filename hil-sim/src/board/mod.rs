@@ -373,6 +373,12 @@ impl SimBoard {
         self.screen = screen;
     }
 
+    /// Tell the person which positions a resumed session already holds (body-frame up
+    /// directions): they skip them, as a person reading the host's list would.
+    pub fn tell_held(&mut self, ups: &[[f64; 3]]) {
+        self.person.skip_held(ups);
+    }
+
     /// The configuration the board was built from.
     pub fn config(&self) -> &BoardConfig {
         &self.config

@@ -69,6 +69,10 @@ pub const CORNER_PATIENCE_S: f64 = 2.5;
 /// least 70.5° apart, and a corner is held within a few degrees of its direction).
 const NAMED_CORNER_DEG: f64 = 25.0;
 
+/// A held position's up direction names a hold of the person's within this angle, degrees
+/// (holds are at least 35° apart, and placed within a few degrees of their direction).
+const HELD_MATCH_DEG: f64 = 15.0;
+
 /// Body-frame field directions are remembered when they differ by more than this from the last
 /// one remembered, degrees (a tenth of the angle that counts as seen).
 const FIELD_TRACE_STEP_DEG: f64 = SEEN_ANGLE_DEG / 10.0;
@@ -219,6 +223,9 @@ pub struct Person {
     first_prompt_s: Option<f64>,
     /// What the host's screen shows, and since when, s.
     screen: (Screen, f64),
+    /// Body-frame up directions of the positions a resumed session already holds (unit): the
+    /// person skips them in the first round and among the corners.
+    held: Vec<Vector3<f64>>,
 }
 
 /// Minimum-jerk turn length for a peak rate: the peak of `ṡ` is 1.875 times the mean.
@@ -295,6 +302,7 @@ impl Person {
             moving_at_s: None,
             first_prompt_s: None,
             screen: (Screen::Unknown, 0.0),
+            held: Vec::new(),
         };
         if hold_count > 0 {
             person.begin_hold(0, 0.0, Prompts::default())?;
@@ -312,6 +320,16 @@ impl Person {
         self.holds.iter().map(|h| h.orientation).collect()
     }
 
+    /// Tell the person which positions a resumed session already holds (body-frame up
+    /// directions, as the host lists them when it resumes): the host does not ask for them
+    /// again, so the person skips them, leaving one held now at the next observation.
+    pub fn skip_held(&mut self, ups: &[[f64; 3]]) {
+        self.held = ups
+            .iter()
+            .filter_map(|up| Vector3::from(*up).try_normalize(0.0))
+            .collect();
+    }
+
     /// React to what the firmware did up to time `t_s`, moving on through the schedule.
     pub fn observe(&mut self, t_s: f64, prompts: Prompts) -> Result<(), SimError> {
         if prompts.capture_requests > 0 && self.first_prompt_s.is_none() {
@@ -322,7 +340,7 @@ impl Person {
         if prompts.screen != self.screen.0 {
             self.screen = (prompts.screen, t_s);
         }
-        if let (PersonPhase::Hold { .. }, Some(at_start)) =
+        if let (PersonPhase::Hold { index }, Some(at_start)) =
             (self.phase, self.hold_captures_at_start)
         {
             if self.captured.is_none() && prompts.poses_captured > at_start {
@@ -350,7 +368,8 @@ impl Person {
             if unwanted_corner && self.screen.0 == Screen::Unknown {
                 self.corners_done = true;
             }
-            if prompted_on || timed_out || unwanted_corner {
+            let held_already = self.captured.is_none() && self.is_held(index);
+            if prompted_on || timed_out || unwanted_corner || held_already {
                 self.end_hold(t_s)?;
             }
         }
@@ -423,6 +442,20 @@ impl Person {
         self.holds.get(index.checked_rem(self.holds.len())?)
     }
 
+    /// Whether hold `index` is a position a resumed session already holds: one of the twelve
+    /// in the first round, or a corner.
+    fn is_held(&self, index: usize) -> bool {
+        if (self.holds.len()..self.hold_count).contains(&index) {
+            return false;
+        }
+        let Some(plan) = self.hold_plan(index) else {
+            return false;
+        };
+        let up = plan.orientation.inverse() * Vector3::z();
+        let cos_limit = HELD_MATCH_DEG.to_radians().cos();
+        self.held.iter().any(|held| held.dot(&up) >= cos_limit)
+    }
+
     /// Whether the current hold is one of the corners.
     fn is_corner(&self) -> bool {
         matches!(self.phase, PersonPhase::Hold { index } if index >= self.hold_count)
@@ -461,7 +494,10 @@ impl Person {
     /// the twelve the screen, when it can be read, decides: the corner it names, or the tumble
     /// when it asks for turning.
     fn after_hold(&self, index: usize) -> Option<usize> {
-        let next = index + 1;
+        // Positions a resumed session holds are skipped (the holds after them end).
+        let next = (index + 1..)
+            .find(|&i| !self.is_held(i))
+            .unwrap_or(index + 1);
         if next < self.hold_count {
             return Some(next);
         }
@@ -762,6 +798,29 @@ mod tests {
             t_s += STEP_S;
         }
         assert_eq!(person.phase(), PersonPhase::Hold { index: 14 });
+    }
+
+    #[test]
+    fn a_person_told_what_a_resumed_session_holds_skips_those_positions() {
+        let mut person = guided_person();
+        // The host holds the first five positions: the person leaves the first (held) at once,
+        // although no pose was asked for there, and turns to the sixth.
+        let ups: Vec<[f64; 3]> = person.hold_orientations()[..5]
+            .iter()
+            .map(|q| {
+                let up = q.inverse() * Vector3::z();
+                [up.x, up.y, up.z]
+            })
+            .collect();
+        person.skip_held(&ups);
+        let mut t_s = 0.0;
+        while t_s < 5.0 && person.phase() == (PersonPhase::Hold { index: 0 }) {
+            person
+                .observe(t_s, Prompts::default())
+                .expect("the person moves");
+            t_s += STEP_S;
+        }
+        assert_eq!(person.phase(), PersonPhase::TurnToHold { index: 5 });
     }
 
     #[test]

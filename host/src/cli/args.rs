@@ -240,6 +240,20 @@ pub enum SimTemperature {
     },
 }
 
+/// As typed on the command line: `constant` or `sweep:LOW:HIGH:PERIOD`.
+impl std::fmt::Display for SimTemperature {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Constant => f.write_str("constant"),
+            Self::Sweep {
+                low_c,
+                high_c,
+                period_s,
+            } => write!(f, "sweep:{low_c}:{high_c}:{period_s}"),
+        }
+    }
+}
+
 /// `--sim-temperature`: `constant`, `sweep` (10–40 °C every 90 s) or `sweep:LOW:HIGH:PERIOD`.
 fn sim_temperature(text: &str) -> Result<SimTemperature, String> {
     if text == "constant" {
@@ -503,6 +517,19 @@ impl CalibrateArgs {
     }
 }
 
+/// `calibrate --speed` unless given: simulated seconds per wall second.
+pub const DEFAULT_SPEED: f64 = 15.0;
+/// `calibrate --gravity` unless given, m/s² (standard gravity).
+pub const DEFAULT_GRAVITY: f64 = 9.806_65;
+/// `calibrate --hold` unless given, s.
+pub const DEFAULT_HOLD_S: f64 = 1.5;
+/// `calibrate --pose-timeout` unless given, s.
+pub const DEFAULT_POSE_TIMEOUT_S: f64 = 180.0;
+/// `calibrate --mag-timeout` unless given, s.
+pub const DEFAULT_MAG_TIMEOUT_S: f64 = 180.0;
+/// `calibrate --rest-timeout` unless given, s.
+pub const DEFAULT_REST_TIMEOUT_S: f64 = 120.0;
+
 /// Arguments of `imucal calibrate`.
 #[derive(Debug, Args)]
 #[command(group(clap::ArgGroup::new("simulated").args(["sim", "sim_boards"])))]
@@ -550,7 +577,7 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub sketch_rate: Option<f64>,
     /// Simulator: simulated seconds per wall second.
-    #[arg(long, default_value_t = 15.0, requires = "simulated", value_parser = positive)]
+    #[arg(long, default_value_t = DEFAULT_SPEED, requires = "simulated", value_parser = positive)]
     pub speed: f64,
     /// Simulator: the LSM9DS1 converts on its own clock, this relative error off its nominal
     /// output data rates (e.g. -0.005), so reads repeat or miss conversions as on hardware and
@@ -604,7 +631,7 @@ pub struct CalibrateArgs {
     #[command(flatten)]
     pub history: super::history::RecordArgs,
     /// Local gravity, m/s².
-    #[arg(long, default_value_t = 9.806_65)]
+    #[arg(long, default_value_t = DEFAULT_GRAVITY)]
     pub gravity: f64,
     /// Local field magnitude, µT (e.g. from a geomagnetic model). Without it the magnetometer
     /// keeps its mean sensitivity (with `--sim`: the simulated site's field).
@@ -617,16 +644,16 @@ pub struct CalibrateArgs {
     /// Longest still time averaged per position, s. Each position is averaged until the mean
     /// of |a| is as precise as the accelerometer's budget asks, from the noise measured just
     /// before it (at least 0.3 s), and never longer than this.
-    #[arg(long, default_value_t = 1.5, value_parser = positive)]
+    #[arg(long, default_value_t = DEFAULT_HOLD_S, value_parser = positive)]
     pub hold: f64,
     /// Longest wait for the next position, s.
-    #[arg(long, default_value_t = 180.0, value_parser = positive)]
+    #[arg(long, default_value_t = DEFAULT_POSE_TIMEOUT_S, value_parser = positive)]
     pub pose_timeout: f64,
     /// Longest magnetometer phase, s.
-    #[arg(long, default_value_t = 180.0, value_parser = positive)]
+    #[arg(long, default_value_t = DEFAULT_MAG_TIMEOUT_S, value_parser = positive)]
     pub mag_timeout: f64,
     /// Longest wait for the board to lie still at the end, s.
-    #[arg(long, default_value_t = 120.0, value_parser = positive)]
+    #[arg(long, default_value_t = DEFAULT_REST_TIMEOUT_S, value_parser = positive)]
     pub rest_timeout: f64,
 }
 
@@ -647,6 +674,14 @@ mod tests {
             sim_temperature("sweep:-5:55.5:120"),
             Ok(sweep(-5.0, 55.5, 120.0))
         );
+    }
+
+    #[test]
+    fn a_profile_is_written_as_it_is_read_back() {
+        for text in ["constant", "sweep", "sweep:-5:55.5:120"] {
+            let profile = sim_temperature(text).expect(text);
+            assert_eq!(sim_temperature(&profile.to_string()), Ok(profile), "{text}");
+        }
     }
 
     #[test]

@@ -14,14 +14,14 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
 use imucal::device::{DeviceClient, ParamsFile};
 use imucal::pipeline::References;
 use imucal::session::{
-    load_poses, load_progress, run_session_with, save_session, summary, CapturedPose,
-    SessionControl, SessionEvent, SessionOptions, Tapped,
+    load_mag_samples, load_poses, load_progress, run_session_with, save_session, summary,
+    CapturedPose, MagSample, SessionControl, SessionEvent, SessionOptions, Tapped,
 };
 use imucal_protocol::Welcome;
 
@@ -46,8 +46,12 @@ pub(super) fn unix_now() -> u64 {
         .map_or(0, |d| d.as_secs())
 }
 
-/// The poses of the unfinished session in `dir`, refused when it was started on another board.
-fn resumed_poses(dir: &Path, device_id: &str) -> anyhow::Result<Vec<CapturedPose>> {
+/// What an unfinished session in `dir` measured: its poses and magnetometer samples, refused
+/// when it was started on another board.
+fn resumed_session(
+    dir: &Path,
+    device_id: &str,
+) -> anyhow::Result<(Vec<CapturedPose>, Vec<MagSample>)> {
     let progress = load_progress(dir)?;
     anyhow::ensure!(
         progress.device_id == device_id,
@@ -56,29 +60,158 @@ fn resumed_poses(dir: &Path, device_id: &str) -> anyhow::Result<Vec<CapturedPose
         dir.display(),
         progress.device_id
     );
-    let poses = load_poses(&dir.join("poses.json"))?;
+    // A session stopped before its first pose has no poses.json, and possibly no samples.
+    let poses_path = dir.join("poses.json");
+    let poses = if poses_path.exists() {
+        load_poses(&poses_path)?
+    } else {
+        Vec::new()
+    };
+    let mag_path = dir.join("mag_samples.csv");
+    let mag = if mag_path.exists() {
+        load_mag_samples(&mag_path)?
+    } else {
+        Vec::new()
+    };
     let names: Vec<&str> = poses.iter().map(|p| p.target.name.as_str()).collect();
     say!(
         "Resuming {} (stopped: {}): {} positions already captured ({}); they are not asked for \
-         again",
+         again. The {} magnetometer samples saved are kept.",
         dir.display(),
         progress.stopped_because,
         poses.len(),
-        names.join(", ")
+        names.join(", "),
+        mag.len()
     );
-    Ok(poses)
+    Ok((poses, mag))
 }
 
-/// A flag set by the first Ctrl-C, which the session notices at its next batch of samples (it
-/// then stops the stream and saves); a second Ctrl-C ends the program at once.
+/// `word` as one shell word: as it is when it needs no quoting, otherwise in single quotes.
+fn shell_word(word: &str) -> String {
+    let plain = |c: char| c.is_ascii_alphanumeric() || "/._,:=+-@%".contains(c);
+    if !word.is_empty() && word.chars().all(plain) {
+        word.to_string()
+    } else {
+        format!("'{}'", word.replace('\'', r"'\''"))
+    }
+}
+
+/// The command that continues the session saved in `dir` as `args` started it: the board (the
+/// port, or every simulator option that makes the simulated board and its person the same),
+/// the references, limits and history, so that it works as pasted.
+pub(super) fn resume_command(args: &CalibrateArgs, dir: &Path) -> String {
+    use super::args::{
+        SimTemperature, DEFAULT_GRAVITY, DEFAULT_HOLD_S, DEFAULT_MAG_TIMEOUT_S,
+        DEFAULT_POSE_TIMEOUT_S, DEFAULT_REST_TIMEOUT_S, DEFAULT_SPEED,
+    };
+    let mut words = vec![
+        "imucal calibrate --resume".to_string(),
+        shell_word(&dir.display().to_string()),
+    ];
+    if args.sim {
+        words.push("--sim".to_string());
+    }
+    let mut option = |name: &str, value: String| {
+        let value = shell_word(&value);
+        // A negative number after a space would be read as an option.
+        words.push(if value.starts_with('-') {
+            format!("--{name}={value}")
+        } else {
+            format!("--{name} {value}")
+        });
+    };
+    if args.sim {
+        option("sim-seed", args.sim_seed.to_string());
+        if args.sim_chip != imucal_hil_sim::board::SensorChip::default() {
+            if let Some(chip) = clap::ValueEnum::to_possible_value(&args.sim_chip) {
+                option("sim-chip", chip.get_name().to_string());
+            }
+        }
+        if let Some(error) = args.sim_odr_error {
+            option("sim-odr-error", error.to_string());
+        }
+        if args.sim_temperature != SimTemperature::Constant {
+            option("sim-temperature", args.sim_temperature.to_string());
+        }
+        for effect in &args.sim_effects {
+            option("sim-effect", effect.clone());
+        }
+        if args.speed != DEFAULT_SPEED {
+            option("speed", args.speed.to_string());
+        }
+    }
+    for port in &args.port {
+        option("port", port.clone());
+    }
+    if args.rounds > 1 {
+        option("rounds", args.rounds.to_string());
+    }
+    if args.gravity != DEFAULT_GRAVITY {
+        option("gravity", args.gravity.to_string());
+    }
+    if let Some(field) = args.field_ut {
+        option("field-ut", field.to_string());
+    }
+    if let Some(at) = &args.location {
+        option(
+            "location",
+            format!("{},{},{}", at.latitude_deg, at.longitude_deg, at.altitude_m),
+        );
+    }
+    for (name, value, default) in [
+        ("hold", args.hold, DEFAULT_HOLD_S),
+        ("pose-timeout", args.pose_timeout, DEFAULT_POSE_TIMEOUT_S),
+        ("mag-timeout", args.mag_timeout, DEFAULT_MAG_TIMEOUT_S),
+        ("rest-timeout", args.rest_timeout, DEFAULT_REST_TIMEOUT_S),
+    ] {
+        if value != default {
+            option(name, value.to_string());
+        }
+    }
+    let history = &args.history;
+    for (name, value) in [
+        ("db", &history.db),
+        ("operator", &history.operator),
+        ("station", &history.station),
+    ] {
+        if let Some(value) = value {
+            option(name, value.clone());
+        }
+    }
+    let flags = [
+        ("--no-history", history.no_history),
+        ("--analyze", args.analyze),
+        ("--accept-poor", args.accept_poor),
+        ("--json", args.json),
+        ("--yes", args.yes),
+    ];
+    words.extend(
+        flags
+            .iter()
+            .filter(|(_, given)| *given)
+            .map(|(flag, _)| flag.to_string()),
+    );
+    words.join(" ")
+}
+
+/// A second SIGINT within this time of the first is the same Ctrl-C: `timeout` and `kill` on a
+/// process group deliver one interrupt to the process and again to its group.
+const SAME_CTRL_C: Duration = Duration::from_millis(500);
+
+/// A flag set by the first Ctrl-C, which the session notices at its next batch of samples or
+/// stage (it then stops the stream and saves); a second Ctrl-C ends the program at once.
 fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     let handler_flag = Arc::clone(&flag);
-    ctrlc::set_handler(move || {
-        if handler_flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
+    let mut first: Option<Instant> = None;
+    ctrlc::set_handler(move || match first {
+        None => {
+            first = Some(Instant::now());
+            handler_flag.store(true, Ordering::SeqCst);
+            say!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
         }
-        say!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
+        Some(at) if at.elapsed() < SAME_CTRL_C => {}
+        Some(_) => std::process::exit(130),
     })
     .context("the Ctrl-C handler could not be installed")?;
     Ok(flag)
@@ -192,11 +325,16 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         welcome.firmware_version.patch,
         welcome.scales.sample_rate_hz
     );
+    let (resume, resume_mag) = match &args.resume {
+        Some(dir) => resumed_session(dir, &welcome.device_id.to_string())?,
+        None => (Vec::new(), Vec::new()),
+    };
+    if let Some(sim) = &simulated {
+        sim.resumed(&resume);
+    }
     let control = SessionControl {
-        resume: match &args.resume {
-            Some(dir) => resumed_poses(dir, &welcome.device_id.to_string())?,
-            None => Vec::new(),
-        },
+        resume,
+        resume_mag,
         save_dir: Some(dir.clone()),
         interrupt: Some(interrupt_flag()?),
     };
@@ -219,11 +357,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     };
     terminal.bar.finish_and_clear();
     let outcome = result.map_err(|error| {
-        anyhow::anyhow!(
-            "{error}\nContinue with `imucal calibrate --resume {}`{}",
-            dir.display(),
-            if args.sim { " --sim (same seed)" } else { "" }
-        )
+        anyhow::anyhow!("{error}\nContinue with `{}`", resume_command(args, &dir))
     })?;
     save_session(&outcome, &dir)?;
     bind_saved_params(&dir.join("params.json"), &welcome)?;
@@ -341,4 +475,66 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         return Err(refused_poor("The extended set", &params));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::args::{Cli, Command};
+    use clap::Parser;
+
+    fn calibrate_args(words: &[&str]) -> CalibrateArgs {
+        let cli = Cli::try_parse_from(words).unwrap_or_else(|e| panic!("{words:?}: {e}"));
+        match cli.command {
+            Command::Calibrate(args) => args,
+            other => panic!("not calibrate: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_resume_command_names_the_simulated_board_and_reads_back_as_the_same() {
+        let args = calibrate_args(&[
+            "imucal",
+            "calibrate",
+            "--sim",
+            "--sim-seed",
+            "3",
+            "--sim-odr-error",
+            "-0.004",
+            "--sim-effect",
+            "accel.bias_temperature=2",
+            "--rounds",
+            "2",
+            "--yes",
+            "-o",
+            "my session",
+        ]);
+        let command = resume_command(&args, Path::new("my session"));
+        assert!(
+            command.starts_with("imucal calibrate --resume 'my session' --sim --sim-seed 3"),
+            "{command}"
+        );
+        // The words a shell would pass, read back by the same parser.
+        let words: Vec<String> = command
+            .replace("'my session'", "my_session")
+            .split_whitespace()
+            .map(|w| w.replace("my_session", "my session"))
+            .collect();
+        let words: Vec<&str> = words.iter().map(String::as_str).collect();
+        let again = calibrate_args(&words);
+        assert_eq!(again.resume.as_deref(), Some(Path::new("my session")));
+        assert_eq!(again.sim_seed, 3);
+        assert_eq!(again.sim_odr_error, Some(-0.004));
+        assert_eq!(again.sim_effects, args.sim_effects);
+        assert_eq!((again.rounds, again.yes, again.sim), (2, true, true));
+    }
+
+    #[test]
+    fn the_resume_command_of_a_board_names_its_port() {
+        let args = calibrate_args(&["imucal", "calibrate", "--port", "/dev/ttyACM0"]);
+        assert_eq!(
+            resume_command(&args, Path::new("s1")),
+            "imucal calibrate --resume s1 --port /dev/ttyACM0"
+        );
+    }
 }

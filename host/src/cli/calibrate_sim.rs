@@ -93,6 +93,16 @@ impl Simulated {
         }
     }
 
+    /// Tell the simulated person which positions a resumed session holds, as a person reads
+    /// the list the host prints when it resumes: they skip them.
+    pub(super) fn resumed(&self, poses: &[imucal::session::CapturedPose]) {
+        let ups = poses
+            .iter()
+            .map(|p| [p.target.up.x, p.target.up.y, p.target.up.z])
+            .collect();
+        self.handle.tell_held(ups);
+    }
+
     /// The simulated site's field, µT: it stands for a value looked up for the location.
     pub(super) fn field_ut(&self) -> f64 {
         let field = self.handle.truth().world.field_world_ut;
@@ -135,6 +145,10 @@ impl Simulated {
     }
 
     pub(super) fn show(&self, _event: &imucal::session::SessionEvent<'_>) {
+        match *self {}
+    }
+
+    pub(super) fn resumed(&self, _poses: &[imucal::session::CapturedPose]) {
         match *self {}
     }
 

@@ -99,6 +99,41 @@ fn default_out(path: &Path, is_session: bool) -> PathBuf {
     path.with_file_name(format!("{stem}_report"))
 }
 
+/// Why the directory `path` cannot be reported: what it lacks, and for a session `calibrate`
+/// stopped before its fit, how to finish it.
+fn not_a_session(path: &Path) -> anyhow::Error {
+    let missing: Vec<&str> = ["params.json", "poses.json"]
+        .into_iter()
+        .filter(|name| !path.join(name).is_file())
+        .collect();
+    if let Ok(progress) = imucal::session::load_progress(path) {
+        return anyhow::anyhow!(
+            "`{}` is a session of `imucal calibrate` that stopped before its calibration was \
+             fitted ({}), so it has no {} to report; continue it with `imucal calibrate --resume \
+             {}` (with the options printed when it stopped) and report it once it has finished",
+            path.display(),
+            if progress.stopped_because.is_empty() {
+                format!("stage `{}`", progress.stage)
+            } else {
+                progress.stopped_because
+            },
+            missing.join(" or "),
+            path.display()
+        );
+    }
+    anyhow::anyhow!(
+        "`{}` is not a session directory of `imucal calibrate`: it has no {}, nor a \
+         recording.csv{}; pass a session directory or a recording file",
+        path.display(),
+        missing.join(" or "),
+        if path.join(REPORT_FILE).is_file() {
+            format!(" (its {REPORT_FILE} is the output of `imucal report`)")
+        } else {
+            String::new()
+        }
+    )
+}
+
 /// Run the command.
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let path = &args.input.recording;
@@ -107,16 +142,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let is_session =
         path.is_dir() && path.join("params.json").is_file() && path.join("poses.json").is_file();
     if path.is_dir() && !is_session && !path.join("recording.csv").is_file() {
-        anyhow::bail!(
-            "`{}` is not a session directory of `imucal calibrate`: it has no params.json and \
-             poses.json, nor a recording.csv{}; pass a session directory or a recording file",
-            path.display(),
-            if path.join(REPORT_FILE).is_file() {
-                format!(" (its {REPORT_FILE} is the output of `imucal report`)")
-            } else {
-                String::new()
-            }
-        );
+        return Err(not_a_session(path));
     }
     let out = args
         .out

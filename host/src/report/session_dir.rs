@@ -116,7 +116,9 @@ fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
     })
 }
 
-/// Builds a report from a session directory written by `imucal calibrate`.
+/// Builds a report from a session directory written by `imucal calibrate`: a finished one, one
+/// stopped after its fit (`progress.json`), or one of a MotionCal sketch (`motioncal.json`, no
+/// magnetometer samples). What the directory lacks is said in the report's notes, with why.
 pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     let params_path = dir.join("params.json");
     let params = ParamsFile::load(&params_path)?;
@@ -168,12 +170,48 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         labels,
     });
 
+    // What the directory lacks, and why, from the files that say what kind of session it was.
+    let motioncal_path = dir.join("motioncal.json");
+    let motioncal = motioncal_path.is_file();
+    let unfinished = crate::session::load_progress(dir).ok();
+    let mut notes = Vec::new();
+    if let Some(progress) = &unfinished {
+        notes.push(format!(
+            "the session did not finish (progress.json: {}); its check at rest and summary are \
+             missing",
+            if progress.stopped_because.is_empty() {
+                format!("it stopped in stage `{}`", progress.stage)
+            } else {
+                progress.stopped_because.clone()
+            }
+        ));
+    }
+    let mag_path = dir.join("mag_samples.csv");
+    let mag_columns = if mag_path.is_file() {
+        read_mag_csv(&mag_path)?
+    } else {
+        notes.push(if motioncal {
+            "mag_samples.csv is missing, as in every session with a MotionCal sketch (its \
+             readings are not saved): no magnetometer plots"
+                .to_string()
+        } else {
+            "mag_samples.csv is missing (the session saved no magnetometer samples): no \
+             magnetometer plots"
+                .to_string()
+        });
+        MagColumns {
+            time_s: Vec::new(),
+            raw: Vec::new(),
+            temp_c: Vec::new(),
+            counted: Vec::new(),
+        }
+    };
     let MagColumns {
         time_s,
         raw: mag_raw,
         temp_c: mag_temp,
         counted,
-    } = read_mag_csv(&dir.join("mag_samples.csv"))?;
+    } = mag_columns;
     let mag_calibrated = mag_raw
         .iter()
         .zip(&mag_temp)
@@ -220,6 +258,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
             .ok()
             .and_then(|text| serde_json::from_str::<Value>(&text).ok())
             .and_then(|summary| summary["mag_regions_covered"].as_u64()),
+        notes,
         ..ReportData::default()
     };
     let summary_path = dir.join("summary.json");
@@ -276,10 +315,32 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         if let Some(gyro) = data.gyro.as_mut() {
             gyro.scale_fit = gyro_scale_rows(&summary["gyro_scale"], &mat3_of(&params.gyro.a));
         }
+    } else if motioncal {
+        // A MotionCal sketch session keeps its verdict in motioncal.json; the sketch has no
+        // calibrated stream, so there is no check at rest.
+        let summary: Value = serde_json::from_str(&read(&motioncal_path)?)
+            .map_err(|e| format_error(&motioncal_path, e.to_string()))?;
+        data.verdict_level = summary["verdict"]["level"]
+            .as_str()
+            .unwrap_or("unknown")
+            .to_string();
+        data.verdict = summary["verdict"]["reasons"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|r| r.as_str().map(str::to_string))
+            .collect();
+        data.notes.push(
+            "a session with a MotionCal sketch: the verdict is motioncal.json's, and there is no \
+             check at rest (the sketch streams no calibrated readings)"
+                .to_string(),
+        );
     } else {
         data.verdict_level = "unknown".to_string();
-        data.notes
-            .push("summary.json is missing: no verdict from the session".to_string());
+        if unfinished.is_none() {
+            data.notes
+                .push("summary.json is missing: no verdict from the session".to_string());
+        }
     }
     Ok(data)
 }

@@ -273,7 +273,7 @@ impl<L: Read + Write> Runner<'_, L> {
         }
         // Any corner helps; the prompt names the one that helps most ([`plan`]), and the
         // phase ends as soon as the expected error meets the target.
-        let corners = targets::corner_positions(captured.len().max(12));
+        let corners = corners_left(captured);
         let gravity = self.options.gravity_mps2;
         let most = self.options.max_extra_poses;
         let before = captured.len();
@@ -336,6 +336,23 @@ impl<L: Read + Write> Runner<'_, L> {
     }
 }
 
+/// The corner positions not held yet, numbered after every target in `captured`. A corner is
+/// told by its direction, not its number: a resumed session holds corners numbered by the run
+/// that captured them.
+fn corners_left(captured: &[CapturedPose]) -> Vec<Target> {
+    let first = captured
+        .iter()
+        .map(|c| c.target.index + 1)
+        .max()
+        .unwrap_or(0)
+        .max(captured.len())
+        .max(12);
+    targets::corner_positions(first)
+        .into_iter()
+        .filter(|t| !captured.iter().any(|c| c.target.up.dot(&t.up) > 0.99))
+        .collect()
+}
+
 /// The accelerometer norm fit's expected `|a|` error in its worst direction, mg (1σ), for
 /// `captured`; infinite when the fit fails or gives no covariance.
 fn expected_norm_error_mg(captured: &[CapturedPose], gravity: f64) -> f64 {
@@ -370,5 +387,25 @@ mod tests {
             );
             before = after;
         }
+    }
+
+    #[test]
+    fn corners_held_before_a_resume_are_not_asked_for_again() {
+        let g = 9.8;
+        // A resumed session: the twelve and two corners, numbered 12 and 13 by the first run.
+        let mut poses: Vec<CapturedPose> = twelve_positions().iter().map(|t| pose(t, g)).collect();
+        let held: Vec<Target> = corner_positions(12).into_iter().take(2).collect();
+        poses.extend(held.iter().map(|t| pose(t, g)));
+        let left = corners_left(&poses);
+        assert_eq!(left.len(), 6);
+        for corner in &held {
+            assert!(
+                left.iter().all(|t| t.name != corner.name),
+                "{} is asked for again",
+                corner.name
+            );
+        }
+        // Their numbers follow every target so far.
+        assert!(left.iter().all(|t| t.index >= 14));
     }
 }

@@ -31,6 +31,13 @@ impl Phase {
             Phase::Rest => "rest",
         }
     }
+
+    /// The phase written as `name` ([`Phase::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Phase::Positions, Phase::Tumble, Phase::Rest]
+            .into_iter()
+            .find(|p| p.name() == name)
+    }
 }
 
 /// One raw magnetometer reading of the stream.

@@ -76,10 +76,12 @@ impl Journal {
         })
     }
 
-    /// Poses measured before this run (a resumed session): saved again with the new ones.
-    pub(super) fn resume_with(&mut self, poses: &[CapturedPose]) {
+    /// Poses and magnetometer samples measured before this run (a resumed session): saved
+    /// again with the new ones.
+    pub(super) fn resume_with(&mut self, poses: &[CapturedPose], mag: &[MagSample]) {
         self.poses = poses.to_vec();
         self.progress.poses = self.poses.len();
+        self.progress.mag_samples = mag.len();
     }
 
     /// A pose was captured.

@@ -88,7 +88,7 @@ pub use options::SessionOptions;
 pub use rest::{rest_errors, RestErrors};
 pub use rest_phase::stream_for;
 pub use save::PROGRESS_FILE;
-pub use save::{load_poses, save_session, summary, SessionSummary};
+pub use save::{load_mag_samples, load_poses, save_session, summary, SessionSummary};
 pub use solve::{
     fit_session, Budgets, CapturedPose, FieldSource, SessionFit, Uncertainties, Verdict,
     VerdictLevel,
@@ -151,6 +151,9 @@ pub struct SessionControl {
     /// Poses of an earlier run of this session ([`load_poses`]); their positions are not asked
     /// for again.
     pub resume: Vec<CapturedPose>,
+    /// Magnetometer samples of that earlier run (`mag_samples.csv`, [`load_mag_samples`]):
+    /// kept, saved again with the new ones and fitted with them.
+    pub resume_mag: Vec<MagSample>,
     /// Set (by a Ctrl-C handler) to stop the session at the next batch of samples.
     pub interrupt: Option<Arc<AtomicBool>>,
 }
@@ -177,7 +180,7 @@ pub fn run_session_with<L: Read + Write>(
     options.validate()?;
     let device_id = client.welcome().device_id.to_string();
     let mut journal = Journal::new(control.save_dir.as_deref(), device_id)?;
-    journal.resume_with(&control.resume);
+    journal.resume_with(&control.resume, &control.resume_mag);
     let mut runner = Runner::new(
         client,
         options,
@@ -185,6 +188,7 @@ pub fn run_session_with<L: Read + Write>(
         journal,
         control.interrupt.clone(),
     );
+    runner.mag = control.resume_mag.clone();
     match run_phases(&mut runner, &control.resume) {
         Ok(outcome) => Ok(outcome),
         Err(cause) => Err(runner.stop(cause)),
@@ -234,11 +238,11 @@ fn run_phases<L: Read + Write>(
     let gyro_turns_note = runner.gyro_turns(&mut captured)?;
     runner.observer.event(&SessionEvent::Note(gyro_turns_note));
 
-    runner.journal.stage("magnetometer", &runner.mag)?;
+    runner.stage("magnetometer")?;
     let coverage = runner.magnetometer()?;
-    runner.journal.stage("rest", &runner.mag)?;
+    runner.stage("rest")?;
     let raw_rest = runner.measure_at_rest()?;
-    runner.journal.stage("fitting", &runner.mag)?;
+    runner.stage("fitting")?;
 
     // Every moving sample shows a field direction: those of the moves between the positions and
     // of the tumble.
@@ -296,11 +300,14 @@ fn run_phases<L: Read + Write>(
         fit,
         gyro_scale,
     };
+    // An interrupt during the fit stops the session before the write is offered or started.
+    runner.check_interrupt()?;
     if runner.observer.confirm_write(&outcome.fit) {
+        runner.check_interrupt()?;
         runner.write_started = Some(outcome.fit.set.crc32());
         runner.journal.stage("writing", &runner.mag)?;
         let status = runner.client.write_params_verified(&outcome.fit.set)?;
-        runner.journal.stage("after", &runner.mag)?;
+        runner.stage("after")?;
         outcome.written = true;
         outcome.verified = true;
         outcome.param_status = Some(status);

@@ -155,6 +155,8 @@ impl<L: Read + Write> Runner<'_, L> {
 
     /// Stream `kind` at full rate for `rest_measure_s` of board time.
     pub(super) fn measure(&mut self, kind: StreamKind) -> Result<Vec<UnitSample>, SessionError> {
+        // Its stream does not look at the interrupt: an interrupt before it stops here.
+        self.check_interrupt()?;
         self.observer.event(&SessionEvent::Measuring { kind });
         stream_for(
             self.client,

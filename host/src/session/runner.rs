@@ -81,7 +81,8 @@ impl<'a, L: Read + Write> Runner<'a, L> {
         }
     }
 
-    pub(super) fn read_chunk(&mut self) -> Result<SampleChunk, SessionError> {
+    /// Stop if the session was interrupted.
+    pub(super) fn check_interrupt(&self) -> Result<(), SessionError> {
         if self
             .interrupt
             .as_ref()
@@ -89,6 +90,18 @@ impl<'a, L: Read + Write> Runner<'a, L> {
         {
             return Err(SessionError::Interrupted);
         }
+        Ok(())
+    }
+
+    /// Begin `stage` (saving the samples so far). An interrupt that came while no samples were
+    /// read (during a fit, a capture, a write) stops the session here, before the stage starts.
+    pub(super) fn stage(&mut self, stage: &str) -> Result<(), SessionError> {
+        self.check_interrupt()?;
+        self.journal.stage(stage, &self.mag)
+    }
+
+    pub(super) fn read_chunk(&mut self) -> Result<SampleChunk, SessionError> {
+        self.check_interrupt()?;
         match self.client.next_samples(self.options.read_timeout)? {
             Some(chunk) => Ok(chunk),
             None => Err(SessionError::NoSamples {

@@ -15,7 +15,7 @@ use super::gyro_fit::GyroScale;
 use super::rest::RestErrors;
 use super::solve::{CapturedPose, FieldSource, Uncertainties, Verdict};
 use super::targets::Target;
-use super::{MagSample, SessionError, SessionOutcome};
+use super::{MagSample, Phase, SessionError, SessionOutcome};
 use crate::device::ParamsFile;
 use crate::fit::Vec3;
 
@@ -231,6 +231,55 @@ pub(super) fn mag_csv(samples: &[MagSample]) -> String {
     csv
 }
 
+/// Read the samples of a session directory's `mag_samples.csv` ([`mag_csv`]'s columns), e.g.
+/// to continue an unfinished session without losing them.
+pub fn load_mag_samples(path: &Path) -> Result<Vec<MagSample>, SessionError> {
+    let load_error = |reason: String| SessionError::Load {
+        path: path.display().to_string(),
+        reason,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| load_error(e.to_string()))?;
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, header)) if header.trim() == "t_s,mx,my,mz,temp_c,phase" => {}
+        _ => {
+            return Err(load_error(
+                "its first line is not the header t_s,mx,my,mz,temp_c,phase".into(),
+            ))
+        }
+    }
+    lines
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(i, line)| {
+            let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+            let number = |k: usize| fields.get(k).and_then(|f| f.parse::<f64>().ok());
+            let phase = fields.get(5).and_then(|name| Phase::from_name(name));
+            match (
+                fields.len(),
+                number(0),
+                number(1),
+                number(2),
+                number(3),
+                number(4),
+                phase,
+            ) {
+                (6, Some(t_s), Some(mx), Some(my), Some(mz), Some(temp_c), Some(phase)) => {
+                    Ok(MagSample {
+                        t_s,
+                        mag: [mx, my, mz],
+                        temp_c,
+                        phase,
+                    })
+                }
+                _ => Err(load_error(format!(
+                    "line {} is not six comma-separated values ending in a phase name: {line}",
+                    i + 1
+                ))),
+            }
+        })
+        .collect()
+}
+
 /// Write the session directory `dir` (created if missing); returns the files written.
 pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>, SessionError> {
     create_dir(dir)?;
@@ -316,6 +365,36 @@ mod tests {
         let _ = std::fs::remove_file(&path);
         let order: Vec<(usize, f64)> = poses.iter().map(|p| (p.target.index, p.t_s)).collect();
         assert_eq!(order, vec![(0, 0.0), (1, 1.0)]);
+    }
+
+    #[test]
+    fn saved_magnetometer_samples_are_read_back_as_written() {
+        let samples = vec![
+            MagSample {
+                t_s: 1.25,
+                mag: [20.5, -3.25, 41.0],
+                temp_c: 24.5,
+                phase: Phase::Positions,
+            },
+            MagSample {
+                t_s: 9.5,
+                mag: [-18.0, 7.5, -40.25],
+                temp_c: 25.0,
+                phase: Phase::Tumble,
+            },
+        ];
+        let path = temp_file("mag.csv", &mag_csv(&samples));
+        let read = load_mag_samples(&path).expect("the file is read");
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(read, samples);
+    }
+
+    #[test]
+    fn a_broken_magnetometer_file_is_an_error_naming_the_line() {
+        let path = temp_file("mag-broken.csv", "t_s,mx,my,mz,temp_c,phase\n1,2,3\n");
+        let error = load_mag_samples(&path).expect_err("a short line is refused");
+        let _ = std::fs::remove_file(&path);
+        assert!(error.to_string().contains("line 2"), "{error}");
     }
 
     #[test]
