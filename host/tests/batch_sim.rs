@@ -9,6 +9,7 @@
 
 mod history_support;
 
+use std::path::Path;
 use std::process::Command;
 
 use history_support::{databases, scratch_dir, url};
@@ -20,22 +21,29 @@ use imucal::history::{BoardWrite, HistoryStore};
 /// gives two.
 const SPEED: &str = "10";
 
+/// `imucal calibrate --sim-boards BOARDS --sim-faulty 1 --json` into `db` and `out_dir`, which
+/// must fail (the faulty board is not written): its JSON report and its standard error.
+fn failing_batch(boards: &str, db: &str, out_dir: &Path) -> (serde_json::Value, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim-boards", boards, "--sim-faulty", "1"])
+        .args(["--speed", SPEED, "--yes", "--json", "--db", db, "--out"])
+        .arg(out_dir)
+        .output()
+        .expect("imucal runs");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "{stderr}");
+    let report = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("JSON on stdout ({e}): {stderr}"));
+    (report, stderr)
+}
+
 #[test]
 fn a_batch_of_eight_on_an_empty_history_verifies_seven_and_refuses_the_faulty_one() {
     for location in databases("batch") {
         let db = url(&location);
         let out_dir = scratch_dir("batch-sessions");
-        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
-            .args(["calibrate", "--sim-boards", "8", "--sim-faulty", "1"])
-            .args(["--speed", SPEED, "--yes", "--json", "--db", &db, "--out"])
-            .arg(&out_dir)
-            .output()
-            .expect("imucal runs");
-        let stderr = String::from_utf8_lossy(&out.stderr);
         // One board is refused, so the batch as a whole reports failure.
-        assert!(!out.status.success(), "{stderr}");
-        let report: serde_json::Value = serde_json::from_slice(&out.stdout)
-            .unwrap_or_else(|e| panic!("JSON on stdout ({e}): {stderr}"));
+        let (report, stderr) = failing_batch("8", &db, &out_dir);
         let boards = report["boards"].as_array().expect("boards");
         assert_eq!(boards.len(), 8, "{report}");
         assert_eq!(report["verified"], 7, "{report}\n{stderr}");
@@ -121,16 +129,7 @@ fn a_first_batch_too_small_to_compare_holds_each_board_to_the_datasheet_bounds()
         .expect("a SQLite database");
     let db = url(&location);
     let out_dir = scratch_dir("first-batch-sessions");
-    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
-        .args(["calibrate", "--sim-boards", "3", "--sim-faulty", "1"])
-        .args(["--speed", SPEED, "--yes", "--json", "--db", &db, "--out"])
-        .arg(&out_dir)
-        .output()
-        .expect("imucal runs");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{stderr}");
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("JSON on stdout ({e}): {stderr}"));
+    let (report, stderr) = failing_batch("3", &db, &out_dir);
     let boards = report["boards"].as_array().expect("boards");
     let faults = report["simulated_faults"].as_array().expect("faults");
     assert_eq!(report["verified"], 2, "{report}\n{stderr}");

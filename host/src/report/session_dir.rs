@@ -265,16 +265,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     if let Ok(text) = std::fs::read_to_string(&summary_path) {
         let summary: Value =
             serde_json::from_str(&text).map_err(|e| format_error(&summary_path, e.to_string()))?;
-        data.verdict_level = summary["verdict"]["level"]
-            .as_str()
-            .unwrap_or("unknown")
-            .to_string();
-        data.verdict = summary["verdict"]["reasons"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .filter_map(|r| r.as_str().map(str::to_string))
-            .collect();
+        (data.verdict_level, data.verdict) = verdict_of(&summary);
         if let Some(map) = summary["uncertainties"].as_object() {
             data.uncertainty_notes = map
                 .iter()
@@ -320,16 +311,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         // calibrated stream, so there is no check at rest.
         let summary: Value = serde_json::from_str(&read(&motioncal_path)?)
             .map_err(|e| format_error(&motioncal_path, e.to_string()))?;
-        data.verdict_level = summary["verdict"]["level"]
-            .as_str()
-            .unwrap_or("unknown")
-            .to_string();
-        data.verdict = summary["verdict"]["reasons"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .filter_map(|r| r.as_str().map(str::to_string))
-            .collect();
+        (data.verdict_level, data.verdict) = verdict_of(&summary);
         data.notes.push(
             "a session with a MotionCal sketch: the verdict is motioncal.json's, and there is no \
              check at rest (the sketch streams no calibrated readings)"
@@ -343,4 +325,19 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         }
     }
     Ok(data)
+}
+
+/// The verdict's level and reasons as a session's summary (or `motioncal.json`) holds them.
+fn verdict_of(summary: &Value) -> (String, Vec<String>) {
+    let level = summary["verdict"]["level"]
+        .as_str()
+        .unwrap_or("unknown")
+        .to_string();
+    let reasons = summary["verdict"]["reasons"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|r| r.as_str().map(str::to_string))
+        .collect();
+    (level, reasons)
 }
