@@ -123,7 +123,7 @@ fn a_first_batch_too_small_to_compare_holds_each_board_to_the_datasheet_bounds()
     // Three boards on an empty history: no fleet, and too few for the within-batch test. The
     // faulty one (0.3 g of accelerometer offset, beyond the widest datasheet's 0.25 g) must not
     // be written; the two sound ones are.
-    let location = databases("first-batch")
+    let location = databases("first_batch")
         .into_iter()
         .next()
         .expect("a SQLite database");

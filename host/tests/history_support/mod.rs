@@ -29,7 +29,12 @@ pub fn scratch_dir(test: &str) -> PathBuf {
 pub fn databases(test: &str) -> Vec<DbLocation> {
     let mut out = vec![DbLocation::Sqlite(scratch_dir(test).join("history.sqlite"))];
     if let Ok(admin) = std::env::var(PG_ENV) {
-        let name = format!("imucal_{test}_{}", std::process::id()).to_lowercase();
+        // An unquoted SQL identifier: letters, digits and underscores only.
+        let name: String = format!("imucal_{test}_{}", std::process::id())
+            .to_lowercase()
+            .chars()
+            .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+            .collect();
         let mut client = postgres::Client::connect(&admin, postgres::NoTls)
             .unwrap_or_else(|e| panic!("{PG_ENV}={admin}: cannot connect: {e}"));
         client
