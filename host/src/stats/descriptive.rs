@@ -86,17 +86,9 @@ pub fn mad_sigma(values: &[f64]) -> f64 {
 /// cancelling digits). Only the last `w + 1` prefix sums are kept (a ring), not all `n + 1`:
 /// the same sums in the same order, without two more arrays the length of the recording.
 pub fn window_variances(x: &[Vec3], w: usize) -> Vec<Vec3> {
-    let mut out = Vec::new();
-    window_variances_into(x, w, &mut out);
-    out
-}
-
-/// [`window_variances`] written into `out` (cleared first), so that one buffer can serve stream
-/// after stream of a long recording instead of a fresh allocation each.
-pub fn window_variances_into(x: &[Vec3], w: usize, out: &mut Vec<Vec3>) {
-    out.clear();
-    out.reserve((x.len() + 1).saturating_sub(w));
+    let mut out = Vec::with_capacity((x.len() + 1).saturating_sub(w));
     for_each_window_variance(x, w, |v| out.push(v));
+    out
 }
 
 /// [`window_variances`] handed to `each` in window order instead of collected: a caller that
@@ -256,12 +248,8 @@ mod tests {
         let x: Vec<Vec3> = (0..2000)
             .map(|i| Vec3::new(9.8 + next(), 1e4 * (i as f64 * 0.01).sin(), next() - 0.5))
             .collect();
-        // One buffer reused from window length to window length, starting dirty.
-        let mut reused = vec![Vec3::repeat(7.0); 3];
         for w in [2, 5, 50, 1999, 2000, 2001] {
             let got = window_variances(&x, w);
-            window_variances_into(&x, w, &mut reused);
-            assert_eq!(reused, got, "w = {w}");
             if w > x.len() {
                 assert!(got.is_empty());
                 continue;
