@@ -236,6 +236,17 @@ fn after_analyze_the_summary_and_history_record_the_extended_set_the_board_holds
             serde_json::from_value(summary["params"].clone()).expect("params in the summary");
         let set = file.to_calibration_set("summary").expect("a valid set");
         assert_eq!(format!("{:#010x}", set.crc32()), extended);
+        // The scalar figures at rest are the extended set's, not the base set's `after`.
+        let on_board = &summary["on_board_after"];
+        assert!(on_board.is_object(), "{summary}");
+        assert_ne!(on_board, &summary["after"], "{summary}");
+        for (scalar, field) in [
+            ("accel_rest_error_mg", "accel_error_mg"),
+            ("mag_rest_error_pct", "mag_error_pct"),
+            ("gyro_rest_error_dps", "gyro_rate_dps"),
+        ] {
+            assert_eq!(summary[scalar], on_board[field], "{scalar}: {summary}");
+        }
     }
     let history = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
         .args(["history", "--db", &db, "--json"])

@@ -385,6 +385,11 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         final_summary.params = ParamsFile::from(&**set);
         final_summary.params_crc = format!("{:#010x}", status.active_crc);
         final_summary.on_board_after = rest.as_ref().ok().copied();
+        // The scalar figures describe the set on the board; unknown when its check failed.
+        let on_board = rest.as_ref().ok();
+        final_summary.accel_rest_error_mg = on_board.map(|a| a.accel_error_mg);
+        final_summary.mag_rest_error_pct = on_board.map(|a| a.mag_error_pct);
+        final_summary.gyro_rest_error_dps = on_board.map(|a| a.gyro_rate_dps);
         rest_failure = rest.as_ref().err().map(|e| format!("{e:#}"));
         let path = dir.join("summary.json");
         let text = serde_json::to_string_pretty(&final_summary)

@@ -24,11 +24,13 @@ use crate::fit::Vec3;
 pub struct SessionSummary {
     /// Whether the written set was read back and matched (CRC and every value).
     pub verified: bool,
-    /// `| |ā| − g |` at rest with the written set, mg (`null` when not written).
+    /// `| |ā| − g |` at rest with the set on the board at the end, mg: the extended set when
+    /// `--analyze` wrote one (`null` when nothing was written, or when the extended set's check
+    /// at rest failed).
     pub accel_rest_error_mg: Option<f64>,
-    /// `| |m̄| − H |` at rest with the written set, % of `H`.
+    /// `| |m̄| − H |` at rest with the set on the board at the end, % of `H` (as above).
     pub mag_rest_error_pct: Option<f64>,
-    /// `|ω̄|` at rest with the written set, °/s.
+    /// `|ω̄|` at rest with the set on the board at the end, °/s (as above).
     pub gyro_rest_error_dps: Option<f64>,
     /// Board time from the first prompt to the verified write, s (simulated on a simulated
     /// board).
@@ -46,7 +48,8 @@ pub struct SessionSummary {
     pub base_params_crc: Option<String>,
     /// Errors at rest without calibration (raw readings).
     pub before: RestErrors,
-    /// Errors at rest with the written set.
+    /// Errors at rest with the fitted set as first written (the base set, when `--analyze`
+    /// then replaced it; see `on_board_after`).
     pub after: Option<RestErrors>,
     /// The set on the board when the session ended: the extended set `--analyze` wrote, or the
     /// base set (then equal to `after`); `null` when nothing was written.
