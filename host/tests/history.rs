@@ -134,6 +134,47 @@ fn changes_since_the_previous_calibration_are_in_combined_sigma() {
 }
 
 #[test]
+fn changes_are_measured_against_the_set_on_the_board_not_an_unwritten_attempt() {
+    for location in databases("since_on_board") {
+        let mut store = HistoryStore::open(&location).expect("open");
+        let first = board_record(6);
+        // A refused attempt far off, then a good set close to the first.
+        let mut refused = first.clone();
+        refused.recorded_unix_ms += 3_600_000;
+        refused.params.accel.b[0] += 2.0;
+        refused.board = imucal::history::BoardWrite::NotWritten {
+            reason: "outlier against the fleet".into(),
+        };
+        let mut second = first.clone();
+        second.recorded_unix_ms += 7_200_000;
+        second.params.accel.b[0] += 0.01;
+        for record in [&first, &refused, &second] {
+            store.record(record).expect("write");
+        }
+        let history = device_changes(store.records(None).expect("read"));
+        let ids: Vec<_> = history.iter().map(|h| h.stored.id).collect();
+        assert_eq!(
+            history[1].previous,
+            Some(ids[0]),
+            "the refused one vs the board's set"
+        );
+        assert_eq!(
+            history[2].previous,
+            Some(ids[0]),
+            "the unwritten attempt is skipped"
+        );
+        assert_eq!(history[2].not_written_between, vec![ids[1]]);
+        let change = history[2]
+            .changes
+            .iter()
+            .find(|c| c.parameter == "accel.b.x")
+            .expect("offset compared");
+        // 0.01 m/s² since the set on the board, not −1.99 since the refused attempt.
+        assert!((change.change - 0.01).abs() < 1e-12, "{change:?}");
+    }
+}
+
+#[test]
 fn a_sensor_fitted_anew_or_from_another_unit_is_named_and_not_compared() {
     for location in databases("sensor_changes") {
         let mut store = HistoryStore::open(&location).expect("open");

@@ -346,7 +346,7 @@ fn sets_not_written_are_labelled_and_not_counted_in_the_fleet() {
         retry.recorded_unix_ms += 1000;
         (FAULTS[0].apply)(&mut retry);
         retry.board = refusal.clone();
-        store.record(&retry).expect("write");
+        let retry_id = store.record(&retry).expect("write");
 
         let report = fleet_report(&mut store, &FleetOptions::default()).expect("report");
         assert_eq!(report.boards, 60, "the 60 sets on boards only");
@@ -397,6 +397,26 @@ fn sets_not_written_are_labelled_and_not_counted_in_the_fleet() {
         let table = String::from_utf8_lossy(&out.stdout);
         assert!(
             table.contains("NOT WRITTEN to the board: outlier against the fleet"),
+            "{table}"
+        );
+        // A good set after the refused attempt is compared with the set the board held, and
+        // the history says the attempt between was skipped.
+        let mut again = board_record(3);
+        again.recorded_unix_ms += 2000;
+        store.record(&again).expect("write");
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["history", &retry.device_id, "--db", &db])
+            .output()
+            .expect("imucal runs");
+        let table = String::from_utf8_lossy(&out.stdout);
+        let since = table
+            .lines()
+            .rfind(|l| l.contains("since #"))
+            .expect("the last record is compared");
+        assert!(
+            since.contains(&format!(
+                "the set on the board before; #{retry_id} was not written"
+            )) && since.contains("no parameter changed"),
             "{table}"
         );
     }

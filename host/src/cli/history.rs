@@ -168,8 +168,20 @@ fn print_entry(entry: &RecordChanges, shown: usize) {
     if let Some(label) = r.board.label() {
         println!("       {label}");
     }
+    let skipped = match entry.not_written_between.as_slice() {
+        [] => String::new(),
+        [one] => format!("; #{one} was not written"),
+        many => format!(
+            "; {} were not written",
+            many.iter()
+                .map(|id| format!("#{id}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
     match entry.previous {
-        None => println!("       first calibration of this board"),
+        None if skipped.is_empty() => println!("       first calibration of this board"),
+        None => println!("       no earlier set on this board{skipped}"),
         Some(previous) => {
             let changed: Vec<_> = entry.changes.iter().filter(|c| c.change != 0.0).collect();
             // Three significant digits whatever the unit: a bias change of 2e-5 rad/s is not
@@ -191,10 +203,17 @@ fn print_entry(entry: &RecordChanges, shown: usize) {
             }
             let kinds: Vec<String> = entry.sensor_changes.iter().map(|c| c.sentence()).collect();
             let said: Vec<String> = kinds.into_iter().chain(listed).collect();
-            if said.is_empty() {
-                println!("       since #{previous}: no parameter changed");
+            // The comparison is with the set the board held, so an unwritten attempt between
+            // does not hide what changed on the board.
+            let since = if skipped.is_empty() {
+                format!("since #{previous}")
             } else {
-                println!("       since #{previous}: {}", said.join(", "));
+                format!("since #{previous}, the set on the board before{skipped}")
+            };
+            if said.is_empty() {
+                println!("       {since}: no parameter changed");
+            } else {
+                println!("       {since}: {}", said.join(", "));
             }
         }
     }

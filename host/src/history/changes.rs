@@ -35,8 +35,12 @@ pub struct RecordChanges {
     /// The record.
     #[serde(flatten)]
     pub stored: StoredRecord,
-    /// The previous record of the same board, if any.
+    /// The same board's latest earlier record whose set went onto the board: the set the board
+    /// held before this record. Records never written are skipped (see `not_written_between`).
     pub previous: Option<RecordId>,
+    /// The same board's records after `previous` (or from its first record) whose set was
+    /// never written to the board, oldest first.
+    pub not_written_between: Vec<RecordId>,
     /// Every parameter both records have, largest change in σ first (then unscaled ones).
     pub changes: Vec<ParameterChange>,
     /// Sensors this record calibrates and the previous one did not, and the reverse, and those
@@ -138,23 +142,36 @@ fn sensor_changes(before: &StoredRecord, after: &StoredRecord) -> Vec<SensorChan
         .collect()
 }
 
-/// `records` (oldest first, any devices) with each one's changes since the same device's
-/// previous record.
+/// `records` (oldest first, any devices) with each one's changes since the set the same device
+/// held before it (its latest earlier record that was written to the board).
 pub fn device_changes(records: Vec<StoredRecord>) -> Vec<RecordChanges> {
-    let mut previous: BTreeMap<String, StoredRecord> = BTreeMap::new();
+    #[derive(Default)]
+    struct Board {
+        on_board: Option<StoredRecord>,
+        not_written: Vec<RecordId>,
+    }
+    let mut boards: BTreeMap<String, Board> = BTreeMap::new();
     let mut out = Vec::with_capacity(records.len());
     for stored in records {
-        let before = previous.insert(stored.record.device_id.clone(), stored.clone());
+        let board = boards.entry(stored.record.device_id.clone()).or_default();
+        let before = board.on_board.as_ref();
         let sensors = before
-            .as_ref()
             .map(|b| sensor_changes(b, &stored))
             .unwrap_or_default();
         let changes = before
-            .as_ref()
             .map(|b| parameter_changes(b, &stored, &sensors))
             .unwrap_or_default();
+        let previous = before.map(|b| b.id);
+        let not_written_between = board.not_written.clone();
+        if stored.record.board.on_board() {
+            board.on_board = Some(stored.clone());
+            board.not_written.clear();
+        } else {
+            board.not_written.push(stored.id);
+        }
         out.push(RecordChanges {
-            previous: before.map(|b| b.id),
+            previous,
+            not_written_between,
             stored,
             changes,
             sensor_changes: sensors,
