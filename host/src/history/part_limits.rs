@@ -38,14 +38,36 @@ fn within(value: f64, limit: f64) -> bool {
     value.abs() <= limit
 }
 
+/// What a part limit bounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LimitKind {
+    /// An offset, bounded in magnitude about 0.
+    Offset,
+    /// A gain, bounded in its distance from the nominal 1.
+    Gain,
+}
+
+impl LimitKind {
+    /// The value a working part is centred on: 0 for an offset, 1 for a gain.
+    pub fn nominal(self) -> f64 {
+        match self {
+            Self::Offset => 0.0,
+            Self::Gain => 1.0,
+        }
+    }
+}
+
 /// A parameter beyond what any working common part shows.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PartLimitFinding {
     /// The parameter, e.g. `accel.b.x` or `accel.gain.y`.
     pub parameter: String,
+    /// Whether the bound is on an offset or on a gain.
+    pub kind: LimitKind,
     /// Its value, in `unit`.
     pub value: f64,
-    /// The bound on its magnitude (for a gain, on its distance from 1), in `unit`.
+    /// The bound on its distance from [`LimitKind::nominal`], in `unit`.
     pub limit: f64,
     /// Unit of `value` and `limit`.
     pub unit: &'static str,
@@ -56,17 +78,12 @@ pub struct PartLimitFinding {
 impl PartLimitFinding {
     /// How far past the bound, as the ratio of the excess to the bound's own size (1 = at it).
     pub fn times_limit(&self) -> f64 {
-        let excess = if self.unit == "relative" {
-            (self.value - 1.0).abs()
-        } else {
-            self.value.abs()
-        };
-        excess / self.limit
+        (self.value - self.kind.nominal()).abs() / self.limit
     }
 
     /// One phrase: the parameter, its value and the bound.
     pub fn phrase(&self) -> String {
-        if self.unit == "relative" {
+        if self.kind == LimitKind::Gain {
             format!(
                 "{} {:.3} is {:+.1} % off nominal, beyond the ±{:.0} % of every common part: {}",
                 self.parameter,
@@ -98,6 +115,7 @@ pub fn beyond_part_limits(record: &CalibrationRecord) -> Vec<PartLimitFinding> {
             if !within(offset, offset_limit) {
                 findings.push(PartLimitFinding {
                     parameter: format!("accel.b.{name}"),
+                    kind: LimitKind::Offset,
                     value: offset,
                     limit: offset_limit,
                     unit: "m/s²",
@@ -109,6 +127,7 @@ pub fn beyond_part_limits(record: &CalibrationRecord) -> Vec<PartLimitFinding> {
             if !within(gain - 1.0, MAX_ACCEL_GAIN_ERROR) {
                 findings.push(PartLimitFinding {
                     parameter: format!("accel.gain.{name}"),
+                    kind: LimitKind::Gain,
                     value: gain,
                     limit: MAX_ACCEL_GAIN_ERROR,
                     unit: "relative",
@@ -124,6 +143,7 @@ pub fn beyond_part_limits(record: &CalibrationRecord) -> Vec<PartLimitFinding> {
             if !within(offset, limit) {
                 findings.push(PartLimitFinding {
                     parameter: format!("gyro.b.{name}"),
+                    kind: LimitKind::Offset,
                     value: offset,
                     limit,
                     unit: "rad/s",

@@ -206,7 +206,7 @@ fn held_to_part_limits(record: &CalibrationRecord, why_not_compared: String) -> 
         .into_iter()
         .map(|f| Finding {
             likely_cause: f.phrase(),
-            fleet_median: if f.unit == "relative" { 1.0 } else { 0.0 },
+            fleet_median: f.kind.nominal(),
             // In units of the bound: 1 is at it.
             robust_z: f.times_limit(),
             threshold_z: 1.0,
