@@ -180,9 +180,11 @@ fn run_calibration_with(
 fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
     let truth = sim.truth();
     let fit = &outcome.fit;
-    // Twelve positions, each captured once, and at most four corners when the accelerometer
-    // fit's covariance asked for them; the verified write.
-    let extra = SessionOptions::default().max_extra_poses;
+    // Twelve positions, each captured once; at most four corners when the accelerometer fit's
+    // covariance asked for them, and at most four holds after extra turns when the moves left
+    // an axis of the gyroscope's scale undetermined; the verified write.
+    let defaults = SessionOptions::default();
+    let extra = defaults.max_extra_poses + defaults.max_gyro_moves;
     assert!(
         (12..=12 + extra).contains(&outcome.poses.len()),
         "{} poses: {}",
