@@ -10,8 +10,9 @@ use std::sync::Arc;
 use imucal::device::DeviceClient;
 use imucal::fit::Vec3;
 use imucal::session::{
-    load_mag_samples, load_poses, load_progress, run_session_with, save_session, SessionControl,
-    SessionError, SessionEvent, SessionObserver, SessionOptions, PROGRESS_FILE,
+    load_mag_samples, load_moves, load_poses, load_progress, run_session_with, save_session,
+    SessionControl, SessionError, SessionEvent, SessionObserver, SessionOptions, MOVES_FILE,
+    PROGRESS_FILE,
 };
 use imucal_hil_sim::link_faults::ParamTamper;
 use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
@@ -233,6 +234,9 @@ fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking
     assert!(load_progress(&dir).is_ok());
     let first_mag = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
     assert!(!first_mag.is_empty());
+    // The moves between the five holds: the gyroscope's scale is fitted from them.
+    let first_moves = load_moves(&dir.join(MOVES_FILE)).expect("the moves are saved");
+    assert!(first_moves.len() >= 3, "{} moves", first_moves.len());
 
     // Resume on the same board: the five positions are neither prompted for nor captured again.
     let mut observer = Saboteur {
@@ -245,6 +249,7 @@ fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking
         save_dir: Some(dir.clone()),
         resume: first.clone(),
         resume_mag: first_mag.clone(),
+        resume_moves: first_moves.clone(),
         interrupt: None,
     };
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
@@ -267,9 +272,19 @@ fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking
     // The samples of the first run are kept ahead of the new ones, on disk too.
     assert!(outcome.mag_samples.len() > first_mag.len());
     assert_eq!(outcome.mag_samples[..first_mag.len()], first_mag[..]);
+    // The first run's moves are fitted with the new ones, read back bit for bit.
+    assert!(outcome.moves.len() > first_moves.len());
+    assert_eq!(outcome.moves[..first_moves.len()], first_moves[..]);
+    let gyro = outcome
+        .gyro_scale
+        .as_ref()
+        .expect("the gyroscope's scale is fitted");
+    assert_eq!(gyro.moves_recorded, outcome.moves.len());
     save_session(&outcome, &dir).expect("the finished session is saved");
     let saved = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
     assert_eq!(saved.len(), outcome.mag_samples.len());
+    let saved_moves = load_moves(&dir.join(MOVES_FILE)).expect("the moves are saved");
+    assert_eq!(saved_moves, outcome.moves);
     assert!(
         !dir.join(PROGRESS_FILE).exists(),
         "a finished session has no progress file"

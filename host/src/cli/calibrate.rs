@@ -17,11 +17,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
-use imucal::device::{DeviceClient, ParamsFile};
+use imucal::device::{DeviceClient, ParamsFile, UnitSample};
 use imucal::pipeline::References;
 use imucal::session::{
-    load_mag_samples, load_poses, load_progress, run_session_with, save_session, summary,
-    CapturedPose, MagSample, SessionControl, SessionEvent, SessionOptions, Tapped,
+    load_mag_samples, load_moves, load_poses, load_progress, run_session_with, save_session,
+    summary, CapturedPose, MagSample, SessionControl, SessionEvent, SessionOptions, Tapped,
+    MOVES_FILE,
 };
 use imucal_protocol::Welcome;
 
@@ -46,12 +47,16 @@ pub(super) fn unix_now() -> u64 {
         .map_or(0, |d| d.as_secs())
 }
 
-/// What an unfinished session in `dir` measured: its poses and magnetometer samples, refused
-/// when it was started on another board.
-fn resumed_session(
-    dir: &Path,
-    device_id: &str,
-) -> anyhow::Result<(Vec<CapturedPose>, Vec<MagSample>)> {
+/// What an unfinished session in `dir` measured, refused when it was started on another board.
+struct Resumed {
+    poses: Vec<CapturedPose>,
+    mag: Vec<MagSample>,
+    moves: Vec<Vec<UnitSample>>,
+}
+
+/// Read what the unfinished session in `dir` measured: its poses, magnetometer samples and the
+/// moves between its holds.
+fn resumed_session(dir: &Path, device_id: &str) -> anyhow::Result<Resumed> {
     let progress = load_progress(dir)?;
     anyhow::ensure!(
         progress.device_id == device_id,
@@ -60,7 +65,8 @@ fn resumed_session(
         dir.display(),
         progress.device_id
     );
-    // A session stopped before its first pose has no poses.json, and possibly no samples.
+    // A session stopped before its first pose has no poses.json, and possibly no samples; one
+    // saved before moves were kept has no moves.csv.
     let poses_path = dir.join("poses.json");
     let poses = if poses_path.exists() {
         load_poses(&poses_path)?
@@ -73,17 +79,24 @@ fn resumed_session(
     } else {
         Vec::new()
     };
+    let moves_path = dir.join(MOVES_FILE);
+    let moves = if moves_path.exists() {
+        load_moves(&moves_path)?
+    } else {
+        Vec::new()
+    };
     let names: Vec<&str> = poses.iter().map(|p| p.target.name.as_str()).collect();
     say!(
         "Resuming {} (stopped: {}): {} positions already captured ({}); they are not asked for \
-         again. The {} magnetometer samples saved are kept.",
+         again. The {} magnetometer samples and the {} moves between positions saved are kept.",
         dir.display(),
         progress.stopped_because,
         poses.len(),
         names.join(", "),
-        mag.len()
+        mag.len(),
+        moves.len()
     );
-    Ok((poses, mag))
+    Ok(Resumed { poses, mag, moves })
 }
 
 /// `word` as one shell word: as it is when it needs no quoting, otherwise in single quotes.
@@ -325,16 +338,21 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         welcome.firmware_version.patch,
         welcome.scales.sample_rate_hz
     );
-    let (resume, resume_mag) = match &args.resume {
+    let resumed = match &args.resume {
         Some(dir) => resumed_session(dir, &welcome.device_id.to_string())?,
-        None => (Vec::new(), Vec::new()),
+        None => Resumed {
+            poses: Vec::new(),
+            mag: Vec::new(),
+            moves: Vec::new(),
+        },
     };
     if let Some(sim) = &simulated {
-        sim.resumed(&resume);
+        sim.resumed(&resumed.poses);
     }
     let control = SessionControl {
-        resume,
-        resume_mag,
+        resume: resumed.poses,
+        resume_mag: resumed.mag,
+        resume_moves: resumed.moves,
         save_dir: Some(dir.clone()),
         interrupt: Some(interrupt_flag()?),
     };

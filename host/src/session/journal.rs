@@ -1,6 +1,7 @@
 //! The session directory kept up to date while a session runs, so nothing measured is lost when
 //! the session stops early (a board that vanishes, a lost reply, Ctrl-C, a timeout):
-//! `poses.json` after every captured pose, `mag_samples.csv` after every phase, `params.json`
+//! `poses.json` and `moves.csv` after every captured pose, `mag_samples.csv` after every phase,
+//! `params.json`
 //! once fitted, and `progress.json` saying how far the session got and what the board holds.
 //! `save_session` writes the finished directory and removes `progress.json`.
 
@@ -8,9 +9,11 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::save::{create_dir, mag_csv, poses_json, write_file, PROGRESS_FILE};
+use super::save::{
+    create_dir, mag_csv, moves_csv, poses_json, write_file, MOVES_FILE, PROGRESS_FILE,
+};
 use super::{CapturedPose, MagSample, SessionError};
-use crate::device::ParamsFile;
+use crate::device::{ParamsFile, UnitSample};
 use imucal_protocol::CalibrationSet;
 
 /// How far an unfinished session got (`progress.json`).
@@ -76,19 +79,31 @@ impl Journal {
         })
     }
 
-    /// Poses and magnetometer samples measured before this run (a resumed session): saved
-    /// again with the new ones.
-    pub(super) fn resume_with(&mut self, poses: &[CapturedPose], mag: &[MagSample]) {
+    /// Poses, magnetometer samples and moves measured before this run (a resumed session):
+    /// saved again with the new ones. The moves are written now, so a directory reused by a
+    /// new session holds no moves of an older one.
+    pub(super) fn resume_with(
+        &mut self,
+        poses: &[CapturedPose],
+        mag: &[MagSample],
+        moves: &[Vec<UnitSample>],
+    ) -> Result<(), SessionError> {
         self.poses = poses.to_vec();
         self.progress.poses = self.poses.len();
         self.progress.mag_samples = mag.len();
+        self.write(MOVES_FILE, || moves_csv(moves))
     }
 
-    /// A pose was captured.
-    pub(super) fn pose(&mut self, pose: &CapturedPose) -> Result<(), SessionError> {
+    /// A pose was captured; `moves` are every move kept so far.
+    pub(super) fn pose(
+        &mut self,
+        pose: &CapturedPose,
+        moves: &[Vec<UnitSample>],
+    ) -> Result<(), SessionError> {
         self.poses.push(pose.clone());
         self.progress.poses = self.poses.len();
         self.write("poses.json", || poses_json(&self.poses))?;
+        self.write(MOVES_FILE, || moves_csv(moves))?;
         self.write_progress()
     }
 

@@ -71,7 +71,7 @@ use std::time::Instant;
 
 use imucal_protocol::{ParamStatus, StreamKind};
 
-use crate::device::DeviceClient;
+use crate::device::{DeviceClient, UnitSample};
 use crate::fit::Vec3;
 use capture::CaptureGoal;
 use journal::Journal;
@@ -87,8 +87,8 @@ pub use motion::{MotionMonitor, MotionState};
 pub use options::SessionOptions;
 pub use rest::{rest_errors, RestErrors};
 pub use rest_phase::stream_for;
-pub use save::PROGRESS_FILE;
-pub use save::{load_mag_samples, load_poses, save_session, summary, SessionSummary};
+pub use save::{load_mag_samples, load_moves, load_poses, save_session, summary, SessionSummary};
+pub use save::{MOVES_FILE, PROGRESS_FILE};
 pub use solve::{
     fit_session, Budgets, CapturedPose, FieldSource, SessionFit, Uncertainties, Verdict,
     VerdictLevel,
@@ -108,6 +108,9 @@ pub struct SessionOutcome {
     pub extra_positions_note: String,
     /// Every raw magnetometer sample streamed.
     pub mag_samples: Vec<MagSample>,
+    /// Every move between holds kept for the gyroscope's scale fit (those of an earlier run
+    /// first), in nominal units.
+    pub moves: Vec<Vec<UnitSample>>,
     /// Coverage of the magnetometer phase.
     pub coverage: Coverage,
     /// Samples a region needed to count as covered ([`SessionOptions::mag_min_per_region`]).
@@ -154,6 +157,9 @@ pub struct SessionControl {
     /// Magnetometer samples of that earlier run (`mag_samples.csv`, [`load_mag_samples`]):
     /// kept, saved again with the new ones and fitted with them.
     pub resume_mag: Vec<MagSample>,
+    /// Moves between the holds of that earlier run (`moves.csv`, [`load_moves`]): kept, saved
+    /// again with the new ones and fitted with them.
+    pub resume_moves: Vec<Vec<UnitSample>>,
     /// Set (by a Ctrl-C handler) to stop the session at the next batch of samples.
     pub interrupt: Option<Arc<AtomicBool>>,
 }
@@ -180,7 +186,7 @@ pub fn run_session_with<L: Read + Write>(
     options.validate()?;
     let device_id = client.welcome().device_id.to_string();
     let mut journal = Journal::new(control.save_dir.as_deref(), device_id)?;
-    journal.resume_with(&control.resume, &control.resume_mag);
+    journal.resume_with(&control.resume, &control.resume_mag, &control.resume_moves)?;
     let mut runner = Runner::new(
         client,
         options,
@@ -189,6 +195,7 @@ pub fn run_session_with<L: Read + Write>(
         control.interrupt.clone(),
     );
     runner.mag = control.resume_mag.clone();
+    runner.moves = control.resume_moves.clone();
     match run_phases(&mut runner, &control.resume) {
         Ok(outcome) => Ok(outcome),
         Err(cause) => Err(runner.stop(cause)),
@@ -285,6 +292,7 @@ fn run_phases<L: Read + Write>(
         poses: captured,
         extra_positions_note,
         mag_samples: Vec::new(),
+        moves: runner.moves.clone(),
         coverage,
         mag_min_per_region: options.mag_min_per_region,
         written: false,

@@ -3,8 +3,11 @@
 //! Files: `params.json` (the [`ParamsFile`] format, so `imucal flash params.json` writes it
 //! again), `poses.json` (every `PoseStats` with the orientation it was taken for and the board
 //! time of the hold; [`load_poses`] reads it back for `imucal analyze SESSION_DIR`),
-//! `mag_samples.csv` (`t_s,mx,my,mz,temp_c,phase`, raw µT on the board's clock) and
-//! `summary.json` (the [`SessionSummary`], as printed by `imucal calibrate --json`).
+//! `mag_samples.csv` (`t_s,mx,my,mz,temp_c,phase`, raw µT on the board's clock), `moves.csv`
+//! (every sample of the moves between the holds that the gyroscope's scale fit integrates, in
+//! the recording format with a `segment` per move; [`load_moves`] reads it back, so a resumed
+//! session keeps them) and `summary.json` (the [`SessionSummary`], as printed by
+//! `imucal calibrate --json`).
 
 use std::path::{Path, PathBuf};
 
@@ -16,7 +19,7 @@ use super::rest::RestErrors;
 use super::solve::{CapturedPose, FieldSource, Uncertainties, Verdict};
 use super::targets::Target;
 use super::{MagSample, Phase, SessionError, SessionOutcome};
-use crate::device::ParamsFile;
+use crate::device::{ParamsFile, UnitSample};
 use crate::fit::Vec3;
 
 /// The summary of a session (`--json` and `summary.json`).
@@ -283,6 +286,94 @@ pub fn load_mag_samples(path: &Path) -> Result<Vec<MagSample>, SessionError> {
         .collect()
 }
 
+/// Header of `moves.csv`: the recording format's columns in nominal units (m/s², rad/s, µT,
+/// °C on the board's clock) and the move each row belongs to.
+const MOVES_HEADER: &str = "t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c,segment";
+
+/// The text of `moves.csv` for `moves`: one row per sample, `segment` `move-N` numbering the
+/// moves from 1. Values are written in the shortest form that reads back to the same `f64`,
+/// so a resumed session fits exactly what the first run measured.
+pub(super) fn moves_csv(moves: &[Vec<UnitSample>]) -> String {
+    use std::fmt::Write as _;
+    let mut csv = String::with_capacity(32 + 160 * moves.iter().map(Vec::len).sum::<usize>());
+    csv.push_str(MOVES_HEADER);
+    csv.push('\n');
+    for (k, samples) in moves.iter().enumerate() {
+        for u in samples {
+            let [ax, ay, az] = u.accel;
+            let [gx, gy, gz] = u.gyro;
+            let [mx, my, mz] = u.mag;
+            // Writing to a String cannot fail.
+            let _ = writeln!(
+                csv,
+                "{},{ax},{ay},{az},{gx},{gy},{gz},{mx},{my},{mz},{},move-{}",
+                u.t_s,
+                u.temp_c,
+                k + 1
+            );
+        }
+    }
+    csv
+}
+
+/// Read the moves of a session directory's `moves.csv` ([`moves_csv`]'s columns), in order.
+pub fn load_moves(path: &Path) -> Result<Vec<Vec<UnitSample>>, SessionError> {
+    let load_error = |reason: String| SessionError::Load {
+        path: path.display().to_string(),
+        reason,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| load_error(e.to_string()))?;
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, header)) if header.trim() == MOVES_HEADER => {}
+        _ => {
+            return Err(load_error(format!(
+                "its first line is not the header {MOVES_HEADER}"
+            )))
+        }
+    }
+    let mut moves: Vec<Vec<UnitSample>> = Vec::new();
+    let mut names: Vec<String> = Vec::new();
+    for (i, line) in lines.filter(|(_, line)| !line.trim().is_empty()) {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let values: Option<Vec<f64>> = match fields.as_slice() {
+            [numbers @ .., _] if fields.len() == 12 => numbers
+                .iter()
+                .map(|f| f.parse::<f64>().ok().filter(|v| v.is_finite()))
+                .collect(),
+            _ => None,
+        };
+        let (Some(v), Some(segment)) = (values, fields.last()) else {
+            return Err(load_error(format!(
+                "line {} is not eleven finite numbers and a move name: {line}",
+                i + 1
+            )));
+        };
+        let sample = UnitSample {
+            t_s: v[0],
+            accel: [v[1], v[2], v[3]],
+            gyro: [v[4], v[5], v[6]],
+            mag: [v[7], v[8], v[9]],
+            temp_c: v[10],
+        };
+        match (names.last(), moves.last_mut()) {
+            (Some(last), Some(samples)) if last == segment => samples.push(sample),
+            _ if names.iter().any(|n| n == segment) => {
+                return Err(load_error(format!(
+                    "line {}: the rows of {segment} are not together (each move's rows are \
+                     consecutive)",
+                    i + 1
+                )))
+            }
+            _ => {
+                names.push((*segment).to_string());
+                moves.push(vec![sample]);
+            }
+        }
+    }
+    Ok(moves)
+}
+
 /// Write the session directory `dir` (created if missing); returns the files written.
 pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>, SessionError> {
     create_dir(dir)?;
@@ -293,11 +384,15 @@ pub fn save_session(outcome: &SessionOutcome, dir: &Path) -> Result<Vec<PathBuf>
         )?,
         write_file(&dir.join("poses.json"), &poses_json(&outcome.poses))?,
         write_file(&dir.join("mag_samples.csv"), &mag_csv(&outcome.mag_samples))?,
+        write_file(&dir.join(MOVES_FILE), &moves_csv(&outcome.moves))?,
         write_file(&dir.join("summary.json"), &json_text(&summary(outcome)))?,
     ];
     finish(dir)?;
     Ok(written)
 }
+
+/// The name of the moves file of a session directory ([`moves_csv`]).
+pub const MOVES_FILE: &str = "moves.csv";
 
 /// The name of the progress file of an unfinished session directory.
 pub const PROGRESS_FILE: &str = "progress.json";
@@ -398,6 +493,69 @@ mod tests {
         let error = load_mag_samples(&path).expect_err("a short line is refused");
         let _ = std::fs::remove_file(&path);
         assert!(error.to_string().contains("line 2"), "{error}");
+    }
+
+    fn unit_sample(k: u32) -> UnitSample {
+        // Values as the board gives them: counts times a scale that is not a short decimal.
+        let c = f64::from(k);
+        UnitSample {
+            t_s: 12.0 + c * 0.01,
+            accel: [c * 0.000_598_550_4, -9.81 + c * 1e-3, 0.1],
+            gyro: [c * 0.000_152_716_1, -1.0 / 3.0, std::f64::consts::PI * 1e-3],
+            mag: [20.0 + c * 0.146_484_375, -5.0, 41.0],
+            temp_c: 25.0 + c / 7.0,
+        }
+    }
+
+    #[test]
+    fn saved_moves_are_read_back_bit_for_bit_and_in_order() {
+        let moves = vec![
+            (0..40).map(unit_sample).collect::<Vec<_>>(),
+            (40..41).map(unit_sample).collect(),
+            (41..90).map(unit_sample).collect(),
+        ];
+        let path = temp_file("moves.csv", &moves_csv(&moves));
+        let read = load_moves(&path).expect("the file is read");
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(read, moves);
+        let path = temp_file("moves-none.csv", &moves_csv(&[]));
+        let read = load_moves(&path).expect("a file of no moves is read");
+        let _ = std::fs::remove_file(&path);
+        assert!(read.is_empty());
+    }
+
+    #[test]
+    fn a_broken_moves_file_is_an_error_naming_the_cause() {
+        let header = MOVES_HEADER;
+        let row = |segment: &str| format!("1,0,0,9.8,0,0,0,20,0,40,25,{segment}\n");
+        for (name, text, expected) in [
+            ("moves-header.csv", "t_s,ax\n".to_string(), "header"),
+            (
+                "moves-short.csv",
+                format!("{header}\n1,2,3,move-1\n"),
+                "line 2",
+            ),
+            (
+                "moves-nan.csv",
+                format!("{header}\n{}", row("move-1").replace("9.8", "NaN")),
+                "line 2",
+            ),
+            (
+                "moves-split.csv",
+                format!(
+                    "{header}\n{}{}{}",
+                    row("move-1"),
+                    row("move-2"),
+                    row("move-1")
+                ),
+                "not together",
+            ),
+        ] {
+            let path = temp_file(name, &text);
+            let error = load_moves(&path).expect_err("a broken file is refused");
+            let _ = std::fs::remove_file(&path);
+            assert!(error.to_string().contains(expected), "{name}: {error}");
+        }
     }
 
     #[test]
