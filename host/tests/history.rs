@@ -418,3 +418,89 @@ fn a_boards_history_plots_each_parameter_group_over_time() {
         );
     }
 }
+
+/// A database as a build of schema version 1 left it, holding `record`.
+fn write_version_1_database(location: &DbLocation, record: &CalibrationRecord) {
+    use imucal::history::schema::{
+        migration_v1, to_row, Dialect, SqlValue, COLUMNS, TABLE, VERSION_TABLE,
+    };
+    // Version 1 had the first 15 columns.
+    let row: Vec<SqlValue> = to_row(record).into_iter().take(15).collect();
+    let names: Vec<&str> = COLUMNS[..15].iter().map(|(name, _)| *name).collect();
+    let params: Vec<String> = (1..=15).map(|i| format!("${i}")).collect();
+    let insert = format!(
+        "INSERT INTO {TABLE} ({}) VALUES ({})",
+        names.join(", "),
+        params.join(", ")
+    );
+    let version = [
+        format!("CREATE TABLE {VERSION_TABLE} (version BIGINT NOT NULL)"),
+        format!("INSERT INTO {VERSION_TABLE} (version) VALUES (1)"),
+    ];
+    match location {
+        DbLocation::Sqlite(path) => {
+            let connection = rusqlite::Connection::open(path).expect("create SQLite file");
+            for statement in version.iter().cloned().chain(migration_v1(Dialect::Sqlite)) {
+                connection
+                    .execute(&statement, [])
+                    .expect("version 1 schema");
+            }
+            let values = row.iter().map(|v| match v {
+                SqlValue::Text(t) => rusqlite::types::Value::Text(t.clone()),
+                SqlValue::Int(i) => rusqlite::types::Value::Integer(*i),
+                SqlValue::Null => rusqlite::types::Value::Null,
+            });
+            connection
+                .execute(&insert, rusqlite::params_from_iter(values))
+                .expect("version 1 row");
+        }
+        DbLocation::Postgres(url) => {
+            let mut client = postgres::Client::connect(url, postgres::NoTls).expect("connect");
+            for statement in version
+                .iter()
+                .cloned()
+                .chain(migration_v1(Dialect::Postgres))
+            {
+                client.batch_execute(&statement).expect("version 1 schema");
+            }
+            let null: Option<&str> = None;
+            let params: Vec<&(dyn postgres::types::ToSql + Sync)> = row
+                .iter()
+                .map(|v| match v {
+                    SqlValue::Text(t) => t as &(dyn postgres::types::ToSql + Sync),
+                    SqlValue::Int(i) => i as &(dyn postgres::types::ToSql + Sync),
+                    SqlValue::Null => &null as &(dyn postgres::types::ToSql + Sync),
+                })
+                .collect();
+            client.execute(&insert, &params).expect("version 1 row");
+        }
+    }
+}
+
+#[test]
+fn a_version_1_history_upgrades_on_open_keeping_its_records_as_written_sets() {
+    for location in databases("upgrade_v1") {
+        let old = board_record(8);
+        write_version_1_database(&location, &old);
+        let mut store = HistoryStore::open(&location).expect("a version 1 history opens");
+        let records = store.records(None).expect("read");
+        assert_eq!(records.len(), 1, "{}", location.display());
+        // Version 1 recorded only sets that were written.
+        assert_eq!(records[0].record, old, "{}", location.display());
+        assert_eq!(
+            records[0].record.board,
+            imucal::history::BoardWrite::Written
+        );
+        let mut refused = board_record(9);
+        refused.board = imucal::history::BoardWrite::NotWritten {
+            reason: "poor verdict".into(),
+        };
+        store.record(&refused).expect("a version 2 record is added");
+        drop(store);
+        // Opening again finds version 2 and changes nothing.
+        let mut store = HistoryStore::open(&location).expect("the upgraded history opens again");
+        let records = store.records(None).expect("read");
+        assert_eq!(records.len(), 2);
+        assert_eq!(records[1].record, refused, "{}", location.display());
+    }
+}

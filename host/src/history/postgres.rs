@@ -55,12 +55,7 @@ impl Backend for PostgresBackend {
             .try_get(0)
             .map_err(failed)?;
         if found < SCHEMA_VERSION {
-            let mut statements = Vec::new();
-            if found < 1 {
-                statements.extend(schema::migration_v1(Dialect::Postgres));
-            }
-            statements.extend(schema::migration_v2());
-            for statement in statements {
+            for statement in schema::upgrade_statements(found, Dialect::Postgres) {
                 tx.batch_execute(&statement).map_err(failed)?;
             }
             tx.execute(

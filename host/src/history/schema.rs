@@ -142,6 +142,19 @@ pub fn migration_v2() -> Vec<String> {
     )]
 }
 
+/// The statements that bring a database at schema version `found` (0: empty) to
+/// [`SCHEMA_VERSION`], in order; none when it is there already.
+pub fn upgrade_statements(found: i64, dialect: Dialect) -> Vec<String> {
+    let mut statements = Vec::new();
+    if found < 1 {
+        statements.extend(migration_v1(dialect));
+    }
+    if found < 2 {
+        statements.extend(migration_v2());
+    }
+    statements
+}
+
 /// The table holding the schema version.
 pub const VERSION_TABLE: &str = "imucal_schema_version";
 

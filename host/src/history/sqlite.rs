@@ -95,12 +95,7 @@ impl Backend for SqliteBackend {
             )
             .map_err(failed)?;
         if found < SCHEMA_VERSION {
-            let mut statements = Vec::new();
-            if found < 1 {
-                statements.extend(schema::migration_v1(Dialect::Sqlite));
-            }
-            statements.extend(schema::migration_v2());
-            for statement in statements {
+            for statement in schema::upgrade_statements(found, Dialect::Sqlite) {
                 tx.execute(&statement, []).map_err(failed)?;
             }
             tx.execute(
