@@ -151,11 +151,12 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
             a.observations.len()
         ));
         out.push_str(&format!(
-            "  noise floor {:.3e} {u}; base residual χ² = {:.1} on {} dof (p = {:.2e}): {}\n",
+            "  noise floor {:.3e} {u} (RMS of each observation's own noise, which weighs its \
+             residual in χ²); base residual χ² = {:.1} on {} dof ({}): {}\n",
             a.noise_floor,
             a.test_before.chi2,
             a.test_before.dof,
-            a.test_before.p_value,
+            a.test_before.p_text(),
             if a.consistent_with_noise() {
                 "consistent with the noise"
             } else {
@@ -201,8 +202,9 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
                 "unexplained: the final residual"
             };
             out.push_str(&format!(
-                "  {what} ({:.3e} {u} RMS, χ²/dof = {:.1}) is above the floor and no candidate explains it{corr}\n",
+                "  {what} ({:.3e} {u} RMS; weighed by each observation's noise {:.1}× it, χ²/dof = {:.1}) is above the floor and no candidate explains it{corr}\n",
                 a.rms_after,
+                a.test_after.reduced().sqrt(),
                 a.test_after.reduced()
             ));
         } else {

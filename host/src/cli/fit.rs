@@ -183,6 +183,12 @@ pub(super) fn to_json(result: &SensorOutcome) -> Value {
             "iterations": fit.iterations,
             "termination": fit.termination.map(|t| t.name()),
             "coverage_factor": fit.coverage_factor,
+            "noise_test": result.noise_test.map(|t| json!({
+                "chi2": t.chi2,
+                "dof": t.dof,
+                "p_value": t.p_value,
+                "consistent": t.consistent(),
+            })),
             "verdict": result.verdict(),
             "note": note,
         }),

@@ -13,9 +13,10 @@ use crate::still::StillReport;
 
 use super::align::align_mag;
 use super::calibration::{
-    pose_noise_floor, sample_noise_floor, RecordingCalibration, SensorOutcome,
+    bias_noise_test, norm_noise_test, pose_noise_floor, sample_noise_floor, RecordingCalibration,
+    SensorOutcome,
 };
-use super::chain::default_accel_chain;
+use super::chain::{default_accel_chain, unknowns};
 use super::gyro::{fit_gyroscope, gyro_unit_scale, moot_gyro_scale};
 use super::input::{check_input_then, CheckedInput, InputOptions};
 use super::methods::{fit_accel, fit_mag};
@@ -253,7 +254,14 @@ impl SensorContext<'_> {
                 }),
             };
             if let Ok(f) = &fit {
-                outcome.noise_floor = pose_noise_floor(&poses, f);
+                // The residual analysis's test, so that `fit` and `analyze` judge alike.
+                match norm_noise_test(&poses, &still.pose_sigmas(sensor), f, unknowns(f.method)) {
+                    Some((test, floor)) => {
+                        outcome.noise_test = Some(test);
+                        outcome.noise_floor = Some(floor);
+                    }
+                    None => outcome.noise_floor = pose_noise_floor(&poses, f),
+                }
             }
             fit
         } else {
@@ -264,7 +272,11 @@ impl SensorContext<'_> {
             outcome.output_unit = unit.to_string();
             outcome.to_nominal = (unit == "rad/s").then_some(scale);
             let method = self.method.unwrap_or(Method::GyroBias);
-            fit_gyroscope(method, recording, still, gravity, scale)
+            let fit = fit_gyroscope(method, recording, still, gravity, scale);
+            if let Some(f) = fit.as_ref().ok().filter(|f| f.method == Method::GyroBias) {
+                outcome.noise_test = bias_noise_test(&poses, &still.pose_sigmas(sensor), f);
+            }
+            fit
         };
         outcome.fit = fit.map_err(|e| e.to_string());
         outcome

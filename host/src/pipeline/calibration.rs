@@ -8,6 +8,7 @@ use crate::fit::alignment::Alignment;
 use crate::fit::{Fit, Pose, Vec3};
 use crate::geomag::{LocalField, RadiusCheck};
 use crate::recording::Sensor;
+use crate::stats::chi_square::ChiSquareTest;
 
 use super::chain::ChainChoice;
 
@@ -31,6 +32,10 @@ pub struct SensorOutcome {
     /// Relative residual a perfect model would leave: from the pose noise (accelerometer,
     /// gyroscope), or from the noise of single samples (magnetometer).
     pub noise_floor: Option<f64>,
+    /// The χ² test of the residual against each pose's own noise, the residual analysis's test
+    /// ([`norm_noise_test`], [`bias_noise_test`]); `None` for the magnetometer, for models
+    /// with as many unknowns as poses, and when a pose has too few samples for its noise.
+    pub noise_test: Option<ChiSquareTest>,
     /// Findings worth a line (e.g. which model the default chain chose and why).
     pub notes: Vec<String>,
     /// Accelerometer with the default chain: every candidate model and why it was chosen or not.
@@ -56,6 +61,7 @@ impl SensorOutcome {
             output_unit: String::new(),
             to_nominal: None,
             noise_floor: None,
+            noise_test: None,
             notes: Vec::new(),
             chain: None,
             alignment: None,
@@ -100,7 +106,32 @@ impl SensorOutcome {
                 "temperature, non-linearity, motion during holds",
             )
         };
-        if let Some(floor) = self.noise_floor.filter(|f| *f > 0.0) {
+        if let Some(test) = &self.noise_test {
+            // √(χ²/dof): the residual in units of what the poses' own noise leaves.
+            let ratio = test.reduced().sqrt();
+            let figures = format!(
+                "χ² = {:.1} on {} dof, {}",
+                test.chi2,
+                test.dof,
+                test.p_text()
+            );
+            parts.push(match (self.sensor, test.consistent()) {
+                (Sensor::Gyro, true) => {
+                    format!("the holds agree on one bias within their noise ({figures})")
+                }
+                (Sensor::Gyro, false) => format!(
+                    "the holds' means scatter {ratio:.1}× their noise ({figures}): the bias \
+                     moved between holds (temperature, drift) or the board turned during one"
+                ),
+                (_, true) => {
+                    format!("residual is at the noise floor ({ratio:.1}× the {noise}: {figures})")
+                }
+                (_, false) => format!(
+                    "residual is {ratio:.1}× the {noise} ({figures}): the model misses \
+                     something ({misses})"
+                ),
+            });
+        } else if let Some(floor) = self.noise_floor.filter(|f| *f > 0.0) {
             let ratio = fit.rms / floor;
             // Noise never leaves a residual a millionth of its floor: the fit has as many
             // unknowns as equations and passes through every pose.
@@ -167,6 +198,69 @@ pub fn pose_noise_floor(poses: &[Pose], fit: &Fit) -> Option<f64> {
         .collect();
     (!values.is_empty())
         .then(|| (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt())
+}
+
+/// The χ² test of a norm fit's residual against its poses' own noise, as the residual analysis
+/// tests it ([`crate::stats::chi_square`]): each pose's relative residual `|A(x−b)|/ref − 1`
+/// weighed by the standard error of its mean carried to the norm, `σ'ᵢ = |(Aᵀŷᵢ)∘σᵢ|/ref`
+/// (`ŷ` the calibrated direction), on `N − unknowns` degrees of freedom; with the RMS of the
+/// `σ'ᵢ`, the floor printed beside it. `sigmas` are the poses' standard errors
+/// ([`crate::still::StillReport::pose_sigmas`]); `None` when one is missing or the model has
+/// as many unknowns as there are poses.
+pub fn norm_noise_test(
+    poses: &[Pose],
+    sigmas: &[Option<Vec3>],
+    fit: &Fit,
+    unknowns: usize,
+) -> Option<(ChiSquareTest, f64)> {
+    if poses.len() != sigmas.len() || poses.len() <= unknowns || fit.reference <= 0.0 {
+        return None;
+    }
+    let (mut chi2, mut floor2) = (0.0, 0.0);
+    for (pose, sigma) in poses.iter().zip(sigmas) {
+        let y = fit.cal.a * (pose.mean - fit.cal.b);
+        let norm = y.norm();
+        let spread = (fit.cal.a.transpose() * (y / norm))
+            .component_mul(&(*sigma)?)
+            .norm()
+            / fit.reference;
+        let residual = norm / fit.reference - 1.0;
+        if !(spread > 0.0 && spread.is_finite() && residual.is_finite()) {
+            return None;
+        }
+        chi2 += (residual / spread).powi(2);
+        floor2 += spread * spread;
+    }
+    Some((
+        ChiSquareTest::new(chi2, poses.len(), unknowns),
+        (floor2 / poses.len() as f64).sqrt(),
+    ))
+}
+
+/// The χ² test of a gyroscope bias against its holds' own noise: every hold's mean less the
+/// bias, per axis, weighed by the hold's standard error, on `3N − 3` degrees of freedom; with
+/// the RMS standard error in the data's units. `None` for fewer than two holds or when one has
+/// no standard error.
+pub fn bias_noise_test(
+    poses: &[Pose],
+    sigmas: &[Option<Vec3>],
+    fit: &Fit,
+) -> Option<ChiSquareTest> {
+    if poses.len() < 2 || poses.len() != sigmas.len() {
+        return None;
+    }
+    let mut chi2 = 0.0;
+    for (pose, sigma) in poses.iter().zip(sigmas) {
+        let sigma = (*sigma)?;
+        for k in 0..3 {
+            let weighted = (pose.mean[k] - fit.cal.b[k]) / sigma[k];
+            if !(sigma[k] > 0.0 && weighted.is_finite()) {
+                return None;
+            }
+            chi2 += weighted * weighted;
+        }
+    }
+    Some(ChiSquareTest::new(chi2, 3 * poses.len(), 3))
 }
 
 /// Most samples the sample noise floor is averaged over: evenly spaced, they give its RMS to

@@ -44,6 +44,15 @@ impl ChiSquareTest {
     pub fn reduced(&self) -> f64 {
         self.chi2 / self.dof
     }
+
+    /// `p = 3.20e-6`, or `p < 1e-300` where the tail probability underflows.
+    pub fn p_text(&self) -> String {
+        if self.p_value > 0.0 {
+            format!("p = {:.2e}", self.p_value)
+        } else {
+            "p < 1e-300".to_string()
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1,11 +1,12 @@
-//! Per-sensor statistics of one hold: mean, within-hold variance and count of each sensor's
-//! screened samples ([`super::samples`]), the magnetometer samples inside the hold's time span,
+//! Per-sensor statistics of one hold: mean, within-hold variance, count and the standard error
+//! of the mean (corrected for correlated samples) of each sensor's screened samples ([`super::samples`]), the magnetometer samples inside the hold's time span,
 //! and the die temperature.
 
-use super::intervals::{StillInterval, StillReport, TempStats};
+use super::intervals::{sensor_index, StillInterval, StillReport, TempStats};
 use super::samples::hold_samples;
 use crate::fit::Pose;
 use crate::recording::{Recording, Sensor};
+use crate::stats::autocorrelation::run_stats;
 use crate::stats::descriptive::mean_variance;
 
 /// Holds from a `pose` column: every row with the same label belongs to one hold.
@@ -53,9 +54,11 @@ pub(super) fn interval(
     let t_start = recording.time[start];
     let t_end = recording.time[end - 1];
     let mut dropped = Vec::new();
+    let mut sigma_mean = [None; 3];
     let mut pose = |sensor: Sensor| {
         let held = hold_samples(recording, rows, t_start, t_end, sensor)?;
         dropped.extend(held.dropped);
+        sigma_mean[sensor_index(sensor)] = run_stats(&held.kept).map(|s| s.sigma_mean);
         mean_variance(held.kept.iter()).map(|(mean, var, n)| Pose {
             mean,
             var,
@@ -83,6 +86,7 @@ pub(super) fn interval(
         accel,
         gyro,
         mag,
+        sigma_mean,
         temp,
         direction: None,
         dropped,

@@ -35,6 +35,10 @@ pub struct StillInterval {
     pub gyro: Option<Pose>,
     /// Magnetometer statistics of the samples within `[t_start, t_end]`, if any.
     pub mag: Option<Pose>,
+    /// Standard error of each sensor's hold mean (accelerometer, gyroscope, magnetometer),
+    /// corrected for correlated samples as the residual analysis's is
+    /// ([`crate::stats::autocorrelation::run_stats`]); `None` for fewer than four samples.
+    pub sigma_mean: [Option<Vec3>; 3],
     /// Temperature statistics, if the recording has a temperature column.
     pub temp: Option<TempStats>,
     /// Index into [`StillReport::directions`] of this hold's gravity direction.
@@ -105,6 +109,11 @@ impl StillInterval {
     /// Duration in seconds.
     pub fn duration(&self) -> f64 {
         self.t_end - self.t_start
+    }
+
+    /// The standard error of one sensor's hold mean (see `sigma_mean`).
+    pub fn pose_sigma_mean(&self, sensor: Sensor) -> Option<Vec3> {
+        self.sigma_mean[sensor_index(sensor)]
     }
 
     /// The pose of one sensor.
@@ -221,5 +230,23 @@ impl StillReport {
             .iter()
             .filter_map(|i| i.pose(sensor).cloned())
             .collect()
+    }
+
+    /// The standard error of each of [`Self::poses`]' means, in the same order.
+    pub fn pose_sigmas(&self, sensor: Sensor) -> Vec<Option<Vec3>> {
+        self.intervals
+            .iter()
+            .filter(|i| i.pose(sensor).is_some())
+            .map(|i| i.pose_sigma_mean(sensor))
+            .collect()
+    }
+}
+
+/// Position of `sensor` in per-sensor arrays ordered accelerometer, gyroscope, magnetometer.
+pub(super) fn sensor_index(sensor: Sensor) -> usize {
+    match sensor {
+        Sensor::Accel => 0,
+        Sensor::Gyro => 1,
+        Sensor::Mag => 2,
     }
 }
