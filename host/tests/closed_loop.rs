@@ -187,6 +187,26 @@ fn analysed_temperature_terms_cut_the_error_across_a_temperature_sweep() {
     assert!(accepted(&run.analysis, GYRO).contains(&"bias_temperature"));
     assert!(run.extended.set.accel.bias_temp.is_some());
     assert!(run.extended.set.gyro.bias_temp.is_some());
+    // The set's residuals are the final models' (the board shows them), not the base fit's.
+    for (sensor, written, scale) in [
+        (
+            ACCEL,
+            run.extended.set.residuals.accel_rms,
+            f64::from(run.extended.set.reference.gravity_mps2),
+        ),
+        (GYRO, run.extended.set.residuals.gyro_rms, 1.0),
+    ] {
+        let Ok(found) = &run.analysis.sensors[sensor].1 else {
+            panic!("sensor {sensor} was not analysed");
+        };
+        let expected = found.rms_after * scale;
+        assert!(
+            ((f64::from(written) - expected) / expected).abs() < 1e-6,
+            "sensor {sensor}: {written} written, final model {expected}"
+        );
+        assert!(found.rms_after < found.rms_before);
+    }
+    assert!(run.extended.set.residuals.accel_rms < run.outcome.fit.set.residuals.accel_rms);
     assert_eq!(run.before.len(), BINS, "every temperature bin was measured");
     assert_eq!(run.after.len(), BINS, "every temperature bin was measured");
 

@@ -12,7 +12,7 @@
 //! that the firmware can apply (bias temperature polynomial, scale temperature coefficient,
 //! non-linearity, gyro g-sensitivity) by the analysis's final model, fitted jointly with them;
 //! a sensor with nothing accepted keeps the session's values, so a set without accepted effects
-//! is written unchanged.
+//! is written unchanged. A replaced sensor's residual RMS is the final model's.
 
 use imucal_protocol::CalibrationSet;
 
@@ -193,10 +193,17 @@ pub fn extend_set(base: &CalibrationSet, analysis: &RecordingAnalysis) -> Extend
             continue;
         }
         let terms = found.to_calibration_terms();
+        // The set's residual is the model it carries: the analysis's final one (relative to
+        // g for the accelerometer, rad/s for the gyroscope), not the base fit's.
         match sensor {
-            Sensor::Accel => set.accel = terms.sensor,
+            Sensor::Accel => {
+                set.accel = terms.sensor;
+                set.residuals.accel_rms =
+                    (found.rms_after * f64::from(set.reference.gravity_mps2)) as f32;
+            }
             Sensor::Gyro => {
                 set.gyro = terms.sensor;
+                set.residuals.gyro_rms = found.rms_after as f32;
                 if terms.gyro_g_sensitivity.is_some() {
                     set.gyro_g_sensitivity = terms.gyro_g_sensitivity;
                 }
