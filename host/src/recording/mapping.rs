@@ -147,6 +147,8 @@ impl FromStr for ColumnMapping {
         };
         let mut axes: [[Option<String>; 3]; 3] = Default::default();
         let mut mapping = ColumnMapping::default();
+        // File column → the imucal column it was mapped to: one file column is one quantity.
+        let mut sources: Vec<(String, String)> = Vec::new();
         for pair in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let (target, column) = pair
                 .split_once('=')
@@ -155,6 +157,13 @@ impl FromStr for ColumnMapping {
             if column.is_empty() {
                 return Err(bad(format!("`{target}` is mapped to nothing")));
             }
+            if let Some((_, first)) = sources.iter().find(|(c, _)| c == column) {
+                return Err(bad(format!(
+                    "file column `{column}` is mapped to both `{first}` and `{target}`; each \
+                     imucal column needs its own file column"
+                )));
+            }
+            sources.push((column.to_string(), target.clone()));
             let column = column.to_string();
             if let Some((_, scale)) = TIME_KEYS.iter().find(|(key, _)| *key == target) {
                 if mapping.time.is_some() {
@@ -359,4 +368,22 @@ pub fn load(
         cause,
     })?;
     parse(&text, path, mapping, units, rate_hz)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_file_column_mapped_to_two_imucal_columns_is_refused_naming_both() {
+        let error = "t_s=t,ax=ax,ay=ax,az=az"
+            .parse::<ColumnMapping>()
+            .expect_err("ay would silently copy ax");
+        let text = error.to_string();
+        assert!(
+            text.contains("file column `ax` is mapped to both `ax` and `ay`"),
+            "{text}"
+        );
+        assert!("t_s=t,ax=a,ay=b,az=c".parse::<ColumnMapping>().is_ok());
+    }
 }
