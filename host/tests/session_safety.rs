@@ -394,6 +394,24 @@ fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     let mag = load_mag_samples(&dir.join("mag_samples.csv")).expect("the samples are saved");
     assert!(mag.len() > saved_mag.len());
     assert_eq!(mag[..saved_mag.len()], saved_mag[..]);
+    // The fresh simulated board's clock restarted at 0: the session's times still increase
+    // across the two runs, so drift and temperature are analysed in the order measured.
+    assert!(
+        stderr.contains("it restarted, so this run's times continue"),
+        "{stderr}"
+    );
+    let increasing = |times: &[f64]| times.windows(2).all(|w| w[1] >= w[0]);
+    let pose_times: Vec<f64> = kept.iter().map(|p| p.t_s).collect();
+    assert!(increasing(&pose_times), "{pose_times:?}");
+    let mag_times: Vec<f64> = mag.iter().map(|m| m.t_s).collect();
+    assert!(increasing(&mag_times));
+    let moves = load_moves(&dir.join(MOVES_FILE)).expect("the moves are saved");
+    let move_starts: Vec<f64> = moves
+        .iter()
+        .filter_map(|m| m.first())
+        .map(|s| s.t_s)
+        .collect();
+    assert!(increasing(&move_starts), "{move_starts:?}");
     assert!(!dir.join(PROGRESS_FILE).exists(), "the session is finished");
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(dir.with_extension("db"));

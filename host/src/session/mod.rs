@@ -122,6 +122,9 @@ pub struct SessionOutcome {
     pub gyro_scale: Option<GyroScale>,
     /// Whether the set was written (false when the write was declined).
     pub written: bool,
+    /// Why the set was not written, in words (`poor verdict`, `outlier against the fleet`, …),
+    /// set by whoever declined it before the session is saved; `None` when it was written.
+    pub not_written_because: Option<String>,
     /// Whether the set read back from the board matched (CRC and every value).
     pub verified: bool,
     /// The store's state after the commit.
@@ -210,6 +213,7 @@ fn run_phases<L: Read + Write>(
     // A stream left running by an earlier program would mix into the replies' timing.
     runner.client.stop_stream()?;
     let board_start_s = runner.board_time_s()?;
+    runner.continue_clock_after(resumed, board_start_s);
     let wall_start = Instant::now();
 
     let mut captured = Vec::new();
@@ -296,6 +300,7 @@ fn run_phases<L: Read + Write>(
         coverage,
         mag_min_per_region: options.mag_min_per_region,
         written: false,
+        not_written_because: None,
         verified: false,
         param_status: None,
         before,

@@ -10,10 +10,11 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use imucal_protocol::StreamKind;
 
 use super::error::SessionError;
-use super::events::{MagSample, Phase, SessionObserver};
+use super::events::{MagSample, Phase, SessionEvent, SessionObserver};
 use super::journal::Journal;
 use super::motion::MotionMonitor;
 use super::options::SessionOptions;
+use super::solve::CapturedPose;
 use super::targets::Target;
 use crate::device::{DeviceClient, SampleChunk, UnitSample};
 
@@ -39,7 +40,15 @@ pub(super) struct Runner<'a, L: Read + Write> {
     pub(super) interrupt: Option<Arc<AtomicBool>>,
     /// The CRC of the set once its write started: from then on the board may hold it.
     pub(super) write_started: Option<u32>,
+    /// Added to every streamed sample's board time: non-zero when a resumed session's board
+    /// restarted its clock, so that the session's times keep increasing
+    /// ([`Runner::continue_clock_after`]).
+    pub(super) time_offset_s: f64,
 }
+
+/// Nominal gap between a resumed session's saved data and its new samples when the board's
+/// clock restarted in between, s.
+pub(super) const RESUME_GAP_S: f64 = 1.0;
 
 /// Seconds since the Unix epoch (0 if the clock is before it).
 pub(super) fn unix_now() -> u64 {
@@ -69,6 +78,7 @@ impl<'a, L: Read + Write> Runner<'a, L> {
             journal,
             interrupt,
             write_started: None,
+            time_offset_s: 0.0,
             monitor: MotionMonitor::new(options.window_s, options.thresholds),
             client,
             options,
@@ -103,11 +113,41 @@ impl<'a, L: Read + Write> Runner<'a, L> {
     pub(super) fn read_chunk(&mut self) -> Result<SampleChunk, SessionError> {
         self.check_interrupt()?;
         match self.client.next_samples(self.options.read_timeout)? {
-            Some(chunk) => Ok(chunk),
+            Some(mut chunk) => {
+                if self.time_offset_s != 0.0 {
+                    for sample in &mut chunk.samples {
+                        sample.t_s += self.time_offset_s;
+                    }
+                }
+                Ok(chunk)
+            }
             None => Err(SessionError::NoSamples {
                 port: self.client.port_name().to_string(),
                 waited_s: self.options.read_timeout.as_secs_f64(),
             }),
+        }
+    }
+
+    /// A resumed session whose board now reads `board_now_s`: when that is not past the saved
+    /// data's last time (the board restarted), this run's samples are shifted to start
+    /// [`RESUME_GAP_S`] after it, and a note says so. The time between the runs is unknown to
+    /// the board, so the gap is nominal.
+    pub(super) fn continue_clock_after(&mut self, resumed: &[CapturedPose], board_now_s: f64) {
+        let last = resumed
+            .iter()
+            .map(|p| p.t_s)
+            .chain(self.mag.iter().map(|m| m.t_s))
+            .chain(self.moves.iter().flatten().map(|s| s.t_s))
+            .filter(|t| t.is_finite())
+            .fold(f64::NEG_INFINITY, f64::max);
+        if last.is_finite() && board_now_s <= last {
+            self.time_offset_s = last + RESUME_GAP_S - board_now_s;
+            self.observer.event(&SessionEvent::Note(format!(
+                "the board's clock reads {board_now_s:.1} s, before the saved run's last time \
+                 ({last:.1} s): it restarted, so this run's times continue from {:.1} s (the \
+                 time between the runs is not known)",
+                last + RESUME_GAP_S
+            )));
         }
     }
 
