@@ -75,6 +75,34 @@ fn a_batch_of_eight_on_an_empty_history_verifies_seven_and_refuses_the_faulty_on
         let dir = out_dir.join(faulty["device_id"].as_str().expect("device id"));
         assert!(dir.join("params.json").is_file(), "{}", dir.display());
         assert_eq!(faulty["summary"]["verified"], false, "{faulty}");
+        // Its summary, on disk too, says it is not on the board and why; so does its report.
+        let saved: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("summary.json")).expect("summary.json"),
+        )
+        .expect("summary.json parses");
+        for summary in [&faulty["summary"], &saved] {
+            assert_eq!(summary["written"], false, "{summary}");
+            assert_eq!(
+                summary["not_written_because"], "outlier against the other boards of the batch",
+                "{summary}"
+            );
+        }
+        let page = out_dir.join("faulty-report");
+        let report_run = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["report"])
+            .arg(&dir)
+            .arg("-o")
+            .arg(&page)
+            .output()
+            .expect("imucal report runs");
+        assert!(report_run.status.success(), "{report_run:?}");
+        let html = std::fs::read_to_string(page.join("report.html")).expect("the report page");
+        assert!(
+            html.contains(
+                "NOT WRITTEN to the board (outlier against the other boards of the batch)"
+            ),
+            "the report does not say the set is not on the board"
+        );
 
         let recorded = HistoryStore::open(&location)
             .expect("open")

@@ -193,6 +193,9 @@ fn assert_calibrated_to_truth(sim: &SimHandle, outcome: &SessionOutcome) {
     );
     assert!(outcome.verified && outcome.written);
     assert_eq!(outcome.lost_samples, 0);
+    // The written set meets its targets at rest.
+    let missed = imucal::session::summary(outcome).missed_targets;
+    assert!(missed.is_empty(), "{missed:?}");
 
     // Fitted parameters against the truth, within K_SIGMA of each fit's own covariance. The
     // floors: accelerometer and magnetometer entries 1e-6 relative for f64 round-off of the

@@ -374,9 +374,18 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         None => run_session_with(&mut client, &options, &mut terminal, &control),
     };
     terminal.bar.finish_and_clear();
-    let outcome = result.map_err(|error| {
+    let mut outcome = result.map_err(|error| {
         anyhow::anyhow!("{error}\nContinue with `{}`", resume_command(args, &dir))
     })?;
+    if !outcome.written {
+        outcome.not_written_because = Some(
+            match terminal.decision {
+                Some(WriteDecision::RefusedPoor) => "poor verdict",
+                _ => "declined at the prompt",
+            }
+            .to_string(),
+        );
+    }
     save_session(&outcome, &dir)?;
     bind_saved_params(&dir.join("params.json"), &welcome)?;
     if let Some(sim) = &simulated {
@@ -405,6 +414,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         final_summary.on_board_after = rest.as_ref().ok().copied();
         // The scalar figures describe the set on the board; unknown when its check failed.
         let on_board = rest.as_ref().ok();
+        final_summary.missed_targets = on_board
+            .map(|a| a.missed_targets(outcome.fit.budgets))
+            .unwrap_or_default();
         final_summary.accel_rest_error_mg = on_board.map(|a| a.accel_error_mg);
         final_summary.mag_rest_error_pct = on_board.map(|a| a.mag_error_pct);
         final_summary.gyro_rest_error_dps = on_board.map(|a| a.gyro_rate_dps);
@@ -420,15 +432,6 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let mut record =
         imucal::history::CalibrationRecord::from_session(&final_summary, &outcome.poses);
     record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
-    if !outcome.written {
-        let reason = match terminal.decision {
-            Some(WriteDecision::RefusedPoor) => "poor verdict",
-            _ => "declined at the prompt",
-        };
-        record.board = imucal::history::BoardWrite::NotWritten {
-            reason: reason.into(),
-        };
-    }
     // A failed write is returned after the summary is printed, so nothing is hidden.
     let recorded = super::history::record(&args.history, record);
     let closed = closed.transpose()?;
@@ -448,6 +451,19 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         println!();
         print!("{}", before_after_table(&outcome, on_board_after));
+        if !final_summary.missed_targets.is_empty() {
+            let next = if args.analyze {
+                "the residual analysis found no further term the firmware can apply; see \
+                 analysis.txt"
+            } else {
+                "the model lacks an effect this board shows (temperature, drift, …): \
+                 `--analyze` looks for it and writes what the firmware can apply"
+            };
+            println!(
+                "The set on the board misses its targets at rest: {}; {next}.",
+                final_summary.missed_targets.join("; ")
+            );
+        }
         // The stream's measured rate: a sensor off its nominal rate shows here first.
         let lost = match outcome.lost_samples {
             0 => "no sample lost".to_string(),
@@ -477,8 +493,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
                 "no (not written)"
             }
         );
+        let flash = match &final_summary.not_written_because {
+            None => "writes the parameters again".to_string(),
+            Some(why) => format!("writes them; they are not on the board: {why}"),
+        };
         println!(
-            "Saved {} (`imucal flash {}` writes the parameters again)",
+            "Saved {} (`imucal flash {}` {flash})",
             dir.display(),
             dir.join("params.json").display()
         );

@@ -199,6 +199,11 @@ impl CalibrationRecord {
         record.noise = still_noise(poses);
         record.temperatures = temperature_span(poses);
         record.verdict = record_verdict(&summary.verdict);
+        if let Some(reason) = &summary.not_written_because {
+            record.board = BoardWrite::NotWritten {
+                reason: reason.clone(),
+            };
+        }
         record
     }
 

@@ -266,6 +266,13 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         let summary: Value =
             serde_json::from_str(&text).map_err(|e| format_error(&summary_path, e.to_string()))?;
         (data.verdict_level, data.verdict) = verdict_of(&summary);
+        // A set that never reached the board is said first, beside the verdict.
+        if let Some(why) = summary["not_written_because"].as_str() {
+            data.verdict.insert(
+                0,
+                format!("NOT WRITTEN to the board ({why}): the board keeps its earlier set"),
+            );
+        }
         if let Some(map) = summary["uncertainties"].as_object() {
             data.uncertainty_notes = map
                 .iter()

@@ -18,7 +18,7 @@ use super::{
     SessionObserver, SessionOptions, SessionSummary, VerdictLevel,
 };
 use crate::device::{DeviceClient, ParamsFile};
-use crate::history::{record_calibration, BoardWrite, CalibrationRecord, RecordId};
+use crate::history::{record_calibration, CalibrationRecord, RecordId};
 
 /// Settings of a batch.
 #[derive(Debug, Clone)]
@@ -311,6 +311,8 @@ fn board_session(
             )
         }
     };
+    let mut outcome = outcome;
+    outcome.not_written_because = refusal_reason(status, &check);
     let saved = save_session(&outcome, &dir)
         .map_err(|e| e.to_string())
         .and_then(|_| bind_saved_params(&dir.join("params.json"), client.welcome()));
@@ -334,6 +336,27 @@ fn board_session(
         record_attempt(&mut result, &outcome.poses, options, &client);
     }
     result
+}
+
+/// Why a board's set was not written, in words, for its summary and its history record;
+/// `None` for a written set.
+fn refusal_reason(status: BoardStatus, check: &OutlierCheck) -> Option<String> {
+    match status {
+        BoardStatus::RefusedOutlier => Some(
+            match check.basis {
+                super::batch_gate::OutlierBasis::Batch => {
+                    "outlier against the other boards of the batch"
+                }
+                super::batch_gate::OutlierBasis::PartLimits => {
+                    "beyond the bounds of every common part's datasheet"
+                }
+                _ => "outlier against the fleet",
+            }
+            .to_string(),
+        ),
+        BoardStatus::RefusedPoorVerdict => Some("poor verdict".into()),
+        _ => None,
+    }
 }
 
 /// Binds the saved parameter file to the board it was measured on, so that `flash` can tell it
@@ -366,25 +389,6 @@ fn record_attempt<L>(
     ));
     record.operator.clone_from(&options.operator);
     record.station.clone_from(&options.station);
-    let refusal = match result.status {
-        BoardStatus::RefusedOutlier => Some(
-            match result.outlier_check.as_ref().map(|c| &c.basis) {
-                Some(super::batch_gate::OutlierBasis::Batch) => {
-                    "outlier against the other boards of the batch"
-                }
-                Some(super::batch_gate::OutlierBasis::PartLimits) => {
-                    "beyond the bounds of every common part's datasheet"
-                }
-                _ => "outlier against the fleet",
-            }
-            .to_string(),
-        ),
-        BoardStatus::RefusedPoorVerdict => Some("poor verdict".into()),
-        _ => None,
-    };
-    if let Some(reason) = refusal {
-        record.board = BoardWrite::NotWritten { reason };
-    }
     let start = Instant::now();
     let written = record_calibration(options.gate.db.as_deref(), &record);
     result.history_write_seconds = Some(start.elapsed().as_secs_f64());

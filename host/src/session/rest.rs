@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use super::solve::STANDARD_GRAVITY;
+use super::solve::{Budgets, STANDARD_GRAVITY};
 use crate::device::UnitSample;
 use crate::fit::Vec3;
 
@@ -70,6 +70,37 @@ impl RestErrors {
     pub fn values(&self) -> [f64; 3] {
         [self.accel_error_mg, self.mag_error_pct, self.gyro_rate_dps]
     }
+
+    /// The targets these errors miss, one sentence each: an error counts as missing its budget
+    /// when it lies beyond it by more than three standard errors of its own mean (so the
+    /// noise of a short measurement does not fail a good set). Empty when every target is met.
+    pub fn missed_targets(&self, budgets: Budgets) -> Vec<String> {
+        let mut missed = Vec::new();
+        for (what, error, noise, budget, unit) in [
+            (
+                "|a| error",
+                self.accel_error_mg,
+                self.accel_noise_mg,
+                budgets.accel_mg,
+                "mg",
+            ),
+            (
+                "|m| error",
+                self.mag_error_pct,
+                self.mag_noise_pct,
+                budgets.mag_pct,
+                "%",
+            ),
+        ] {
+            if error - 3.0 * noise.max(0.0) > budget {
+                missed.push(format!(
+                    "{what} {error:.3} {unit} (± {noise:.3} {unit}) against its {budget} {unit} \
+                     target"
+                ));
+            }
+        }
+        missed
+    }
 }
 
 fn mean_and_std(values: impl Iterator<Item = Vec3> + Clone) -> (Vec3, Vec3) {
@@ -117,6 +148,31 @@ pub fn rest_errors(samples: &[UnitSample], gravity_mps2: f64, field_ut: f64) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_target_is_missed_only_beyond_three_standard_errors_of_its_measurement() {
+        let budgets = Budgets {
+            accel_mg: 2.0,
+            mag_pct: 0.5,
+        };
+        let errors = |accel_mg: f64, accel_noise_mg: f64, mag_pct: f64| RestErrors {
+            samples: 100,
+            duration_s: 1.0,
+            accel_error_mg: accel_mg,
+            accel_noise_mg,
+            mag_error_pct: mag_pct,
+            mag_noise_pct: 0.01,
+            gyro_rate_dps: 0.0,
+            accel_std_mps2: 0.0,
+        };
+        assert!(errors(0.3, 0.05, 0.1).missed_targets(budgets).is_empty());
+        // 2.1 mg measured to ± 0.05 mg could be 1.95 mg: within noise of the target.
+        assert!(errors(2.1, 0.05, 0.1).missed_targets(budgets).is_empty());
+        let missed = errors(6.774, 0.05, 0.9).missed_targets(budgets);
+        assert_eq!(missed.len(), 2, "{missed:?}");
+        assert!(missed[0].starts_with("|a| error 6.774 mg"), "{missed:?}");
+        assert!(missed[1].starts_with("|m| error 0.900 %"), "{missed:?}");
+    }
 
     #[test]
     fn errors_are_those_of_the_means_against_the_references() {

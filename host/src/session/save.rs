@@ -27,6 +27,11 @@ use crate::fit::Vec3;
 pub struct SessionSummary {
     /// Whether the written set was read back and matched (CRC and every value).
     pub verified: bool,
+    /// Whether the fitted set was written to the board.
+    pub written: bool,
+    /// Why it was not written (`poor verdict`, `declined at the prompt`, `outlier against the
+    /// fleet`, …); `null` when it was.
+    pub not_written_because: Option<String>,
     /// `| |ā| − g |` at rest with the set on the board at the end, mg: the extended set when
     /// `--analyze` wrote one (`null` when nothing was written, or when the extended set's check
     /// at rest failed).
@@ -57,6 +62,9 @@ pub struct SessionSummary {
     /// The set on the board when the session ended: the extended set `--analyze` wrote, or the
     /// base set (then equal to `after`); `null` when nothing was written.
     pub on_board_after: Option<RestErrors>,
+    /// The at-rest targets the set on the board misses, one sentence each
+    /// ([`RestErrors::missed_targets`]); empty when it meets them or nothing was written.
+    pub missed_targets: Vec<String>,
     /// The port.
     pub port: String,
     /// The board's id.
@@ -101,6 +109,12 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         .count();
     SessionSummary {
         verified: outcome.verified,
+        written: outcome.written,
+        not_written_because: match (outcome.written, &outcome.not_written_because) {
+            (true, _) => None,
+            (false, Some(why)) => Some(why.clone()),
+            (false, None) => Some("not written".to_string()),
+        },
         accel_rest_error_mg: outcome.after.map(|a| a.accel_error_mg),
         mag_rest_error_pct: outcome.after.map(|a| a.mag_error_pct),
         gyro_rest_error_dps: outcome.after.map(|a| a.gyro_rate_dps),
@@ -112,6 +126,10 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         before: outcome.before,
         after: outcome.after,
         on_board_after: outcome.after,
+        missed_targets: outcome
+            .after
+            .map(|a| a.missed_targets(outcome.fit.budgets))
+            .unwrap_or_default(),
         port: outcome.port.clone(),
         device_id: outcome.device_id.clone(),
         poses: outcome.poses.len(),

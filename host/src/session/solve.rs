@@ -141,6 +141,8 @@ pub struct SessionFit {
     pub uncertainties: Uncertainties,
     /// The verdict.
     pub verdict: Verdict,
+    /// The budgets the verdict and the check at rest are held to.
+    pub budgets: Budgets,
 }
 
 /// A pose of one sensor from the board's statistics.
@@ -402,6 +404,7 @@ pub fn fit_session(
         gravity_mps2,
         uncertainties,
         verdict,
+        budgets,
     })
 }
 
@@ -436,12 +439,19 @@ fn judge(
     if let Some(loo) = accel.loo_rms {
         let loo_mg = loo * gravity_mps2 * mg;
         if loo_mg > budgets.accel_mg {
-            poor |= loo_mg > 5.0 * budgets.accel_mg;
+            // Marginal up to five budgets, poor beyond: the reason says which.
+            let far = loo_mg > 5.0 * budgets.accel_mg;
+            poor |= far;
             reasons.push(format!(
                 "a position left out of the accelerometer fit is predicted with {loo_mg:.2} mg \
-                 RMS error, above the {:.1} mg budget: the model does not explain every pose \
+                 RMS error, above the {:.1} mg budget{}: the model does not explain every pose \
                  (a pose taken while moving, or an effect such as temperature drift)",
-                budgets.accel_mg
+                budgets.accel_mg,
+                if far {
+                    " by more than five times (poor)"
+                } else {
+                    " (marginal up to five times it)"
+                }
             ));
         }
     }
