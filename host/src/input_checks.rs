@@ -146,7 +146,7 @@ pub enum InputError {
         reasons: String,
     },
     /// Too few distinct gravity directions among the holds.
-    #[error("the accelerometer has only {distinct} distinct gravity directions among {holds} holds{repeats}; a fit needs at least {needed} (the six faces of the board, each up once), so add holds with other faces up")]
+    #[error("the accelerometer has only {} among {}{repeats}; a fit needs at least {needed} (the six faces of the board, each up once), so add holds with other faces up", crate::words::counted(*distinct, "distinct gravity direction"), crate::words::counted(*holds, "hold"))]
     TooFewDirections {
         /// Holds with accelerometer data.
         holds: usize,

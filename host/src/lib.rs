@@ -24,3 +24,4 @@ pub mod stats;
 pub mod still;
 #[cfg(feature = "synthetic")]
 pub mod synthetic;
+pub mod words;

@@ -164,6 +164,10 @@ fn an_option_value_or_combination_the_command_cannot_take_exits_with_the_usage_s
         (&["--speed", "0"], "--speed"),
         (&["--pose-timeout", "0"], "--pose-timeout"),
         (&["--sim-temperature", "bogus"], "sweep:10:40:90"),
+        (
+            &["--sim-protocol", "motioncal", "--sketch-rate", "50"],
+            "the simulated sketch prints 100 readings/s",
+        ),
     ] {
         let out = imucal_in(
             &dir,
@@ -426,6 +430,93 @@ fn a_stillness_window_longer_than_the_holds_is_named_when_moves_pass_as_one_hold
         !stderr(&default).contains("not one pose"),
         "{}",
         stderr(&default)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn resuming_a_finished_session_or_another_directory_is_refused_before_a_board_is_opened() {
+    let dir = scratch("resume-finished");
+    std::fs::create_dir_all(dir.join("done")).expect("session directory");
+    std::fs::write(dir.join("done/summary.json"), "{}").expect("summary");
+    std::fs::create_dir_all(dir.join("other")).expect("directory");
+    for (target, expected) in [
+        ("done", "is a finished session"),
+        ("other", "holds no progress.json"),
+    ] {
+        let out = imucal_in(
+            &dir,
+            &[
+                "calibrate",
+                "--resume",
+                target,
+                "--sim",
+                "--yes",
+                "--no-history",
+            ],
+        );
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        assert!(text.contains(expected), "{text}");
+        assert!(
+            !text.contains("Simulated board"),
+            "a board was opened: {text}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn still_json_names_the_unit_of_its_means_and_noise() {
+    let dir = scratch("still-units");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let out = imucal_in(&dir, &["still", &recording, "--gyro-unit", "dps", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(json["units"]["accel_mean"], "m/s²", "{}", json["units"]);
+    assert_eq!(json["units"]["gyro_mean"], "°/s", "{}", json["units"]);
+    let noise = json["noise"].as_array().expect("noise");
+    assert!(noise.iter().all(|n| n["unit"].is_string()), "{noise:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_stillness_window_or_margin_outside_what_the_detector_uses_is_said() {
+    let dir = scratch("still-window");
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--window",
+            "0.001",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("is shorter than 5 rows at 102.4 Hz"),
+        "{}",
+        stderr(&out)
+    );
+    let out = imucal_in(
+        &dir,
+        &[
+            "still",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--still-margin",
+            "1e300",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("1e300 is not from 1 to 256"),
+        "{}",
+        stderr(&out)
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

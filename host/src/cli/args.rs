@@ -189,9 +189,9 @@ pub struct InputArgs {
     /// Still detection: shortest hold kept, in seconds.
     #[arg(long, default_value_t = 1.0, value_parser = non_negative)]
     pub min_hold: f64,
-    /// Still detection: fixed margin over the χ² threshold, at least 1 (default: chosen from
+    /// Still detection: fixed margin over the χ² threshold, from 1 to 256 (default: chosen from
     /// the data).
-    #[arg(long, value_parser = at_least_one)]
+    #[arg(long, value_parser = margin_in_range)]
     pub still_margin: Option<f64>,
     /// Holds whose gravity directions are within this angle (degrees, more than 0 and less
     /// than 90) count as one direction.
@@ -208,7 +208,8 @@ fn number_that(text: &str, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, 
     if value.is_finite() && ok(value) {
         Ok(value)
     } else {
-        Err(format!("{value} is not {what}"))
+        // As typed: `1e300`, not its 301 digits.
+        Err(format!("{} is not {what}", text.trim()))
     }
 }
 
@@ -220,8 +221,13 @@ fn non_negative(text: &str) -> Result<f64, String> {
     number_that(text, |v| v >= 0.0, "zero or a positive number")
 }
 
-fn at_least_one(text: &str) -> Result<f64, String> {
-    number_that(text, |v| v >= 1.0, "at least 1")
+fn margin_in_range(text: &str) -> Result<f64, String> {
+    let most = imucal::still::MAX_MARGIN;
+    number_that(
+        text,
+        |v| (1.0..=most).contains(&v),
+        &format!("from 1 to {most} (the range the automatic choice takes)"),
+    )
 }
 
 /// `--sim-temperature`: the simulated board's die temperature.
@@ -504,6 +510,16 @@ impl CalibrateArgs {
                     } else {
                         "--protocol"
                     }
+                ))
+            );
+            // The simulated sketch prints at Adafruit's rate; another stated rate would time
+            // its readings wrongly rather than change it.
+            anyhow::ensure!(
+                !self.sim || rate == 100.0,
+                UsageError(format!(
+                    "--sketch-rate {rate} states a real sketch board's reading rate; the \
+                     simulated sketch prints 100 readings/s, as Adafruit's does; leave \
+                     --sketch-rate out with --sim"
                 ))
             );
         }

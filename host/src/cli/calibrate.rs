@@ -287,6 +287,23 @@ pub(super) fn session_options(
 /// before the board is opened when a new session would write into an earlier one's files.
 pub(super) fn checked_session_dir(args: &CalibrateArgs) -> anyhow::Result<PathBuf> {
     if let Some(dir) = &args.resume {
+        // What cannot be resumed is said before a board is opened.
+        if !dir.join(imucal::session::PROGRESS_FILE).is_file() {
+            anyhow::ensure!(
+                !dir.join("summary.json").is_file(),
+                "{} is a finished session (it has summary.json and no progress.json): there is \
+                 nothing to resume; `imucal flash {}` writes its set, and a new session needs \
+                 a new -o directory",
+                dir.display(),
+                dir.join("params.json").display()
+            );
+            anyhow::bail!(
+                "{} holds no progress.json, so it is not a session `imucal calibrate` left \
+                 unfinished; pass the directory a stopped session saved (its error message \
+                 names it)",
+                dir.display()
+            );
+        }
         return Ok(dir.clone());
     }
     let dir = args

@@ -279,11 +279,11 @@ pub(super) fn print_table(calibration: &RecordingCalibration) {
             _ => "relative",
         };
         println!(
-            "{} — method {} — {} poses, {} samples — {} → {} (y = A·(x − b))",
+            "{} — method {} — {}, {} — {} → {} (y = A·(x − b))",
             result.sensor,
             fit.method.name(),
-            result.n_poses,
-            result.n_samples,
+            imucal::words::counted(result.n_poses, "pose"),
+            imucal::words::counted(result.n_samples, "sample"),
             result.input_unit,
             result.output_unit
         );

@@ -5,7 +5,7 @@ use imucal::input_checks::time_stamp_warnings;
 use imucal::pipeline::{check_input, still_intervals, InputOptions};
 use imucal::recording::{Recording, Sensor};
 use imucal::still::StillReport;
-use serde_json::json;
+use serde_json::{json, Value};
 
 use super::args::StillArgs;
 
@@ -113,14 +113,28 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
         let noise: Vec<_> = report
             .noise
             .iter()
-            .map(|n| json!({"sensor": n.sensor.name(), "sigma": triple(&n.sigma), "margin": n.margin}))
+            .map(|n| {
+                json!({"sensor": n.sensor.name(), "sigma": triple(&n.sigma),
+                "unit": recording.units.symbol(n.sensor), "margin": n.margin})
+            })
+            .collect();
+        // The means and noise are in the data's own units, which this names per sensor.
+        let units: serde_json::Map<String, Value> = Sensor::ALL
+            .iter()
+            .filter(|s| recording.samples(**s).is_some())
+            .map(|s| {
+                (
+                    format!("{}_mean", s.name()),
+                    json!(recording.units.symbol(*s)),
+                )
+            })
             .collect();
         let directions: Vec<_> = report.directions.iter().map(triple).collect();
         // The window in the unit `--window` takes, and in rows as the detector used it.
         let window_s = recording.rate_hz().map(|rate| report.window as f64 / rate);
         let out = json!({
             "intervals": intervals, "directions": directions, "noise": noise,
-            "window_s": window_s, "window_samples": report.window,
+            "units": units, "window_s": window_s, "window_samples": report.window,
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());

@@ -356,5 +356,18 @@ pub fn still_intervals(
         input_checks::screen_holds(recording, &mut still, options.direction_angle_deg)
             .map_err(|e| e.to_string())?;
     warnings.extend(still.intervals.iter().filter_map(|i| i.dropped_sentence()));
+    // The detector's window has at least five rows (a variance needs a few); a shorter one
+    // asked for is widened, which the user should know.
+    if let Some(rate) = recording.rate_hz() {
+        if options.window_s * rate < still.window as f64 - 0.5 {
+            warnings.push(format!(
+                "the stillness window of {} s is shorter than {} rows at {rate:.1} Hz, the \
+                 fewest the detector uses; {:.3} s was used",
+                options.window_s,
+                still.window,
+                still.window as f64 / rate
+            ));
+        }
+    }
     Ok((still, warnings))
 }
