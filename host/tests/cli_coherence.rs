@@ -520,3 +520,56 @@ fn a_stillness_window_or_margin_outside_what_the_detector_uses_is_said() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn analyze_and_report_go_on_with_the_sensors_fit_fits_when_one_is_refused() {
+    let dir = scratch("per-sensor");
+    // The gyroscope in counts read as rad/s: fit leaves it out and fits the accelerometer.
+    let tsi = real("tsi_mpu6050_multipos.csv").display().to_string();
+    let out = imucal_in(&dir, &["analyze", &tsi, "--accel-unit", "counts", "--json"]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert!(
+        json["sensors"]["accel"]["chi2_before"]["chi2"].is_number(),
+        "{json}"
+    );
+    assert!(
+        stderr(&out).contains("gyro not analysed: not fitted"),
+        "{}",
+        stderr(&out)
+    );
+    let out = imucal_in(
+        &dir,
+        &["report", &tsi, "--accel-unit", "counts", "-o", "rep"],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let page = std::fs::read_to_string(dir.join("rep/report.html")).expect("the report");
+    assert!(
+        page.contains("gyroscope not fitted"),
+        "the refusal is in the report"
+    );
+    // A tumble with no still holds: the magnetometer is analysed on windows of its stream.
+    let sphere = real("sf_mpu6050_hmc5883l_full_sphere.csv")
+        .display()
+        .to_string();
+    let out = imucal_in(
+        &dir,
+        &[
+            "analyze",
+            &sphere,
+            "--accel-unit",
+            "g",
+            "--gyro-unit",
+            "dps",
+            "--mag-unit",
+            "gauss",
+            "--field-ut",
+            "48.5",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("mag — base model"), "{text}");
+    assert!(text.contains("accel: not analysed"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -139,26 +139,22 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         args.reference.field_ut,
         &fit_options,
     )?;
-    // The same checks as `imucal fit`: a unit mix-up or unusable holds refuse the analysis.
-    if !checked.unit_refusals.is_empty() {
-        bail!(
-            "the recording was refused: {}",
-            checked.unit_refusal_sentences().join("; ")
-        );
-    }
+    // The same checks as `imucal fit`, per sensor: a sensor refused (a unit mix-up, no holds)
+    // is "not fitted" below with its reason, and the others are analysed, as `fit` fits them.
     for warning in &checked.warnings {
         say!("imucal: warning: {warning}");
     }
-    let Some(still) = &checked.still else {
-        let why = [
-            imucal::recording::Sensor::Accel,
-            imucal::recording::Sensor::Gyro,
-        ]
-        .into_iter()
-        .find_map(|s| checked.refusal(s))
-        .unwrap_or("no still intervals were found");
-        bail!("{why}; there is nothing to analyse");
+    // Without holds the accelerometer and gyroscope are refused by the pipeline already; the
+    // magnetometer's analysis works on windows of its stream and needs none.
+    let no_holds = imucal::still::StillReport {
+        intervals: Vec::new(),
+        directions: Vec::new(),
+        noise: Vec::new(),
+        window: 0,
+        from_pose_column: false,
+        rate_bound_applied: false,
     };
+    let still = checked.still.as_ref().unwrap_or(&no_holds);
     let recording = &checked.recording;
     let (gyro_scale, gyro_unit) = gyro_unit_scale(recording, references.gyro_scale);
     if let Some(moot) = moot_gyro_scale(recording, references.gyro_scale) {

@@ -52,12 +52,10 @@ fn from_recording(
     let sensors = recording.sensors();
     let options = super::input_options(&args.input, &args.reference);
     let input = check_input(recording, &sensors, &options, args.reference.field_ut);
-    // The units refused by `fit` are refused here too; other refusals leave the sensor out.
-    if !input.unit_refusals.is_empty() {
-        bail!(
-            "the recording was refused, so no report was written: {}",
-            input.unit_refusal_sentences().join("; ")
-        );
+    // As `fit` does, a sensor refused (its unit, its holds) is left out with its reason, which
+    // the report shows; the others are reported.
+    for sentence in input.unit_refusal_sentences() {
+        say!("imucal: warning: {sentence}; the report leaves it out");
     }
     if input.still.is_none() && input.mag_points().is_empty() {
         // Nothing left to report on: say why the holds were refused.
