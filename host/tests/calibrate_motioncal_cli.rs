@@ -45,6 +45,19 @@ fn the_simulated_sketch_board_is_calibrated_end_to_end_and_stores_the_fitted_pac
         String::from_utf8_lossy(&run.stderr)
     );
     assert!(stdout.contains("cannot apply"), "{stdout}");
+    // The verdict is of what the board applies: the library drops the accelerometer's scale,
+    // which on this simulated part costs more than the 2 mg budget on the poses.
+    let summary: serde_json::Value =
+        serde_json::from_str(&read(&out.join("motioncal.json"))).unwrap();
+    assert_ne!(summary["verdict"]["level"], "good", "{summary}");
+    assert!(
+        summary["verdict"]["reasons"]
+            .as_array()
+            .is_some_and(|r| r.iter().any(|r| r
+                .as_str()
+                .is_some_and(|r| r.contains("applies only the accelerometer's offsets")))),
+        "{summary}"
+    );
     assert!(stdout.contains("echoed Cal1:/Cal2: matching"), "{stdout}");
 
     // The packet as sent: its CRC checks, and it is the fitted set in the symmetric gauge,

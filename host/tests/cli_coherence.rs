@@ -542,7 +542,13 @@ fn analyze_and_report_go_on_with_the_sensors_fit_fits_when_one_is_refused() {
         &dir,
         &["report", &tsi, "--accel-unit", "counts", "-o", "rep"],
     );
-    assert!(out.status.success(), "{}", stderr(&out));
+    // Written, and failing as fit does, naming the sensor left out.
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("the report leaves out what was refused: gyro"),
+        "{}",
+        stderr(&out)
+    );
     let page = std::fs::read_to_string(dir.join("rep/report.html")).expect("the report");
     assert!(
         page.contains("gyroscope not fitted"),
@@ -571,5 +577,35 @@ fn analyze_and_report_go_on_with_the_sensors_fit_fits_when_one_is_refused() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("mag — base model"), "{text}");
     assert!(text.contains("accel: not analysed"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn analyze_writes_the_document_and_text_it_prints() {
+    let dir = scratch("analyze-report");
+    let recording = real("tsi_mpu6050_multipos.csv").display().to_string();
+    let flags = ["--accel-unit", "counts", "--gyro-unit", "counts"];
+    let printed = imucal_in(
+        &dir,
+        &[&["analyze", &recording, "--json"][..], &flags].concat(),
+    );
+    let written = imucal_in(
+        &dir,
+        &[&["analyze", &recording, "--report", "rep"][..], &flags].concat(),
+    );
+    let printed: serde_json::Value = serde_json::from_slice(&printed.stdout).expect("JSON");
+    let saved: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("rep/analysis.json")).expect("analysis.json"),
+    )
+    .expect("analysis.json parses");
+    assert_eq!(saved, printed);
+    assert!(saved["sensors"]["accel"]["base_fit"].is_object());
+    let text = std::fs::read_to_string(dir.join("rep/analysis.txt")).expect("analysis.txt");
+    let shown = String::from_utf8_lossy(&written.stdout);
+    assert!(
+        shown.starts_with(&text),
+        "the text file is what was printed"
+    );
+    assert!(text.contains("verdict:"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -337,6 +337,17 @@ pub fn write_report(
     analysis: &RecordingAnalysis,
     dir: &Path,
 ) -> Result<Vec<std::path::PathBuf>, ReportError> {
+    write_report_as(analysis, dir, &to_json(analysis), &to_text(analysis))
+}
+
+/// [`write_report`] with the JSON document and text as the command printed them (e.g. with
+/// each sensor's base fit), so that the files and the printed output are the same.
+pub fn write_report_as(
+    analysis: &RecordingAnalysis,
+    dir: &Path,
+    document: &serde_json::Value,
+    text: &str,
+) -> Result<Vec<std::path::PathBuf>, ReportError> {
     let io = |path: &Path| {
         let path = path.display().to_string();
         move |source| ReportError::Io { path, source }
@@ -344,11 +355,11 @@ pub fn write_report(
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let mut written = Vec::new();
     let json_path = dir.join("analysis.json");
-    let text = serde_json::to_string_pretty(&to_json(analysis)).unwrap_or_default();
-    std::fs::write(&json_path, text).map_err(io(&json_path))?;
+    let json = serde_json::to_string_pretty(document).unwrap_or_default();
+    std::fs::write(&json_path, json).map_err(io(&json_path))?;
     written.push(json_path);
     let text_path = dir.join("analysis.txt");
-    std::fs::write(&text_path, to_text(analysis)).map_err(io(&text_path))?;
+    std::fs::write(&text_path, text).map_err(io(&text_path))?;
     written.push(text_path);
     for (_, result) in &analysis.sensors {
         let Ok(a) = result else { continue };

@@ -177,24 +177,26 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         ..AnalysisOptions::default()
     };
     let analysis = analyse_calibration(recording, still, &options, &calibration);
-    let output = if args.json {
-        let mut document = report::to_json(&analysis);
-        // Each sensor's base fit as `imucal fit --json` gives it.
-        if let Some(sensors) = document["sensors"].as_object_mut() {
-            for outcome in &calibration.sensors {
-                if let Some(Value::Object(entry)) = sensors.get_mut(outcome.sensor.name()) {
-                    entry.insert("base_fit".into(), super::fit::to_json(outcome));
-                }
+    // One document and one text, printed and written alike.
+    let mut document = report::to_json(&analysis);
+    // Each sensor's base fit as `imucal fit --json` gives it.
+    if let Some(sensors) = document["sensors"].as_object_mut() {
+        for outcome in &calibration.sensors {
+            if let Some(Value::Object(entry)) = sensors.get_mut(outcome.sensor.name()) {
+                entry.insert("base_fit".into(), super::fit::to_json(outcome));
             }
         }
+    }
+    let text = format!(
+        "{}\nresidual analysis (on each hold less one detection window at either end, so its \
+         RMS is not the fit's above)\n\n{}",
+        super::fit::table_text(&calibration),
+        report::to_text(&analysis)
+    );
+    let output = if args.json {
         format!("{}\n", serde_json::to_string_pretty(&document)?)
     } else {
-        super::fit::print_table(&calibration);
-        format!(
-            "\nresidual analysis (on each hold less one detection window at either end, so its \
-             RMS is not the fit's above)\n\n{}",
-            report::to_text(&analysis)
-        )
+        text.clone()
     };
     // A closed pipe (e.g. `| head`) is not an error of the analysis.
     if let Err(e) = std::io::Write::write_all(&mut std::io::stdout(), output.as_bytes()) {
@@ -203,7 +205,7 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(dir) = &args.report {
-        let files = report::write_report(&analysis, dir)?;
+        let files = report::write_report_as(&analysis, dir, &document, &text)?;
         if !args.json {
             println!("report: {} files in {}", files.len(), dir.display());
         }

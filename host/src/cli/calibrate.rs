@@ -520,6 +520,19 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             dir.join("params.json").display()
         );
     }
+    // A Ctrl-C during the last check at rest, after the set was verified, finds nothing left
+    // to stop: the session finished, and the message printed at the Ctrl-C is corrected.
+    if control
+        .interrupt
+        .as_ref()
+        .is_some_and(|flag| flag.load(Ordering::SeqCst))
+    {
+        say!(
+            "The Ctrl-C came after the last stage had begun: the session finished and is saved \
+             in {}",
+            dir.display()
+        );
+    }
     recorded?;
     if let Some(why) = rest_failure {
         anyhow::bail!(

@@ -94,6 +94,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         sim.save_eeprom(&dir.join("sim-eeprom.json"))?;
     }
     print_result(&outcome, &dir);
+    if !args.history.no_history {
+        say!(
+            "Not recorded in the calibration history: a MotionCal sketch board reports no id to \
+             record it under (imucal's firmware does)"
+        );
+    }
     if args.json {
         let summary = std::fs::read_to_string(dir.join("motioncal.json"))
             .context("the session summary could not be read back")?;

@@ -228,8 +228,7 @@ fn scale_error_ppm(a: &imucal::fit::Mat3) -> [f64; 3] {
 /// written in their place is no measurement of a perfect gyroscope.
 fn gyro_gain_line(fit: &SessionFit) -> String {
     if fit.gyro.method != imucal::fit::Method::GyroScale {
-        return "scale and axis angles not calibrated (identity written; the verdict says why)"
-            .to_string();
+        return "scale and axis angles not calibrated (identity written)".to_string();
     }
     gain(&fit.gyro.cal.a, 1.0).map_or_else(
         || "scale: the fitted matrix is singular".to_string(),

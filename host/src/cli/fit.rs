@@ -12,6 +12,7 @@
 //! Magnetic Model's field there (`geomag`) is the magnetometer reference unless `--field-ut` is
 //! given, and the fitted raw radius is compared with it.
 
+use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{bail, Context};
@@ -228,16 +229,19 @@ fn with_std(value: f64, std: Option<f64>) -> String {
     }
 }
 
-fn print_alignment(outcome: &Result<Alignment, String>) {
+fn alignment_text(out: &mut String, outcome: &Result<Alignment, String>) {
     match outcome {
-        Err(e) => println!(
+        Err(e) => {
+            _ = writeln!(
+            out,
             "  not aligned to the accelerometer ({e}); A is left in the magnetometer's own frame"
-        ),
+        )
+        }
         Ok(al) => {
             let (angle, axis, angle_std) = angle_axis(al);
             let angle_std =
                 angle_std.map_or("n/a".to_string(), |s| format!("{:.2}°", s.to_degrees()));
-            println!(
+            _ = writeln!(out,
                 "  aligned to the accelerometer: rotated {:.2}° ± {angle_std} about ({:.3}, {:.3}, {:.3}); dip {:.2}° ± {:.2}°; A is in the accelerometer frame (its uncertainty is the rotation's)",
                 angle.to_degrees(),
                 axis.x,
@@ -250,21 +254,29 @@ fn print_alignment(outcome: &Result<Alignment, String>) {
     }
 }
 
+/// The fit's table as `fit` prints it.
 pub(super) fn print_table(calibration: &RecordingCalibration) {
+    print!("{}", table_text(calibration));
+}
+
+/// The fit's table: per sensor its notes, parameters, residuals and verdict.
+pub(super) fn table_text(calibration: &RecordingCalibration) -> String {
+    let mut out = String::new();
     let file = params_file(calibration);
-    println!("{}", calibration.provenance.source);
+    _ = writeln!(out, "{}", calibration.provenance.source);
     if let Some(still) = &calibration.still_summary {
-        println!("  {still}");
+        _ = writeln!(out, "  {still}");
     }
     for result in &calibration.sensors {
-        println!();
+        out.push('\n');
         for note in &result.notes {
-            println!("{}: {note}", result.sensor);
+            _ = writeln!(out, "{}: {note}", result.sensor);
         }
         let fit = match &result.fit {
             Err(_) => {
                 // The reason is the error at the end (standard error), said once.
-                println!(
+                _ = writeln!(
+                    out,
                     "{}: not fitted (the reason follows at the end)",
                     result.sensor
                 );
@@ -278,7 +290,8 @@ pub(super) fn print_table(calibration: &RecordingCalibration) {
             (Sensor::Gyro, _) => result.output_unit.as_str(),
             _ => "relative",
         };
-        println!(
+        _ = writeln!(
+            out,
             "{} — method {} — {}, {} — {} → {} (y = A·(x − b))",
             result.sensor,
             fit.method.name(),
@@ -292,7 +305,8 @@ pub(super) fn print_table(calibration: &RecordingCalibration) {
             let a: Vec<String> = (0..3)
                 .map(|c| with_std(fit.cal.a[(r, c)], a_std.map(|s| s.a[(r, c)])))
                 .collect();
-            println!(
+            _ = writeln!(
+                out,
                 "  A[{r}] {}   b[{r}] {}",
                 a.join(" "),
                 with_std(fit.cal.b[r], fit.std.map(|s| s.b[r]))
@@ -304,7 +318,7 @@ pub(super) fn print_table(calibration: &RecordingCalibration) {
             .and_then(|k| gain(&fit.cal.a, k))
         {
             let estimated = Estimated::of(&fit.cal.a);
-            println!("  {}", gain_text_of(&g, 3, estimated));
+            _ = writeln!(out, "  {}", gain_text_of(&g, 3, estimated));
         }
         // The parameter file holds the fit for the board's nominal input unit: its numbers are
         // printed too, so that the table and the file show the same calibration.
@@ -317,10 +331,14 @@ pub(super) fn print_table(calibration: &RecordingCalibration) {
             written.b[r] == fit.cal.b[r] && (0..3).all(|c| written.a[r][c] == fit.cal.a[(r, c)])
         });
         if !file.not_fitted.contains_key(result.sensor.name()) && !same {
-            println!("  as the parameter file holds it, for input in {unit}:");
+            _ = writeln!(
+                out,
+                "  as the parameter file holds it, for input in {unit}:"
+            );
             for (r, row) in written.a.iter().enumerate() {
                 let a: Vec<String> = row.iter().map(|v| format!("{:>14}", number(*v))).collect();
-                println!(
+                _ = writeln!(
+                    out,
                     "  A[{r}] {}   b[{r}] {:>14}",
                     a.join(" "),
                     number(written.b[r])
@@ -330,15 +348,17 @@ pub(super) fn print_table(calibration: &RecordingCalibration) {
         let loo = fit
             .loo_rms
             .map_or("n/a".to_string(), |l| format!("{l:.3e}"));
-        println!(
+        _ = writeln!(
+            out,
             "  RMS {:.3e} ({rms_unit})   leave-one-out RMS {loo}   condition {:.1e}",
             fit.rms, fit.condition_number
         );
         if let Some(alignment) = &result.alignment {
-            print_alignment(alignment);
+            alignment_text(&mut out, alignment);
         }
-        println!("  verdict: {}", result.verdict().unwrap_or_default());
+        _ = writeln!(out, "  verdict: {}", result.verdict().unwrap_or_default());
     }
+    out
 }
 
 /// The default chain's candidates and choice, for `--json`.

@@ -81,6 +81,10 @@ pub fn report_figures(
     db: Option<&str>,
     session_dir: &Path,
 ) -> Result<Vec<(String, String)>, String> {
+    // A MotionCal sketch session has no summary.json: its board reports no id to look up.
+    if !session_dir.join("summary.json").exists() {
+        return Ok(Vec::new());
+    }
     let summary = std::fs::read_to_string(session_dir.join("summary.json"))
         .map_err(|e| format!("no calibration history shown: summary.json unreadable ({e})"))?;
     let summary: serde_json::Value = serde_json::from_str(&summary)

@@ -40,11 +40,13 @@ fn mean_radius(samples: &[Vec3], centre: &Vec3) -> f64 {
 
 /// Fits a recording through the pipeline and gathers what the report shows. Refuses, as `fit`
 /// does, when an input check refuses a sensor.
+/// The report of a recording, and the sentences of the sensors refused for their units (the
+/// page leaves them out; the command then fails, as `fit` does).
 fn from_recording(
     args: &ReportArgs,
     field: Option<&LocalField>,
     bar: &ProgressBar,
-) -> anyhow::Result<ReportData> {
+) -> anyhow::Result<(ReportData, Vec<String>)> {
     let references = super::references(&args.reference)?;
     let recording = super::load(&args.input, args.reference.gyro_scale)?;
     bar.inc(1);
@@ -54,9 +56,7 @@ fn from_recording(
     let input = check_input(recording, &sensors, &options, args.reference.field_ut);
     // As `fit` does, a sensor refused (its unit, its holds) is left out with its reason, which
     // the report shows; the others are reported.
-    for sentence in input.unit_refusal_sentences() {
-        say!("imucal: warning: {sentence}; the report leaves it out");
-    }
+    let refused = input.unit_refusal_sentences();
     if input.still.is_none() && input.mag_points().is_empty() {
         // Nothing left to report on: say why the holds were refused.
         if let Some(why) = [
@@ -80,7 +80,7 @@ fn from_recording(
         },
     )?;
     bar.inc(1);
-    Ok(from_calibration(&input, &calibration, field))
+    Ok((from_calibration(&input, &calibration, field), refused))
 }
 
 fn default_out(path: &Path, is_session: bool) -> PathBuf {
@@ -159,11 +159,11 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         .map(local_field_today)
         .transpose()?;
     let bar = progress(4);
-    let mut data = if is_session {
+    let (mut data, refused) = if is_session {
         bar.set_message("reading the session directory");
         let data = from_session_dir(path)?;
         bar.inc(3);
-        data
+        (data, Vec::new())
     } else {
         bar.set_message("reading the recording");
         from_recording(args, field.as_ref(), &bar)?
@@ -189,5 +189,10 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     bar.inc(1);
     bar.finish_and_clear();
     println!("report written to {}", written.display());
+    anyhow::ensure!(
+        refused.is_empty(),
+        "the report leaves out what was refused: {}",
+        refused.join("; ")
+    );
     Ok(())
 }

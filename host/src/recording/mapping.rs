@@ -157,7 +157,13 @@ impl FromStr for ColumnMapping {
             if column.is_empty() {
                 return Err(bad(format!("`{target}` is mapped to nothing")));
             }
-            if let Some((_, first)) = sources.iter().find(|(c, _)| c == column) {
+            let is_label = |t: &str| LABEL_KEYS.iter().any(|(key, _)| *key == t);
+            if let Some((_, first)) = sources
+                .iter()
+                .find(|(c, _)| c == column)
+                .filter(|(_, first)| !(is_label(first) && is_label(&target)))
+            {
+                // (Two label keys on one column are told as two label columns, below.)
                 return Err(bad(format!(
                     "file column `{column}` is mapped to both `{first}` and `{target}`; each \
                      imucal column needs its own file column"

@@ -24,7 +24,7 @@ use super::mag_guidance::Attitude;
 use super::motion::MotionMonitor;
 use super::options::SessionOptions;
 use super::runner::unix_now;
-use super::solve::{fit_session, thin, CapturedPose, SessionFit, VerdictLevel};
+use super::solve::{fit_session, thin, Budgets, CapturedPose, SessionFit, VerdictLevel};
 use super::targets::{target_at, twelve_positions, Target};
 use crate::compat::adafruit::{limitations, AdafruitLimitations, Conversion};
 use crate::compat::{AdafruitCalibration, CompatError, EchoCheck, MotionCalClient, MotionCalError};
@@ -357,6 +357,36 @@ fn collect<'a, L: Read + Write>(
     }
 }
 
+/// Adds to `fit`'s verdict what the Adafruit library's model costs on the poses: beyond a
+/// budget, the board's readings miss it whatever the fit, so a good verdict becomes marginal
+/// (the packet still improves on the part: its offsets are the largest error).
+fn judge_what_the_board_applies(
+    fit: &mut SessionFit,
+    limits: &AdafruitLimitations,
+    budgets: Budgets,
+) {
+    let mut reasons = Vec::new();
+    if limits.accel_error_mg > budgets.accel_mg {
+        reasons.push(format!(
+            "the sketch's library applies only the accelerometer's offsets, not its scale and \
+             axis terms: on the {} poses the board's |a| is off by up to {:.2} mg, above the \
+             {:.1} mg budget (params.json keeps the full model for firmware that applies it)",
+            limits.poses, limits.accel_error_mg, budgets.accel_mg
+        ));
+    }
+    if limits.mag_error_pct_of_field > budgets.mag_pct {
+        reasons.push(format!(
+            "the sketch's library holds a symmetric soft iron: on the {} poses the board's |m| \
+             is off by up to {:.2} % of the field, above the {:.1} % budget",
+            limits.poses, limits.mag_error_pct_of_field, budgets.mag_pct
+        ));
+    }
+    if !reasons.is_empty() && fit.verdict.level == VerdictLevel::Good {
+        fit.verdict.level = VerdictLevel::Marginal;
+    }
+    fit.verdict.reasons.extend(reasons);
+}
+
 /// Run the guided session on a sketch board: collect, fit, explain, send and check the echo.
 pub fn run_motioncal_session<L: Read + Write>(
     client: &mut MotionCalClient<L>,
@@ -377,7 +407,7 @@ pub fn run_motioncal_session<L: Read + Write>(
     let (collector, readings) = collect(client, options, observer)?;
     let coverage = collector.coverage();
     let session = &options.session;
-    let fit = fit_session(
+    let mut fit = fit_session(
         &collector.poses,
         &thin(&collector.mag_points, session.mag_max_fit_samples),
         session.gravity_mps2,
@@ -385,7 +415,6 @@ pub fn run_motioncal_session<L: Read + Write>(
         session.budgets,
         unix_now(),
     )?;
-    observer.event(&SessionEvent::Fitted(&fit));
     let conversion = AdafruitCalibration::from_set(&fit.set)?;
     let pose_means: Vec<UnitSample> = collector
         .poses
@@ -399,6 +428,9 @@ pub fn run_motioncal_session<L: Read + Write>(
         })
         .collect();
     let limits = limitations(&fit.set, &pose_means)?;
+    // The verdict is of what the board will apply, not of the model it cannot hold.
+    judge_what_the_board_applies(&mut fit, &limits, session.budgets);
+    observer.event(&SessionEvent::Fitted(&fit));
     let poor = fit.verdict.level == VerdictLevel::Poor;
     let echo = if poor && !options.accept_poor {
         observer.event(&SessionEvent::Note(format!(
@@ -451,21 +483,12 @@ pub fn save_motioncal_session(
     let packet = crate::compat::encode_packet(cal).map_err(std::io::Error::other)?;
     write("motioncal.bin", &packet)?;
     write("sensor_calib.json", cal.to_sensor_calib_json().as_bytes())?;
-    let poses: Vec<serde_json::Value> = outcome
-        .poses
-        .iter()
-        .map(|p| {
-            serde_json::json!({
-                "target": p.target.name, "target_index": p.target.index, "t_s": p.t_s,
-                "stats": p.stats,
-            })
-        })
-        .collect();
-    let text = |v: &serde_json::Value| serde_json::to_string_pretty(v).unwrap_or_default();
+    // The firmware session's format, so that `imucal analyze DIR` reads it too.
     write(
         "poses.json",
-        text(&serde_json::Value::from(poses)).as_bytes(),
+        super::save::poses_json(&outcome.poses).as_bytes(),
     )?;
+    let text = |v: &serde_json::Value| serde_json::to_string_pretty(v).unwrap_or_default();
     let limits = &outcome.limitations;
     let summary = serde_json::json!({
         "verdict": outcome.fit.verdict,

@@ -175,9 +175,9 @@ impl StillReport {
             "detected"
         };
         format!(
-            "{} still intervals {how} ({total:.1} s in total), {} distinct gravity directions",
-            self.intervals.len(),
-            self.directions.len()
+            "{} {how} ({total:.1} s in total), {}",
+            crate::words::counted(self.intervals.len(), "still interval"),
+            crate::words::counted(self.directions.len(), "distinct gravity direction")
         )
     }
 
