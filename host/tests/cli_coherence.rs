@@ -609,3 +609,31 @@ fn analyze_writes_the_document_and_text_it_prints() {
     assert!(text.contains("verdict:"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_report_whose_fits_have_findings_says_so_in_its_headline() {
+    let dir = scratch("report-findings");
+    let tsi = real("tsi_mpu6050_multipos.csv").display().to_string();
+    let out = imucal_in(
+        &dir,
+        &[
+            "report",
+            &tsi,
+            "--accel-unit",
+            "counts",
+            "--gyro-unit",
+            "counts",
+            "-o",
+            "rep",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let page = std::fs::read_to_string(dir.join("rep/report.html")).expect("the report");
+    // Both fits' residuals are above their noise (fit says so too): not a plain "fitted".
+    assert!(
+        page.contains("Verdict: fitted, with findings"),
+        "the headline hides the findings"
+    );
+    assert!(page.contains("the model misses something"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -297,6 +297,8 @@ const MIX_UPS: [(&str, &[&str], &str); 4] = [
 fn refused_by(command: &str, name: &str, flags: &[&str], fix: &str) {
     let recording = real(name);
     let report_dir = temp_file(&format!("{command}-report"));
+    // The page of an earlier mix-up (written for the sensors it could fit) is not this one's.
+    let _ = std::fs::remove_dir_all(&report_dir);
     let extra: &[&str] = if command == "report" {
         &["-o", &report_dir]
     } else {

@@ -389,6 +389,7 @@ fn the_badge_is_neutral_when_nothing_was_checked_and_coloured_for_the_session_le
         ("poor", "poor"),
         ("fitted", "neutral"),
         ("partly fitted", "marginal"),
+        ("fitted, with findings", "marginal"),
         ("not fitted", "poor"),
         ("unknown", "neutral"),
     ] {

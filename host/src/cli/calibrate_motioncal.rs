@@ -123,10 +123,10 @@ fn print_result(outcome: &MotionCalOutcome, dir: &std::path::Path) {
         outcome.coverage.covered(1)
     );
     println!(
-        "imucal's fit: |a| expected error {:.3} mg, |m| {:.3} %, verdict {:?}{}",
+        "imucal's fit: |a| expected error {:.3} mg, |m| {:.3} %, verdict {}{}",
         u.accel_norm_mg,
         u.mag_norm_pct,
-        fit.verdict.level,
+        fit.verdict.level.name(),
         if fit.verdict.reasons.is_empty() {
             String::new()
         } else {

@@ -92,8 +92,25 @@ impl SensorOutcome {
     /// A short judgement of the fit: residual against the noise floor, held-out error against
     /// fit error. `None` without a fit.
     pub fn verdict(&self) -> Option<String> {
+        let (parts, _) = self.judgement()?;
+        Some(if parts.is_empty() {
+            "fitted".to_string()
+        } else {
+            parts.join("; ")
+        })
+    }
+
+    /// Whether the verdict finds something to act on: a residual above the noise, holds that
+    /// disagree, a held-out error far above the fit's, a fit that passes through every pose.
+    pub fn has_findings(&self) -> bool {
+        self.judgement().is_some_and(|(_, found)| found)
+    }
+
+    /// The verdict's phrases and whether any is a finding to act on.
+    fn judgement(&self) -> Option<(Vec<String>, bool)> {
         let fit = self.fit.as_ref().ok()?;
         let mut parts = Vec::new();
+        let mut found = false;
         let (noise, misses) = if self.sensor == Sensor::Mag {
             (
                 "sample noise",
@@ -115,6 +132,7 @@ impl SensorOutcome {
                 test.dof,
                 test.p_text()
             );
+            found |= !test.consistent();
             parts.push(match (self.sensor, test.consistent()) {
                 (Sensor::Gyro, true) => {
                     format!("the holds agree on one bias within their noise ({figures})")
@@ -135,6 +153,7 @@ impl SensorOutcome {
             let ratio = fit.rms / floor;
             // Noise never leaves a residual a millionth of its floor: the fit has as many
             // unknowns as equations and passes through every pose.
+            found |= !(1e-6..=3.0).contains(&ratio);
             if ratio < 1e-6 {
                 parts.push(
                     "the fit passes through every pose exactly (as many unknowns as poses), so \
@@ -163,6 +182,7 @@ impl SensorOutcome {
         }
         if let Some(loo) = fit.loo_rms {
             if fit.rms > 0.0 && loo > 3.0 * fit.rms {
+                found = true;
                 parts.push(format!(
                     "held-out error is {:.1}× the fit error: more poses are needed",
                     loo / fit.rms
@@ -177,11 +197,7 @@ impl SensorOutcome {
                 parts.push("too few samples to estimate their noise".to_string());
             }
         }
-        Some(if parts.is_empty() {
-            "fitted".to_string()
-        } else {
-            parts.join("; ")
-        })
+        Some((parts, found))
     }
 }
 

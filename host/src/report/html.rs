@@ -305,7 +305,7 @@ pub fn badge_class(level: &str) -> &'static str {
         "good" => "good",
         "marginal" => "marginal",
         "poor" | "not fitted" => "poor",
-        "partly fitted" => "marginal",
+        "partly fitted" | "fitted, with findings" => "marginal",
         _ => "neutral",
     }
 }

@@ -65,9 +65,12 @@ pub fn from_calibration(
         }
     }
     // The headline says how much of what was asked for is in the report.
-    data.verdict_level = match (not_fitted.len(), calibration.sensors.len()) {
-        (0, _) => "fitted",
-        (n, all) if n < all => "partly fitted",
+    // and whether the fits found something to act on (each sensor's line below says what).
+    let findings = calibration.sensors.iter().any(|o| o.has_findings());
+    data.verdict_level = match (not_fitted.len(), calibration.sensors.len(), findings) {
+        (0, _, false) => "fitted",
+        (0, _, true) => "fitted, with findings",
+        (n, all, _) if n < all => "partly fitted",
         _ => "not fitted",
     }
     .to_string();

@@ -142,7 +142,7 @@ impl SessionObserver for BoardObserver<'_> {
             SessionEvent::Note(note) => note.clone(),
             SessionEvent::MagPrompt => "magnetometer: turning".into(),
             SessionEvent::RestPrompt => "at rest".into(),
-            SessionEvent::Fitted(fit) => format!("fitted, verdict {:?}", fit.verdict.level),
+            SessionEvent::Fitted(fit) => format!("fitted, verdict {}", fit.verdict.level.name()),
             SessionEvent::Verified(status) => format!(
                 "written and verified: CRC {:#010x}, store sequence {}",
                 status.active_crc, status.active_seq

@@ -198,7 +198,7 @@ impl<L: Read + Write> Runner<'_, L> {
                             }
                             last_progress = Instant::now();
                             if let Some(pose) = captured.last() {
-                                self.journal.pose(pose, &self.moves)?;
+                                self.journal.pose(pose)?;
                             }
                             self.observer.event(&SessionEvent::Captured {
                                 target: actual,

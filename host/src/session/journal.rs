@@ -1,7 +1,8 @@
 //! The session directory kept up to date while a session runs, so nothing measured is lost when
 //! the session stops early (a board that vanishes, a lost reply, Ctrl-C, a timeout):
-//! `poses.json` and `moves.csv` after every captured pose, `mag_samples.csv` after every phase,
-//! `params.json`
+//! `poses.json` after every captured pose, `mag_samples.csv` and `moves.csv` after every phase
+//! and when the session stops (rewriting the moves at every pose would slow the session as
+//! they grow), `params.json`
 //! once fitted, and `progress.json` saying how far the session got and what the board holds.
 //! `save_session` writes the finished directory and removes `progress.json`.
 
@@ -94,24 +95,25 @@ impl Journal {
         self.write(MOVES_FILE, || moves_csv(moves))
     }
 
-    /// A pose was captured; `moves` are every move kept so far.
-    pub(super) fn pose(
-        &mut self,
-        pose: &CapturedPose,
-        moves: &[Vec<UnitSample>],
-    ) -> Result<(), SessionError> {
+    /// A pose was captured.
+    pub(super) fn pose(&mut self, pose: &CapturedPose) -> Result<(), SessionError> {
         self.poses.push(pose.clone());
         self.progress.poses = self.poses.len();
         self.write("poses.json", || poses_json(&self.poses))?;
-        self.write(MOVES_FILE, || moves_csv(moves))?;
         self.write_progress()
     }
 
-    /// A phase ended with `mag` streamed so far; `stage` is the one starting.
-    pub(super) fn stage(&mut self, stage: &str, mag: &[MagSample]) -> Result<(), SessionError> {
+    /// A phase ended with `mag` streamed and `moves` kept so far; `stage` is the one starting.
+    pub(super) fn stage(
+        &mut self,
+        stage: &str,
+        mag: &[MagSample],
+        moves: &[Vec<UnitSample>],
+    ) -> Result<(), SessionError> {
         self.progress.stage = stage.to_string();
         self.progress.mag_samples = mag.len();
         self.write("mag_samples.csv", || mag_csv(mag))?;
+        self.write(MOVES_FILE, || moves_csv(moves))?;
         self.write_progress()
     }
 
@@ -130,6 +132,7 @@ impl Journal {
         because: &str,
         board_holds: &str,
         mag: &[MagSample],
+        moves: &[Vec<UnitSample>],
     ) -> String {
         self.progress.stopped_because = because.to_string();
         self.progress.board_holds = board_holds.to_string();
@@ -138,7 +141,7 @@ impl Journal {
         };
         let stage = std::mem::replace(&mut self.progress.stage, "stopped".to_string());
         self.progress.stopped_because = format!("{because} (during stage `{stage}`)");
-        match self.stage("stopped", mag) {
+        match self.stage("stopped", mag, moves) {
             Ok(()) => format!(
                 "what was measured ({} positions, {} magnetometer samples) is saved in {}",
                 self.progress.poses,

@@ -318,7 +318,9 @@ fn run_phases<L: Read + Write>(
     if runner.observer.confirm_write(&outcome.fit) {
         runner.check_interrupt()?;
         runner.write_started = Some(outcome.fit.set.crc32());
-        runner.journal.stage("writing", &runner.mag)?;
+        runner
+            .journal
+            .stage("writing", &runner.mag, &runner.moves)?;
         let status = runner.client.write_params_verified(&outcome.fit.set)?;
         runner.stage("after")?;
         outcome.written = true;

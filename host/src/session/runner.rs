@@ -107,7 +107,7 @@ impl<'a, L: Read + Write> Runner<'a, L> {
     /// read (during a fit, a capture, a write) stops the session here, before the stage starts.
     pub(super) fn stage(&mut self, stage: &str) -> Result<(), SessionError> {
         self.check_interrupt()?;
-        self.journal.stage(stage, &self.mag)
+        self.journal.stage(stage, &self.mag, &self.moves)
     }
 
     pub(super) fn read_chunk(&mut self) -> Result<SampleChunk, SessionError> {
@@ -191,7 +191,7 @@ impl<'a, L: Read + Write> Runner<'a, L> {
         let board_holds = self.board_holds();
         let saved = self
             .journal
-            .stopped(&cause.to_string(), &board_holds, &self.mag);
+            .stopped(&cause.to_string(), &board_holds, &self.mag, &self.moves);
         SessionError::Stopped {
             cause: Box::new(cause),
             board_holds,

@@ -94,6 +94,17 @@ pub enum VerdictLevel {
     Poor,
 }
 
+impl VerdictLevel {
+    /// The level as the summary's JSON and the screens write it: `good`, `marginal`, `poor`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Good => "good",
+            Self::Marginal => "marginal",
+            Self::Poor => "poor",
+        }
+    }
+}
+
 /// The verdict and its reasons.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Verdict {

@@ -37,31 +37,47 @@ pub fn run_stats(samples: &[Vec3]) -> Option<RunStats> {
     }
     let nf = n as f64;
     let mean = samples.iter().sum::<Vec3>() / nf;
+    // The first differences' statistics in one pass, without storing them (a hold of a
+    // long recording has tens of thousands of samples): their mean telescopes to
+    // (last − first)/(n − 1); then their centred variance, lag-1 covariance and smallest step.
+    let len = (n - 1) as f64;
+    let d_mean = (samples[n - 1] - samples[0]) / len;
+    let (mut d_var, mut d_cov) = (Vec3::zeros(), Vec3::zeros());
+    let mut step = Vec3::repeat(f64::INFINITY);
+    let mut previous: Option<Vec3> = None;
+    for w in samples.windows(2) {
+        let d = w[1] - w[0];
+        let centred = d - d_mean;
+        d_var += centred.component_mul(&centred);
+        if let Some(p) = previous {
+            d_cov += p.component_mul(&centred);
+        }
+        previous = Some(centred);
+        for k in 0..3 {
+            let size = d[k].abs();
+            if size > 0.0 && size < step[k] {
+                step[k] = size;
+            }
+        }
+    }
+    d_var /= len;
+    d_cov /= len;
     let mut sigma_mean = Vec3::zeros();
     let mut rho_sum = 0.0;
     let mut n_eff_sum = 0.0;
     for k in 0..3 {
-        let d: Vec<f64> = samples.windows(2).map(|w| w[1][k] - w[0][k]).collect();
-        let d_mean = d.iter().sum::<f64>() / d.len() as f64;
-        let d_var = d.iter().map(|v| (v - d_mean).powi(2)).sum::<f64>() / d.len() as f64;
-        let d_cov = d
-            .windows(2)
-            .map(|w| (w[0] - d_mean) * (w[1] - d_mean))
-            .sum::<f64>()
-            / d.len() as f64;
-        let r_d = if d_var > 0.0 { d_cov / d_var } else { -0.5 };
+        let r_d = if d_var[k] > 0.0 {
+            d_cov[k] / d_var[k]
+        } else {
+            -0.5
+        };
         let rho = (1.0 + 2.0 * r_d).clamp(0.0, MAX_NOISE_CORRELATION);
-        let white_var = d_var / (2.0 * (1.0 - rho));
+        let white_var = d_var[k] / (2.0 * (1.0 - rho));
         let n_eff = (nf * (1.0 - rho) / (1.0 + rho)).max(1.0);
         // A quantised, noise-free axis has zero variance; keep a floor of one quantum²/12 so that
         // weights stay finite (the step is the smallest non-zero difference).
-        let step = d
-            .iter()
-            .map(|v| v.abs())
-            .filter(|v| *v > 0.0)
-            .fold(f64::INFINITY, f64::min);
-        let quantum_var = if step.is_finite() {
-            step * step / 12.0
+        let quantum_var = if step[k].is_finite() {
+            step[k] * step[k] / 12.0
         } else {
             0.0
         };
