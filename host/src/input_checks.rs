@@ -259,7 +259,8 @@ pub const SLOWEST_PLAUSIBLE_RATE_HZ: f64 = 1.0;
 ///   the rows, and the still windows, set in seconds, hold a different number of rows;
 /// - a rate below [`SLOWEST_PLAUSIBLE_RATE_HZ`]: most often milliseconds in a `t_s` column, which
 ///   makes every hold a thousand times longer than it was and every move too slow to see (the
-///   still detection then finds nothing and says so, without this cause).
+///   still detection then finds nothing and says so, without this cause);
+/// - gaps longer than [`crate::still::BREAK_S`], where the still detection breaks the recording.
 pub fn time_stamp_warnings(time: &[f64]) -> Vec<String> {
     let mut warnings = Vec::new();
     let mut repeats = time.windows(2).filter(|w| w[1] == w[0]);
@@ -272,6 +273,22 @@ pub fn time_stamp_warnings(time: &[f64]) -> Vec<String> {
              clock is coarser than its rate, record the time with more digits",
             time.len(),
             first[0]
+        ));
+    }
+    // Gaps the still detector breaks the recording at: a logger's dropout, or pieces recorded
+    // apart and joined. Holds never span one, so the user should know they are there.
+    let break_s = crate::still::BREAK_S;
+    let gaps: Vec<(f64, f64)> = time
+        .windows(2)
+        .filter(|w| w[1] - w[0] > break_s)
+        .map(|w| (w[0], w[1] - w[0]))
+        .collect();
+    if let Some(&(at, longest)) = gaps.iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
+        warnings.push(format!(
+            "{} in the time stamps longer than {break_s} s (the longest {longest:.3} s, after \
+             t = {at} s): the recording is read as separate pieces and no hold spans a gap; if \
+             the logger dropped data there, the pieces may not belong together",
+            crate::words::counted(gaps.len(), "gap")
         ));
     }
     if let Some(rate) = crate::recording::median_rate(time) {
@@ -816,6 +833,22 @@ pub fn check_accel_poses(still: &StillReport) -> Result<(), InputError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gaps_the_still_detection_breaks_at_are_counted_and_the_longest_named() {
+        // 100 Hz with a 1000 s dropout after t = 14.99 s and a 2 s one later.
+        let mut time: Vec<f64> = (0..1500).map(|i| f64::from(i) * 0.01).collect();
+        time.extend((0..500).map(|i| 1015.0 + f64::from(i) * 0.01));
+        time.extend((0..500).map(|i| 1022.0 + f64::from(i) * 0.01));
+        let warnings = time_stamp_warnings(&time);
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(
+            warnings[0].starts_with("2 gaps in the time stamps longer than 1 s (the longest 1000.010 s, after t = 14.99 s)"),
+            "{warnings:?}"
+        );
+        let steady: Vec<f64> = (0..2000).map(|i| f64::from(i) * 0.01).collect();
+        assert!(time_stamp_warnings(&steady).is_empty());
+    }
 
     #[test]
     fn sphere_radius_of_points_on_an_offset_sphere_is_its_radius() {
