@@ -255,24 +255,33 @@ pub(super) fn mag_csv(samples: &[MagSample]) -> String {
     csv
 }
 
+fn load_error(path: &Path, reason: String) -> SessionError {
+    SessionError::Load {
+        path: path.display().to_string(),
+        reason,
+    }
+}
+
+/// The text of the session CSV file `path`, refused unless its first line is `header`.
+fn read_with_header(path: &Path, header: &str) -> Result<String, SessionError> {
+    let text = std::fs::read_to_string(path).map_err(|e| load_error(path, e.to_string()))?;
+    match text.lines().next() {
+        Some(first) if first.trim() == header => Ok(text),
+        _ => Err(load_error(
+            path,
+            format!("its first line is not the header {header}"),
+        )),
+    }
+}
+
 /// Read the samples of a session directory's `mag_samples.csv` ([`mag_csv`]'s columns), e.g.
 /// to continue an unfinished session without losing them.
 pub fn load_mag_samples(path: &Path) -> Result<Vec<MagSample>, SessionError> {
-    let load_error = |reason: String| SessionError::Load {
-        path: path.display().to_string(),
-        reason,
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| load_error(e.to_string()))?;
-    let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, header)) if header.trim() == "t_s,mx,my,mz,temp_c,phase" => {}
-        _ => {
-            return Err(load_error(
-                "its first line is not the header t_s,mx,my,mz,temp_c,phase".into(),
-            ))
-        }
-    }
-    lines
+    let load_error = |reason: String| load_error(path, reason);
+    let text = read_with_header(path, "t_s,mx,my,mz,temp_c,phase")?;
+    text.lines()
+        .enumerate()
+        .skip(1)
         .filter(|(_, line)| !line.trim().is_empty())
         .map(|(i, line)| {
             let fields: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -336,20 +345,9 @@ pub(super) fn moves_csv(moves: &[Vec<UnitSample>]) -> String {
 
 /// Read the moves of a session directory's `moves.csv` ([`moves_csv`]'s columns), in order.
 pub fn load_moves(path: &Path) -> Result<Vec<Vec<UnitSample>>, SessionError> {
-    let load_error = |reason: String| SessionError::Load {
-        path: path.display().to_string(),
-        reason,
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| load_error(e.to_string()))?;
-    let mut lines = text.lines().enumerate();
-    match lines.next() {
-        Some((_, header)) if header.trim() == MOVES_HEADER => {}
-        _ => {
-            return Err(load_error(format!(
-                "its first line is not the header {MOVES_HEADER}"
-            )))
-        }
-    }
+    let load_error = |reason: String| load_error(path, reason);
+    let text = read_with_header(path, MOVES_HEADER)?;
+    let lines = text.lines().enumerate().skip(1);
     let mut moves: Vec<Vec<UnitSample>> = Vec::new();
     let mut names: Vec<String> = Vec::new();
     for (i, line) in lines.filter(|(_, line)| !line.trim().is_empty()) {
