@@ -1,7 +1,7 @@
 //! `imucal calibrate --sim --sim-protocol motioncal --yes` end to end through the binary: the
 //! simulated Adafruit calibration-sketch board is calibrated, the packet saved in the session
 //! directory passes its CRC and decodes to the fitted set in the symmetric gauge, and the board's
-//! EEPROM holds exactly those values.
+//! EEPROM holds exactly those values; every reading is kept as a recording, also after a Ctrl-C.
 
 use std::path::Path;
 use std::process::Command;
@@ -59,6 +59,13 @@ fn the_simulated_sketch_board_is_calibrated_end_to_end_and_stores_the_fitted_pac
         "{summary}"
     );
     assert!(stdout.contains("echoed Cal1:/Cal2: matching"), "{stdout}");
+    // Every reading is kept, one row each, as a recording.
+    let readings = read(&out.join("readings.csv"));
+    assert_eq!(
+        readings.lines().count() as u64 - 1,
+        summary["readings"].as_u64().unwrap(),
+        "one row per reading"
+    );
 
     // The packet as sent: its CRC checks, and it is the fitted set in the symmetric gauge,
     // bit for bit (both are the same f32 values).
@@ -94,5 +101,68 @@ fn the_simulated_sketch_board_is_calibrated_end_to_end_and_stores_the_fitted_pac
     let written: serde_json::Value = serde_json::from_str(&read(&out.join("params.json"))).unwrap();
     assert_eq!(written["reference"]["field_ut"].as_f64(), Some(site));
     assert_eq!(sent.mag_field, site as f32);
+    std::fs::remove_dir_all(&tmp).ok();
+}
+
+#[test]
+fn ctrl_c_in_a_sketch_session_keeps_its_readings_as_a_recording_that_fit_reads() {
+    use std::io::BufRead;
+    let tmp = std::env::temp_dir().join(format!("imucal-motioncal-int-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    std::fs::create_dir_all(&tmp).unwrap();
+    let out = tmp.join("session");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim", "--sim-protocol", "motioncal", "--yes"])
+        .args([
+            "--sim-seed",
+            &SEED.to_string(),
+            "--speed",
+            "20",
+            "--no-history",
+            "-o",
+        ])
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Interrupt once two positions are held, so that there is something to keep.
+    let stderr = child.stderr.take().unwrap();
+    let mut lines = std::io::BufReader::new(stderr).lines();
+    let mut seen = String::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        seen.push_str(&line);
+        seen.push('\n');
+        if line.contains("— 2/12") {
+            break;
+        }
+    }
+    assert!(seen.contains("— 2/12"), "no second position: {seen}");
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    let rest = rest.join("\n");
+    let exit = child.wait().unwrap();
+    assert_eq!(exit.code(), Some(1), "an interrupted session fails: {rest}");
+    assert!(rest.contains("nothing was sent to the board"), "{rest}");
+    let readings = out.join("readings.csv");
+    assert!(rest.contains("readings.csv"), "the file is named: {rest}");
+    // The saved readings are a recording: still detection finds the held positions again.
+    let still = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["still", "--json"])
+        .arg(&readings)
+        .output()
+        .unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&still.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&still.stderr)));
+    let holds = report["intervals"].as_array().map_or(0, Vec::len);
+    assert!(
+        holds >= 2,
+        "the two held positions are found again: {report}"
+    );
     std::fs::remove_dir_all(&tmp).ok();
 }

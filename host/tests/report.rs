@@ -594,8 +594,8 @@ fn write_progress(dir: &std::path::Path, stage: &str) {
 
 #[test]
 fn a_session_with_a_motioncal_sketch_is_reported_and_says_why_samples_and_checks_are_missing() {
-    // `calibrate --sim-protocol motioncal` saves no magnetometer samples and no summary.json;
-    // its verdict is in motioncal.json.
+    // `calibrate --sim-protocol motioncal` saves its readings as `readings.csv` (a recording),
+    // not `mag_samples.csv`, and no summary.json; its verdict is in motioncal.json.
     let dir = scratch("motioncal");
     write_session(&dir);
     std::fs::remove_file(dir.join("mag_samples.csv")).unwrap();
@@ -610,8 +610,35 @@ fn a_session_with_a_motioncal_sketch_is_reported_and_says_why_samples_and_checks
     assert_eq!(data.accel.as_ref().map(|a| a.calibrated.len()), Some(12));
     assert_eq!(data.verdict_level, "marginal");
     let notes = data.notes.join("\n");
-    assert!(notes.contains("mag_samples.csv is missing"), "{notes}");
+    assert!(notes.contains("readings.csv is missing"), "{notes}");
     assert!(notes.contains("MotionCal sketch"), "{notes}");
+    render_html(&data).expect("renders");
+
+    // With its readings, the magnetometer is plotted from them; the sketch gives no temperature.
+    let mut readings = String::from("t_s,ax,ay,az,gx,gy,gz,mx,my,mz\n");
+    for k in 0..40 {
+        let angle = f64::from(k) * 0.3;
+        readings.push_str(&format!(
+            "{},0,0,9.8,0,0,0,{},{},{}\n",
+            f64::from(k) * 0.01,
+            30.0 * angle.cos(),
+            30.0 * angle.sin(),
+            20.0 * (0.5 * angle).sin()
+        ));
+    }
+    std::fs::write(dir.join("readings.csv"), readings).unwrap();
+    let data = from_session_dir(&dir).expect("a MotionCal session with readings is reported");
+    let mag = data
+        .mag
+        .as_ref()
+        .expect("the readings' magnetometer is plotted");
+    assert_eq!(mag.raw.len(), 40);
+    assert!(mag.temp_c.is_none(), "the sketch prints no temperature");
+    assert!(
+        !data.notes.join("\n").contains("readings.csv"),
+        "{:?}",
+        data.notes
+    );
     render_html(&data).expect("renders");
     let _ = std::fs::remove_dir_all(dir);
 }

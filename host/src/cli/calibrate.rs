@@ -213,7 +213,7 @@ const SAME_CTRL_C: Duration = Duration::from_millis(500);
 
 /// A flag set by the first Ctrl-C, which the session notices at its next batch of samples or
 /// stage (it then stops the stream and saves); a second Ctrl-C ends the program at once.
-fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
+pub(super) fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     let handler_flag = Arc::clone(&flag);
     let mut first: Option<Instant> = None;

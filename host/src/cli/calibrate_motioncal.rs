@@ -10,12 +10,13 @@ use anyhow::Context;
 use imucal::compat::motioncal::RawAccelScaling;
 use imucal::compat::MotionCalClient;
 use imucal::session::motioncal::{
-    run_motioncal_session, save_motioncal_session, MotionCalOptions, MotionCalOutcome,
+    run_motioncal_session, save_motioncal_readings, save_motioncal_session, MotionCalOptions,
+    MotionCalOutcome,
 };
 
 use super::args::CalibrateArgs;
 use super::board::given_or_only_board;
-use super::calibrate::{checked_session_dir, field_reference, session_options};
+use super::calibrate::{checked_session_dir, field_reference, interrupt_flag, session_options};
 use super::calibrate_view::Terminal;
 use super::write_policy::WritePolicy;
 
@@ -68,6 +69,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         sample_rate_hz: args.sketch_rate_hz(),
         accept_poor: args.accept_poor,
         echo_timeout: ECHO_TIMEOUT,
+        interrupt: Some(interrupt_flag()?),
     };
     let mut client = MotionCalClient::open(&port, RawAccelScaling::AdafruitSketch)?;
     say!(
@@ -81,10 +83,34 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         accept_poor: args.accept_poor,
     };
     let mut terminal = Terminal::new(plain, policy, port.clone()).with_json_events(args.json);
-    let outcome = run_motioncal_session(&mut client, &options, &mut terminal)?;
+    let mut readings = Vec::new();
+    let run = run_motioncal_session(&mut client, &options, &mut terminal, &mut readings);
     terminal.bar.finish_and_clear();
+    let outcome = match run {
+        Ok(outcome) => outcome,
+        Err(stop) => {
+            // What was read is kept: the readings are a recording `imucal fit` reads.
+            if !readings.is_empty() {
+                match save_motioncal_readings(&readings, &dir) {
+                    Ok(path) => say!(
+                        "The {} read before the stop are saved in {} (the recording format: \
+                         `imucal fit {}` fits them offline)",
+                        imucal::words::counted(readings.len(), "reading"),
+                        path.display(),
+                        path.display()
+                    ),
+                    Err(e) => say!(
+                        "The {} read before the stop could not be saved in {}: {e}",
+                        imucal::words::counted(readings.len(), "reading"),
+                        dir.display()
+                    ),
+                }
+            }
+            return Err(stop.into());
+        }
+    };
 
-    save_motioncal_session(&outcome, &dir).with_context(|| {
+    save_motioncal_session(&outcome, &readings, &dir).with_context(|| {
         format!(
             "the session directory `{}` could not be written",
             dir.display()

@@ -116,6 +116,23 @@ fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
     })
 }
 
+/// The magnetometer readings of a MotionCal sketch session's `readings.csv` (every reading,
+/// still or moving, all counted), labelled with the temperature the sketch's set assumes.
+fn sketch_readings(path: &Path) -> Result<MagColumns, ReportError> {
+    let recording = crate::recording::Recording::load(path, &Default::default())
+        .map_err(|e| format_error(path, e.to_string()))?;
+    let raw = recording
+        .samples(crate::recording::Sensor::Mag)
+        .ok_or_else(|| format_error(path, "it has no magnetometer columns"))?
+        .to_vec();
+    Ok(MagColumns {
+        time_s: recording.time.clone(),
+        temp_c: vec![crate::session::motioncal::UNKNOWN_TEMPERATURE_C; raw.len()],
+        counted: raw.clone(),
+        raw,
+    })
+}
+
 /// Builds a report from a session directory written by `imucal calibrate`: a finished one, one
 /// stopped after its fit (`progress.json`), or one of a MotionCal sketch (`motioncal.json`, no
 /// magnetometer samples). What the directory lacks is said in the report's notes, with why.
@@ -187,12 +204,18 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         ));
     }
     let mag_path = dir.join("mag_samples.csv");
+    let readings_path = dir.join(crate::session::motioncal::READINGS_FILE);
+    // A sketch prints no temperature: its readings carry none to plot against.
+    let mut mag_temp_recorded = true;
     let mag_columns = if mag_path.is_file() {
         read_mag_csv(&mag_path)?
+    } else if motioncal && readings_path.is_file() {
+        mag_temp_recorded = false;
+        sketch_readings(&readings_path)?
     } else {
         notes.push(if motioncal {
-            "mag_samples.csv is missing, as in every session with a MotionCal sketch (its \
-             readings are not saved): no magnetometer plots"
+            "readings.csv is missing (sessions with a MotionCal sketch save it from this \
+             version on): no magnetometer plots"
                 .to_string()
         } else {
             "mag_samples.csv is missing (the session saved no magnetometer samples): no \
@@ -222,7 +245,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         raw: mag_raw,
         calibrated: mag_calibrated,
         time_s,
-        temp_c: Some(mag_temp),
+        temp_c: mag_temp_recorded.then_some(mag_temp),
         temp_note: None,
         field,
         raw_unit: "µT".to_string(),

@@ -11,8 +11,14 @@
 //! The sketch's readings carry no time stamp, so time is the reading index over the sketch's
 //! nominal rate ([`MotionCalOptions::sample_rate_hz`]); no temperature either, so poses carry
 //! [`UNKNOWN_TEMPERATURE_C`] and the set has no temperature terms.
+//!
+//! Every reading is handed to the caller as it is read, also when the session stops early (a
+//! Ctrl-C, a position not held in time, a lost board), so that nothing measured is lost: the
+//! command line saves them as a recording that `imucal fit` reads.
 
 use std::io::{Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use imucal_protocol::PoseStats;
@@ -50,6 +56,8 @@ pub struct MotionCalOptions {
     pub accept_poor: bool,
     /// Longest wait for the board's `Cal1:`/`Cal2:` echo after the packet.
     pub echo_timeout: Duration,
+    /// Set (by a Ctrl-C handler) to stop the session at the next reading; nothing is sent.
+    pub interrupt: Option<Arc<AtomicBool>>,
 }
 
 impl Default for MotionCalOptions {
@@ -59,6 +67,7 @@ impl Default for MotionCalOptions {
             sample_rate_hz: 100.0,
             accept_poor: false,
             echo_timeout: Duration::from_secs(10),
+            interrupt: None,
         }
     }
 }
@@ -78,6 +87,9 @@ pub enum MotionCalSessionError {
     /// An option is out of range.
     #[error("{0}")]
     Options(String),
+    /// The user stopped the session (Ctrl-C) before anything was sent.
+    #[error("the session was stopped by the user (Ctrl-C); nothing was sent to the board")]
+    Interrupted,
     /// The positions were not all held before the time ran out.
     #[error(
         "only {captured} of {total} positions were held still within {seconds:.0} s (missing: \
@@ -289,11 +301,22 @@ impl<'a> Collector<'a> {
     }
 }
 
-/// Read the board until the twelve positions are held and the sphere is covered.
+impl MotionCalOptions {
+    fn interrupted(&self) -> Result<(), MotionCalSessionError> {
+        match &self.interrupt {
+            Some(flag) if flag.load(Ordering::SeqCst) => Err(MotionCalSessionError::Interrupted),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Read the board until the twelve positions are held and the sphere is covered; every
+/// reading is also appended to `readings`.
 fn collect<'a, L: Read + Write>(
     client: &mut MotionCalClient<L>,
     options: &'a MotionCalOptions,
     observer: &mut dyn SessionObserver,
+    readings: &mut Vec<UnitSample>,
 ) -> Result<(Collector<'a>, usize), MotionCalSessionError> {
     let session = &options.session;
     let mut collector = Collector::new(options);
@@ -301,6 +324,7 @@ fn collect<'a, L: Read + Write>(
     let mut mag_started_s = None;
     let mut index = 0usize;
     loop {
+        options.interrupted()?;
         let reading =
             client
                 .next_reading(session.read_timeout)?
@@ -317,6 +341,7 @@ fn collect<'a, L: Read + Write>(
             mag: reading.mag,
             temp_c: UNKNOWN_TEMPERATURE_C,
         };
+        readings.push(sample);
         collector.push(sample, observer);
         if !collector.positions_done() {
             if t_s > pose_limit_s {
@@ -388,10 +413,12 @@ fn judge_what_the_board_applies(
 }
 
 /// Run the guided session on a sketch board: collect, fit, explain, send and check the echo.
+/// Every reading taken is appended to `readings`, whether the session succeeds or not.
 pub fn run_motioncal_session<L: Read + Write>(
     client: &mut MotionCalClient<L>,
     options: &MotionCalOptions,
     observer: &mut dyn SessionObserver,
+    readings: &mut Vec<UnitSample>,
 ) -> Result<MotionCalOutcome, MotionCalSessionError> {
     options
         .session
@@ -404,7 +431,7 @@ pub fn run_motioncal_session<L: Read + Write>(
         )));
     }
     let wall_start = Instant::now();
-    let (collector, readings) = collect(client, options, observer)?;
+    let (collector, read) = collect(client, options, observer, readings)?;
     let coverage = collector.coverage();
     let session = &options.session;
     let mut fit = fit_session(
@@ -439,6 +466,8 @@ pub fn run_motioncal_session<L: Read + Write>(
         )));
         None
     } else if observer.confirm_write(&fit) {
+        // A Ctrl-C at the prompt (or during the fit) means: do not send.
+        options.interrupted()?;
         Some(client.send_calibration(&conversion.calibration, options.echo_timeout)?)
     } else {
         None
@@ -451,24 +480,40 @@ pub fn run_motioncal_session<L: Read + Write>(
         conversion,
         limitations: limits,
         echo,
-        readings,
+        readings: read,
         unified_lines: client.has_unified_lines(),
         malformed_lines: client.malformed_lines(),
-        session_seconds: readings as f64 / options.sample_rate_hz,
+        session_seconds: read as f64 / options.sample_rate_hz,
         wall_seconds: wall_start.elapsed().as_secs_f64(),
     })
 }
 
+/// Write the session's readings to `dir/readings.csv` (the recording format, for `imucal fit`),
+/// creating `dir`; also the only file of a session that stopped before its fit.
+pub fn save_motioncal_readings(
+    readings: &[UnitSample],
+    dir: &std::path::Path,
+) -> std::io::Result<std::path::PathBuf> {
+    std::fs::create_dir_all(dir)?;
+    let path = dir.join(READINGS_FILE);
+    std::fs::write(&path, super::save::readings_csv(readings))?;
+    Ok(path)
+}
+
+/// Name of the readings file in a sketch session's directory.
+pub const READINGS_FILE: &str = "readings.csv";
+
 /// Write the session directory: `params.json` (imucal's full model, for `imucal export`),
 /// `motioncal.bin` (the packet as sent), `sensor_calib.json` (the library's flash file),
-/// `poses.json` and `motioncal.json` (limitations, echo, verdict). Returns the files written.
+/// `poses.json`, `motioncal.json` (limitations, echo, verdict) and `readings.csv` (every
+/// reading, [`save_motioncal_readings`]). Returns the files written.
 pub fn save_motioncal_session(
     outcome: &MotionCalOutcome,
+    readings: &[UnitSample],
     dir: &std::path::Path,
 ) -> std::io::Result<Vec<std::path::PathBuf>> {
     use crate::device::ParamsFile;
-    std::fs::create_dir_all(dir)?;
-    let mut written = Vec::new();
+    let mut written = vec![save_motioncal_readings(readings, dir)?];
     let mut write = |name: &str, bytes: &[u8]| -> std::io::Result<()> {
         let path = dir.join(name);
         std::fs::write(&path, bytes)?;

@@ -321,26 +321,52 @@ const MOVES_HEADER: &str = "t_s,ax,ay,az,gx,gy,gz,mx,my,mz,temp_c,segment";
 /// moves from 1. Values are written in the shortest form that reads back to the same `f64`,
 /// so a resumed session fits exactly what the first run measured.
 pub(super) fn moves_csv(moves: &[Vec<UnitSample>]) -> String {
-    use std::fmt::Write as _;
     let mut csv = String::with_capacity(32 + 160 * moves.iter().map(Vec::len).sum::<usize>());
     csv.push_str(MOVES_HEADER);
     csv.push('\n');
     for (k, samples) in moves.iter().enumerate() {
+        let label = format!("move-{}", k + 1);
         for u in samples {
-            let [ax, ay, az] = u.accel;
-            let [gx, gy, gz] = u.gyro;
-            let [mx, my, mz] = u.mag;
-            // Writing to a String cannot fail.
-            let _ = writeln!(
-                csv,
-                "{},{ax},{ay},{az},{gx},{gy},{gz},{mx},{my},{mz},{},move-{}",
-                u.t_s,
-                u.temp_c,
-                k + 1
-            );
+            push_row(&mut csv, u, Some(&label));
         }
     }
     csv
+}
+
+/// Header of a session's `readings.csv`: the recording format's columns in nominal units,
+/// without a temperature (a board that reports none).
+const READINGS_HEADER: &str = "t_s,ax,ay,az,gx,gy,gz,mx,my,mz";
+
+/// The text of `readings.csv`: every reading of a session in the recording format, so that
+/// `imucal fit` reads it. The temperature column is left out: it is written only for boards
+/// that measure one, which the callers of this one do not.
+pub fn readings_csv(readings: &[UnitSample]) -> String {
+    let mut csv = String::with_capacity(32 + 150 * readings.len());
+    csv.push_str(READINGS_HEADER);
+    csv.push('\n');
+    for u in readings {
+        push_row(&mut csv, u, None);
+    }
+    csv
+}
+
+/// One row of the recording format: time, the three sensors, then `temp_c` and `label` when
+/// a label is given (the moves' form), in the shortest form that reads back to the same `f64`.
+fn push_row(csv: &mut String, u: &UnitSample, label: Option<&str>) {
+    use std::fmt::Write as _;
+    let [ax, ay, az] = u.accel;
+    let [gx, gy, gz] = u.gyro;
+    let [mx, my, mz] = u.mag;
+    // Writing to a String cannot fail.
+    let _ = write!(
+        csv,
+        "{},{ax},{ay},{az},{gx},{gy},{gz},{mx},{my},{mz}",
+        u.t_s
+    );
+    if let Some(label) = label {
+        let _ = write!(csv, ",{},{label}", u.temp_c);
+    }
+    csv.push('\n');
 }
 
 /// Read the moves of a session directory's `moves.csv` ([`moves_csv`]'s columns), in order.
@@ -427,6 +453,7 @@ pub(super) fn finish(dir: &Path) -> Result<(), SessionError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::recording::Sensor;
 
     fn stats_json(n: u32) -> serde_json::Value {
         serde_json::to_value(PoseStats {
@@ -538,6 +565,31 @@ mod tests {
         let read = load_moves(&path).expect("a file of no moves is read");
         let _ = std::fs::remove_file(&path);
         assert!(read.is_empty());
+    }
+
+    #[test]
+    fn saved_readings_are_a_recording_read_back_bit_for_bit() {
+        let readings: Vec<UnitSample> = (0..5).map(unit_sample).collect();
+        let path = temp_file("readings.csv", &readings_csv(&readings));
+        let recording = crate::recording::Recording::load(&path, &Default::default())
+            .expect("the readings are a recording");
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(recording.len(), 5);
+        assert!(
+            recording.temp_c.is_none(),
+            "no temperature column is written"
+        );
+        for (k, u) in readings.iter().enumerate() {
+            assert_eq!(recording.time[k], u.t_s);
+            for (sensor, value) in [
+                (Sensor::Accel, u.accel),
+                (Sensor::Gyro, u.gyro),
+                (Sensor::Mag, u.mag),
+            ] {
+                let read = recording.samples(sensor).expect("every sensor is written")[k];
+                assert_eq!(<[f64; 3]>::from(read), value, "{sensor:?} row {k}");
+            }
+        }
     }
 
     #[test]
