@@ -504,3 +504,41 @@ fn a_version_1_history_upgrades_on_open_keeping_its_records_as_written_sets() {
         assert_eq!(records[1].record, refused, "{}", location.display());
     }
 }
+
+#[test]
+fn the_history_command_gives_crcs_as_hex_and_fails_naming_the_boards_for_an_unknown_one() {
+    let dir = history_support::scratch_dir("cli-unknown");
+    let url = format!("sqlite://{}", dir.join("history.sqlite").display());
+    let mut store = HistoryStore::open_url(Some(&url)).expect("open");
+    let record = board_record(3);
+    store.record(&record).expect("recorded");
+    let history = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["history", "--db", &url])
+            .args(args)
+            .output()
+            .expect("imucal history runs")
+    };
+    let out = history(&["--json"]);
+    assert!(out.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    // As `info`, the session files and the table print it.
+    assert_eq!(
+        json["records"][0]["params_crc"],
+        format!("{:#010x}", record.params_crc).as_str(),
+        "{json}"
+    );
+    // A mistyped id is an error that lists the boards there are, in both forms.
+    for args in [&["0123"][..], &["0123", "--json"][..]] {
+        let out = history(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("no calibration of board `0123`"),
+            "{stderr}"
+        );
+        assert!(stderr.contains(&record.device_id), "{stderr}");
+    }
+    // The board that is there is listed.
+    assert!(history(&[&record.device_id]).status.success());
+}

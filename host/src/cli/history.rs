@@ -110,7 +110,8 @@ pub fn firmware_text(version: &imucal_protocol::FirmwareVersion) -> String {
     format!("{}.{}.{}", version.major, version.minor, version.patch)
 }
 
-/// Run `imucal history`.
+/// Run `imucal history`. A board with no record is an error (exit 1) naming the boards the
+/// database does hold, so that a mistyped id is not read as "never calibrated".
 pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     let mut store = HistoryStore::open_existing_url(args.db.as_deref())?;
     let records = store.records(args.device.as_deref())?;
@@ -122,17 +123,43 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
             "records": history,
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
     }
     if history.is_empty() {
-        println!(
-            "No calibrations{} in {}",
-            args.device
-                .as_ref()
-                .map(|d| format!(" of {d}"))
-                .unwrap_or_default(),
+        let Some(device) = &args.device else {
+            if !args.json {
+                println!("No calibrations in {}", store.location().display());
+            }
+            return Ok(());
+        };
+        let mut boards: Vec<String> = store
+            .records(None)?
+            .into_iter()
+            .map(|r| r.record.device_id)
+            .collect();
+        boards.sort();
+        boards.dedup();
+        const LISTED: usize = 8;
+        let held = match boards.len() {
+            0 => "it holds no calibration yet".to_string(),
+            n => format!(
+                "it holds {}: {}{}",
+                imucal::words::counted(n, "board"),
+                boards
+                    .iter()
+                    .take(LISTED)
+                    .map(String::as_str)
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if n > LISTED { ", …" } else { "" }
+            ),
+        };
+        anyhow::bail!(
+            "no calibration of board `{device}` is recorded in {}; {held} (check the id as \
+             `imucal info` prints it, or leave it out to list every board)",
             store.location().display()
         );
+    }
+    if args.json {
         return Ok(());
     }
     println!(

@@ -118,7 +118,9 @@ pub struct CalibrationRecord {
     pub source: RecordSource,
     /// The parameter set.
     pub params: ParamsFile,
-    /// CRC-32 of the parameter set as the board stores it.
+    /// CRC-32 of the parameter set as the board stores it (in JSON as `info` and the session
+    /// files print it: `"0x9a2711ba"`).
+    #[serde(with = "crc_text")]
     pub params_crc: u32,
     /// One-sigma uncertainty of named parameters, in the parameters' units (see
     /// [`CalibrationRecord::parameters`]); parameters without an estimate are absent.
@@ -288,6 +290,29 @@ fn insert_sensor(out: &mut BTreeMap<String, f64>, name: &str, sensor: &SensorJso
         out.insert(format!("{name}.b.{row}"), sensor.b[i]);
         for (j, col) in AXES.iter().enumerate() {
             out.insert(format!("{name}.A.{row}{col}"), sensor.a[i][j]);
+        }
+    }
+}
+
+/// A CRC in JSON as the hex text the rest of imucal prints (a plain number is read too).
+mod crc_text {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(crc: &u32, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(&format!("{crc:#010x}"))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<u32, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Crc {
+            Number(u32),
+            Text(String),
+        }
+        match Crc::deserialize(deserializer)? {
+            Crc::Number(n) => Ok(n),
+            Crc::Text(t) => super::parse_crc(&t)
+                .ok_or_else(|| serde::de::Error::custom(format!("`{t}` is not a hex CRC-32"))),
         }
     }
 }
