@@ -54,6 +54,19 @@ impl SensorNotes<'_> {
             .map(|(_, unit)| *unit)
     }
 
+    /// The field magnitude of the magnetometer's output, `None` when the file does not calibrate
+    /// the magnetometer (its `field_ut` is then a placeholder, not a field).
+    fn field_ut(&self, set: &CalibrationSet) -> Option<f32> {
+        self.uncalibrated_because("mag")
+            .is_none()
+            .then_some(set.reference.field_ut)
+    }
+
+    /// The fit's residual RMS of `name`, `None` when the file does not calibrate it.
+    fn residual(&self, name: &str, rms: f32) -> Option<f32> {
+        self.uncalibrated_because(name).is_none().then_some(rms)
+    }
+
     fn uncalibrated_because(&self, name: &str) -> Option<&str> {
         self.uncalibrated
             .iter()
@@ -71,6 +84,12 @@ pub enum ExportFormat {
     Rust,
     /// The versioned JSON document.
     Json,
+}
+
+/// Said in place of the field constant `name` when the magnetometer is not calibrated: the
+/// file's `field_ut` is then a placeholder, and a constant would pass it off as a measured field.
+fn no_field_comment(open: &str, name: &str, close: &str) -> String {
+    format!("{open}{name} is not defined: the magnetometer is not calibrated, so there is no field{close}")
 }
 
 /// The three sensors in export order, with their names and units.
@@ -220,10 +239,13 @@ fn c_header(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>) -> Strin
         model_comment(" * ", notes)
     ));
     out.push_str(&format!(
-        "#define IMUCAL_PARAMS_FORMAT {}\n#define IMUCAL_GRAVITY_MPS2 {}\n#define IMUCAL_FIELD_UT {}\n",
+        "#define IMUCAL_PARAMS_FORMAT {}\n#define IMUCAL_GRAVITY_MPS2 {}\n{}\n",
         set.format_version,
         c_float(set.reference.gravity_mps2),
-        c_float(set.reference.field_ut)
+        match notes.field_ut(set) {
+            Some(field) => format!("#define IMUCAL_FIELD_UT {}", c_float(field)),
+            None => no_field_comment("/* ", "IMUCAL_FIELD_UT", " */"),
+        }
     ));
     for (name, unit) in SENSORS {
         let cal = sensor(set, name);
@@ -353,10 +375,16 @@ fn rust_module(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>) -> St
         model_comment("// ", notes)
     );
     out.push_str(&format!(
-        "/// Parameter format of the source file.\npub const PARAMS_FORMAT: u16 = {};\n/// Local gravity of the fit, m/s².\npub const GRAVITY_MPS2: f32 = {};\n/// Local field magnitude of the fit, µT.\npub const FIELD_UT: f32 = {};\n",
+        "/// Parameter format of the source file.\npub const PARAMS_FORMAT: u16 = {};\n/// Local gravity of the fit, m/s².\npub const GRAVITY_MPS2: f32 = {};\n{}\n",
         set.format_version,
         float_text(set.reference.gravity_mps2),
-        float_text(set.reference.field_ut)
+        match notes.field_ut(set) {
+            Some(field) => format!(
+                "/// Local field magnitude of the fit, µT.\npub const FIELD_UT: f32 = {};",
+                float_text(field)
+            ),
+            None => no_field_comment("// ", "FIELD_UT", ""),
+        }
     ));
     for (name, unit) in SENSORS {
         let cal = sensor(set, name);
@@ -485,12 +513,12 @@ pub fn json_document(set: &CalibrationSet, source: &str, notes: SensorNotes<'_>)
         "matrix_order": "row-major",
         "reference": {
             "gravity_mps2": set.reference.gravity_mps2,
-            "field_ut": set.reference.field_ut,
+            "field_ut": notes.field_ut(set),
         },
         "residuals_rms": {
-            "accel_mps2": set.residuals.accel_rms,
-            "gyro_rads": set.residuals.gyro_rms,
-            "mag_ut": set.residuals.mag_rms,
+            "accel_mps2": notes.residual("accel", set.residuals.accel_rms),
+            "gyro_rads": notes.residual("gyro", set.residuals.gyro_rms),
+            "mag_ut": notes.residual("mag", set.residuals.mag_rms),
         },
     });
     for (name, _) in SENSORS {

@@ -449,6 +449,10 @@ fn a_sensor_the_parameter_file_does_not_calibrate_is_exported_marked_as_not_cali
         .is_some_and(|why| why.contains("no `mag` entry")));
     assert_eq!(json["accel"]["calibrated"], true);
     assert!(json["accel"].get("not_calibrated_because").is_none());
+    // The file's field and magnetometer residual are placeholders, not measurements.
+    assert!(json["reference"]["field_ut"].is_null(), "{json}");
+    assert!(json["residuals_rms"]["mag_ut"].is_null(), "{json}");
+    assert!(json["residuals_rms"]["accel_mps2"].is_number(), "{json}");
 
     let (header, _) = export("c-header");
     assert!(
@@ -460,7 +464,18 @@ fn a_sensor_the_parameter_file_does_not_calibrate_is_exported_marked_as_not_cali
         "{header}"
     );
     assert!(header.contains("NOT CALIBRATED: mag"), "{header}");
+    assert!(!header.contains("#define IMUCAL_FIELD_UT"), "{header}");
+    assert!(
+        header.contains("IMUCAL_FIELD_UT is not defined"),
+        "{header}"
+    );
+    // The Adafruit library keeps its own default field rather than the placeholder.
+    let (calib, note) = export("adafruit-json");
+    let calib: serde_json::Value = serde_json::from_str(&calib).expect("sensor_calib.json");
+    assert_eq!(calib["mag_field"].as_f64(), Some(50.0), "{calib}");
+    assert!(note.contains("library's default of 50"), "{note}");
     let (module, _) = export("rust");
+    assert!(!module.contains("pub const FIELD_UT"), "{module}");
     assert!(
         module.contains("pub const MAG_CALIBRATED: bool = false;"),
         "{module}"

@@ -107,7 +107,8 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
         ExportFormatArg::Rust => ExportFormat::Rust,
         ExportFormatArg::Json => ExportFormat::Json,
         ExportFormatArg::Motioncal | ExportFormatArg::AdafruitJson => {
-            return export_adafruit(&set, args);
+            let mag_calibrated = !uncalibrated.iter().any(|(sensor, _)| *sensor == "mag");
+            return export_adafruit(&set, mag_calibrated, args);
         }
     };
     // Sensors calibrated in raw counts have no nominal unit: the board's limits apply only to
@@ -136,8 +137,22 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
 }
 
 /// The Adafruit library's forms: what it can apply of `set`, and a note of what it cannot.
-fn export_adafruit(set: &CalibrationSet, args: &ExportArgs) -> anyhow::Result<()> {
-    let conversion = AdafruitCalibration::from_set(set)?;
+/// Without a magnetometer calibration the field is the library's own default, not the
+/// parameter file's placeholder.
+fn export_adafruit(
+    set: &CalibrationSet,
+    mag_calibrated: bool,
+    args: &ExportArgs,
+) -> anyhow::Result<()> {
+    let mut conversion = AdafruitCalibration::from_set(set)?;
+    if !mag_calibrated {
+        conversion.calibration.mag_field = compat::adafruit::LIBRARY_DEFAULT_FIELD_UT;
+        say!(
+            "imucal: note: the field is the library's default of {} µT, as the magnetometer \
+             is not calibrated",
+            compat::adafruit::LIBRARY_DEFAULT_FIELD_UT
+        );
+    }
     say_part!("{}", compat::limitations(set, &[])?.describe());
     if args.format == ExportFormatArg::AdafruitJson {
         let text = conversion.calibration.to_sensor_calib_json();

@@ -53,6 +53,9 @@ pub struct Conversion {
     pub mag_rotation_deg: f64,
 }
 
+/// The field magnitude `Adafruit_Sensor_Calibration` holds until a calibration sets it, µT.
+pub const LIBRARY_DEFAULT_FIELD_UT: f32 = 50.0;
+
 impl AdafruitCalibration {
     /// The library's defaults: no offsets, identity soft iron, field 0.
     pub const fn identity() -> Self {
