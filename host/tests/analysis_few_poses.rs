@@ -1,10 +1,10 @@
 //! The analysis on too few poses: a candidate whose unknowns the held-out folds cannot
 //! determine is reported `not_fittable` with the number of poses still needed, never dropped.
 
-use imucal::analysis::dataset::Observation;
 use imucal::analysis::extended_fit::BaseKind;
 use imucal::analysis::{analyse_observations, AnalysisError, EffectStatus, SensorSetup};
 use imucal::fit::{Calibration, Vec3};
+use imucal::pipeline::observations::Observation;
 use imucal::recording::Sensor;
 
 const GRAVITY: f64 = 9.81;

@@ -1,8 +1,9 @@
-//! `fit`'s verdict on its residual is the residual analysis's test: the χ² of each pose's
-//! residual against the standard error of that pose's mean (corrected for correlated samples),
-//! on the model's degrees of freedom. So `fit` and `analyze` say alike whether a recording's
-//! residual is at its noise, on simulated recordings with and without an effect the model
-//! lacks and on real recordings. Run in release: each simulated recording takes a second.
+//! `fit`'s verdict on its residual is a χ² test against the noise of the means it rests on, as
+//! the residual analysis's is: each pose's residual against the standard error of that pose's
+//! mean (corrected for correlated samples), and for the magnetometer the means of its
+//! residual over short windows of the stream. So `fit` and `analyze` say alike whether a
+//! recording's residual is at its noise, on simulated recordings with and without an effect the
+//! model lacks and on real recordings. Run in release: each simulated recording takes a second.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -33,7 +34,7 @@ fn run_json(args: &[&str], file: &Path) -> Value {
 fn verdicts(file: &Path, flags: &[&str]) -> Vec<(String, bool, bool)> {
     let fit = run_json(&[&["fit"], flags].concat(), file);
     let analysis = run_json(&[&["analyze"], flags].concat(), file);
-    ["accel", "gyro"]
+    ["accel", "gyro", "mag"]
         .iter()
         .filter_map(|sensor| {
             let by_fit = fit[sensor]["noise_test"]["consistent"].as_bool()?;
@@ -60,8 +61,8 @@ fn on_clean_recordings_fit_and_analyze_find_the_residual_at_the_noise() {
         let found = verdicts(&path, &[]);
         assert_eq!(
             found.len(),
-            2,
-            "seed {seed}: accel and gyro judged by both: {found:?}"
+            3,
+            "seed {seed}: accel, gyro and mag judged by both: {found:?}"
         );
         eprintln!("seed {seed}: {found:?}");
         for (sensor, by_fit, by_analysis) in found {
@@ -73,8 +74,8 @@ fn on_clean_recordings_fit_and_analyze_find_the_residual_at_the_noise() {
         }
         let _ = std::fs::remove_file(&path);
     }
-    // Each test rejects a right model 1 % of the time: 12 tests by each command, so one
-    // rejection is plausible (11 %), three would be a 2·10⁻⁴ event.
+    // Each test rejects a right model 1 % of the time: 18 tests by each command, so one
+    // rejection is plausible (16 %), three would be a 10⁻³ event.
     assert!(inconsistent.len() <= 2, "{inconsistent:#?}");
 }
 
@@ -105,6 +106,21 @@ fn on_real_recordings_fit_and_analyze_agree_on_the_residual() {
             &["--accel-unit", "counts", "--gyro-unit", "counts"][..],
         ),
         ("imucal_nilspod_ferraris.csv", &["--gyro-unit", "dps"][..]),
+        (
+            "tsm_qmc5883l_mag_rotation.csv",
+            &["--mag-unit", "counts"][..],
+        ),
+        (
+            "sf_mpu6050_hmc5883l_full_sphere.csv",
+            &[
+                "--accel-unit",
+                "g",
+                "--gyro-unit",
+                "dps",
+                "--mag-unit",
+                "gauss",
+            ][..],
+        ),
     ] {
         let found = verdicts(&data.join(file), flags);
         assert!(!found.is_empty(), "{file}: nothing judged by both");
@@ -112,4 +128,28 @@ fn on_real_recordings_fit_and_analyze_agree_on_the_residual() {
             assert_eq!(by_fit, by_analysis, "{file} {sensor}");
         }
     }
+}
+
+#[test]
+fn a_magnetometer_turned_through_its_sphere_is_judged_alike_with_and_without_a_lacking_effect() {
+    // A tumble at constant temperature: the sample-level model is right.
+    for seed in 0..3 {
+        let path = simulated(&SimConfig::new(seed, ScheduleKind::Tumble), "tumble");
+        let found = verdicts(&path, &[]);
+        let _ = std::fs::remove_file(&path);
+        let mag = found.iter().find(|(s, ..)| s == "mag").expect("mag judged");
+        assert_eq!((mag.1, mag.2), (true, true), "seed {seed}: {found:?}");
+    }
+    // A temperature sweep with a bias that follows temperature, which the model lacks.
+    let mut config = SimConfig::new(5, ScheduleKind::Sweep);
+    config.effects.push(EffectRequest {
+        kind: EffectKind::BiasTemperature,
+        sensor: Some(SensorKind::Mag),
+        size: 1.0,
+    });
+    let path = simulated(&config, "mag-bias-temperature");
+    let found = verdicts(&path, &[]);
+    let _ = std::fs::remove_file(&path);
+    let mag = found.iter().find(|(s, ..)| s == "mag").expect("mag judged");
+    assert_eq!((mag.1, mag.2), (false, false), "{found:?}");
 }

@@ -1,7 +1,8 @@
-//! The magnetometer's verdict weighs its residual against the noise of its samples, estimated
-//! from the stream itself: a recording whose residual is its noise is said to be at the floor,
-//! and one whose field changed half way (the board moved near iron) is said to miss something,
-//! however many samples agree with the held-out error.
+//! The magnetometer's verdict weighs its residual against its noise, estimated from the stream
+//! itself (the χ² of the residual's means over short windows against their standard errors): a
+//! recording whose residual is its noise is said to be at the floor, and one whose field
+//! changed half way (the board moved near iron) is said to miss something, however many samples
+//! agree with the held-out error.
 
 use std::f64::consts::PI;
 use std::process::Command;
@@ -69,17 +70,18 @@ fn mag_verdict(name: &str, csv: &str) -> String {
 #[test]
 fn a_magnetometer_fitted_to_its_noise_is_at_the_floor_and_a_field_that_moved_half_way_is_not() {
     // The norm residual of a sample is its noise along the field, 0.4 µT of 50 µT: the fit
-    // leaves that and no more, so the ratio is about 1 (the floor's test allows 3).
+    // leaves that and no more, so the windows' means scatter as their standard errors say.
     let steady = mag_verdict("steady", &tumble_csv(Vec3::zeros()));
     assert!(
         steady.contains("residual is at the noise floor"),
         "{steady}"
     );
     // 10 µT of hard iron more from half way: the best single ellipsoid splits the difference
-    // and leaves about 5× the noise (measured: 5×; the steady case 1.0×).
+    // and leaves a residual far above the noise of 20-sample means.
     let moved = mag_verdict("moved", &tumble_csv(Vec3::new(10.0, 0.0, 0.0)));
     assert!(
-        moved.contains("× the sample noise: the model misses something"),
+        moved.contains("× the noise of its 20-sample means")
+            && moved.contains("the model misses something"),
         "{moved}"
     );
     assert!(moved.contains("held-out error agrees"), "{moved}");

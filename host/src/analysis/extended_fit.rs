@@ -12,10 +12,10 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::dataset::Observation;
 use super::effects::{EffectKind, BINS};
 use crate::fit::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
 use crate::fit::{Calibration, Mat3, Vec3};
+use crate::pipeline::observations::Observation;
 
 /// Which kind of base model a sensor has.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -2,7 +2,8 @@
 //! residual with the noise floor, test candidate effects by held-out error, refit with those the
 //! data support, and report what is left.
 //!
-//! - [`dataset`]: observations (pose means with standard errors, temperature, time, force);
+//! - the observations (pose and window means with standard errors, temperature, time, force)
+//!   are [`crate::pipeline::observations`], which `fit`'s verdict tests too;
 //! - [`earth_rate`]: the Earth's rotation removed from the gyroscope's rest readings;
 //! - [`noise`]: the floor and the chi-square test;
 //! - [`effects`]: the candidate families and their parameters;
@@ -34,7 +35,6 @@
 //! leave a residual above the floor the report says "partly explained".
 
 pub mod crossval;
-pub mod dataset;
 pub mod earth_rate;
 pub mod effects;
 pub mod extended_fit;

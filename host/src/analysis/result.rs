@@ -4,10 +4,10 @@
 
 use imucal_protocol::{BiasTemperature, Nonlinearity, SensorCalibration};
 
-use super::dataset::Observation;
 use super::effects::EffectKind;
 use super::extended_fit::{physical_factor, ExtendedFit, Problem};
 use crate::fit::{Calibration, FitError};
+use crate::pipeline::observations::Observation;
 use crate::recording::Sensor;
 use crate::stats::chi_square::ChiSquareTest;
 
@@ -88,8 +88,8 @@ impl Default for AnalysisOptions {
             field_ut: None,
             gyro_scale: 1.0,
             gyro_scale_known: true,
-            mag_window: 20,
-            max_mag_windows: 300,
+            mag_window: crate::pipeline::observations::MAG_WINDOW_SAMPLES,
+            max_mag_windows: crate::pipeline::observations::MAX_MAG_WINDOWS,
             latitude_deg: None,
         }
     }

@@ -6,7 +6,6 @@ use super::crossval::{
     extend_start, held_out, lack_of_fit_p, observations_needed, Comparison, HeldOut, ALPHA,
     FORM_ALPHA, MIN_GAIN_PER_COMPONENT,
 };
-use super::dataset::Observation;
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
 use super::extended_fit::{
     base_calibration, fit_rows, physical_factor, physical_residual, start_params, BaseKind,
@@ -16,6 +15,7 @@ use super::result::{AnalysisError, Coefficient, EffectResult, EffectStatus, Sens
 use super::time_structure::{follows_time_p, timed_residuals, without_effect};
 use crate::fit::validate::count_distinct;
 use crate::fit::{Calibration, Vec3};
+use crate::pipeline::observations::Observation;
 use crate::recording::Sensor;
 use crate::stats::chi_square::ChiSquareTest;
 

@@ -2,7 +2,6 @@
 //! poses, started at the default chain's model; the gyroscope's bias with the specific force for
 //! g-sensitivity; the magnetometer from still poses or short windows of the stream.
 
-use super::dataset::{self, to_poses};
 use super::earth_rate::vertical_earth_rate;
 use super::extended_fit::BaseKind;
 use super::result::{AnalysisError, AnalysisOptions, RecordingAnalysis, SensorAnalysis};
@@ -14,6 +13,7 @@ use crate::fit::norm_lm::fit_mag_lm;
 use crate::fit::Method;
 use crate::fit::{Calibration, Vec3};
 use crate::pipeline::chain::{default_accel_chain, unknowns, CandidateOutcome};
+use crate::pipeline::observations::{self as dataset, to_poses};
 use crate::pipeline::RecordingCalibration;
 use crate::recording::{Recording, Sensor};
 use crate::still::StillReport;
@@ -228,17 +228,12 @@ pub fn analyse_sensor(
             })
         }
         Sensor::Mag => {
-            // Still poses only when they cover enough orientations for the ellipsoid (nine
-            // distinct gravity directions); otherwise short windows of the whole stream.
-            let mut obs = dataset::pose_observations(recording, still, Sensor::Mag);
-            let covered = still.from_pose_column || still.directions.len() >= 9;
-            if obs.len() < 12 || !covered {
-                obs = dataset::window_observations(
-                    recording,
-                    options.mag_window,
-                    options.max_mag_windows,
-                );
-            }
+            let (obs, _) = dataset::mag_observations(
+                recording,
+                Some(still),
+                options.mag_window,
+                options.max_mag_windows,
+            );
             if obs.len() < 12 {
                 return Err(too_few("magnetometer windows", obs.len(), 12));
             }

@@ -6,6 +6,7 @@
 
 use std::collections::BTreeMap;
 
+use super::observations::{MAG_WINDOW_SAMPLES, MAX_MAG_WINDOWS};
 use crate::fit::{Fit, Method, Vec3};
 use crate::geomag::{local_field_today, LocalField, Location, RadiusCheck};
 use crate::recording::{Recording, Sensor, Units};
@@ -13,8 +14,8 @@ use crate::still::StillReport;
 
 use super::align::align_mag;
 use super::calibration::{
-    bias_noise_test, norm_noise_test, pose_noise_floor, sample_noise_floor, RecordingCalibration,
-    SensorOutcome,
+    bias_noise_test, norm_noise_test, pose_noise_floor, sample_noise_floor, stream_noise_test,
+    RecordingCalibration, SensorOutcome,
 };
 use super::chain::{default_accel_chain, unknowns};
 use super::gyro::{fit_gyroscope, gyro_unit_scale, moot_gyro_scale};
@@ -174,12 +175,14 @@ fn calibrate_with(
             })
             .collect()
     });
-    // The magnetometer's residual against its samples' noise, whichever thread fitted it.
-    if let Some(noise) = &input.mag_noise {
-        for outcome in sensors.iter_mut().filter(|s| s.sensor == Sensor::Mag) {
-            if let Ok(fit) = &outcome.fit {
+    // The magnetometer's residual against its samples' noise, whichever thread fitted it, and
+    // the residual analysis's test on the means of its poses or windows.
+    for outcome in sensors.iter_mut().filter(|s| s.sensor == Sensor::Mag) {
+        if let Ok(fit) = &outcome.fit {
+            if let Some(noise) = &input.mag_noise {
                 outcome.noise_floor = sample_noise_floor(input.mag_points(), fit, noise);
             }
+            test_mag_residual(outcome, recording);
         }
     }
     align_outcomes(&mut sensors, input.still.as_ref());
@@ -313,6 +316,32 @@ fn fit_magnetometer(
     }
     outcome.fit = fit.map_err(|e| e.to_string());
     outcome
+}
+
+/// Unknowns of a magnetometer model: an axis-aligned ellipsoid's six, else a general one's nine.
+fn mag_unknowns(method: Method) -> usize {
+    match method {
+        Method::MinMax | Method::AxisAligned | Method::MinMaxAxisAlignedMean => 6,
+        _ => 9,
+    }
+}
+
+/// The magnetometer's χ² test: the means of its residual over short windows of the recorded
+/// stream against their own standard errors ([`stream_noise_test`]).
+fn test_mag_residual(outcome: &mut SensorOutcome, recording: &Recording) {
+    let Ok(fit) = &outcome.fit else { return };
+    let Some(mag) = &recording.mag else { return };
+    let test = stream_noise_test(
+        &mag.samples,
+        fit,
+        MAG_WINDOW_SAMPLES,
+        MAX_MAG_WINDOWS,
+        mag_unknowns(fit.method),
+    );
+    if let Some(test) = test {
+        outcome.noise_test = Some(test);
+        outcome.noise_test_of = Some(format!("noise of its {MAG_WINDOW_SAMPLES}-sample means"));
+    }
 }
 
 /// Rotate the magnetometer fit into the accelerometer frame when both were asked for.

@@ -8,6 +8,7 @@ use crate::fit::alignment::Alignment;
 use crate::fit::{Fit, Pose, Vec3};
 use crate::geomag::{LocalField, RadiusCheck};
 use crate::recording::Sensor;
+use crate::stats::autocorrelation::MAX_NOISE_CORRELATION;
 use crate::stats::chi_square::ChiSquareTest;
 
 use super::chain::ChainChoice;
@@ -32,10 +33,15 @@ pub struct SensorOutcome {
     /// Relative residual a perfect model would leave: from the pose noise (accelerometer,
     /// gyroscope), or from the noise of single samples (magnetometer).
     pub noise_floor: Option<f64>,
-    /// The χ² test of the residual against each pose's own noise, the residual analysis's test
-    /// ([`norm_noise_test`], [`bias_noise_test`]); `None` for the magnetometer, for models
-    /// with as many unknowns as poses, and when a pose has too few samples for its noise.
+    /// The χ² test of the residual against the noise of the means it rests on, the residual
+    /// analysis's test ([`norm_noise_test`], [`bias_noise_test`]): each pose's, or for the
+    /// magnetometer each window's when the poses do not determine its ellipsoid
+    /// ([`crate::pipeline::observations::mag_observations`]). `None` for models with as many
+    /// unknowns as observations, and when an observation has too few samples for its noise.
     pub noise_test: Option<ChiSquareTest>,
+    /// What the noise test's observations are, when not the poses ("noise of its 20-sample
+    /// windows").
+    pub noise_test_of: Option<String>,
     /// Findings worth a line (e.g. which model the default chain chose and why).
     pub notes: Vec<String>,
     /// Accelerometer with the default chain: every candidate model and why it was chosen or not.
@@ -62,6 +68,7 @@ impl SensorOutcome {
             to_nominal: None,
             noise_floor: None,
             noise_test: None,
+            noise_test_of: None,
             notes: Vec::new(),
             chain: None,
             alignment: None,
@@ -123,6 +130,7 @@ impl SensorOutcome {
                 "temperature, non-linearity, motion during holds",
             )
         };
+        let noise = self.noise_test_of.as_deref().unwrap_or(noise);
         if let Some(test) = &self.noise_test {
             // √(χ²/dof): the residual in units of what the poses' own noise leaves.
             let ratio = test.reduced().sqrt();
@@ -251,6 +259,68 @@ pub fn norm_noise_test(
         ChiSquareTest::new(chi2, poses.len(), unknowns),
         (floor2 / poses.len() as f64).sqrt(),
     ))
+}
+
+/// The χ² test of a norm fit of a stream of samples (the magnetometer's): the relative residual
+/// `|A(x−b)|/ref − 1` of every sample, averaged over consecutive windows of `window` samples
+/// (at most `max_windows`, evenly spread), each mean against the standard error of such a mean,
+/// on `windows − unknowns` degrees of freedom.
+///
+/// The norm is taken per sample before averaging, so a board turning within a window does not
+/// pull the mean inward (a mean of raw readings over a turn lies inside the ellipsoid). The
+/// standard error comes from the residual's first differences, as
+/// [`crate::stats::autocorrelation`] takes it (slow variation, which is what the test looks
+/// for, hardly enters them; correlated noise is corrected by the AR(1) `n_eff`), pooled over all
+/// windows: the noise variance and its lag-1 correlation estimated from one window's 19
+/// differences would scatter by tens of per cent and bias χ² (its correlation is clipped at
+/// zero, its variance enters inverted). `None` with fewer windows than `unknowns + 1`.
+pub fn stream_noise_test(
+    samples: &[Vec3],
+    fit: &Fit,
+    window: usize,
+    max_windows: usize,
+    unknowns: usize,
+) -> Option<ChiSquareTest> {
+    let window = window.max(4);
+    let count = samples.len() / window;
+    if count <= unknowns || max_windows == 0 || fit.reference <= 0.0 {
+        return None;
+    }
+    let residual = |x: &Vec3| (fit.cal.a * (x - fit.cal.b)).norm() / fit.reference - 1.0;
+    let stride = count.div_ceil(max_windows).max(1);
+    let mut means = Vec::with_capacity(count.div_ceil(stride));
+    // Per window: differences centred on the window's own mean difference (a steady trend
+    // within the window is not noise); pooled sums of their squares and lag-1 products.
+    let (mut d_var, mut d_cov, mut d_count) = (0.0, 0.0, 0usize);
+    let mut r = Vec::with_capacity(window);
+    for w in (0..count).step_by(stride) {
+        r.clear();
+        r.extend(samples[w * window..(w + 1) * window].iter().map(residual));
+        if r.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        means.push(r.iter().sum::<f64>() / window as f64);
+        let d_mean = (r[window - 1] - r[0]) / (window - 1) as f64;
+        let mut previous: Option<f64> = None;
+        for pair in r.windows(2) {
+            let d = pair[1] - pair[0] - d_mean;
+            d_var += d * d;
+            if let Some(p) = previous {
+                d_cov += p * d;
+            }
+            previous = Some(d);
+            d_count += 1;
+        }
+    }
+    if d_var.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || means.len() <= unknowns {
+        return None;
+    }
+    let rho = (1.0 + 2.0 * d_cov / d_var).clamp(0.0, MAX_NOISE_CORRELATION);
+    let white_var = d_var / d_count as f64 / (2.0 * (1.0 - rho));
+    let n_eff = (window as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0);
+    let var_of_mean = white_var / n_eff;
+    let chi2 = means.iter().map(|m| m * m / var_of_mean).sum();
+    Some(ChiSquareTest::new(chi2, means.len(), unknowns))
 }
 
 /// The χ² test of a gyroscope bias against its holds' own noise: every hold's mean less the

@@ -4,6 +4,8 @@
 //! recording ─▶ input (units, sanity, still intervals, magnetometer samples)   input.rs
 //!           ─▶ fit: accelerometer by the default chain (chain.rs) or a method (methods.rs),
 //!                   gyroscope (gyro.rs), magnetometer, then mag → accel frame (align.rs)
+//!           ─▶ each residual tested against the noise of the means it rests on
+//!                   (pose or window observations)                         observations.rs
 //!           ─▶ RecordingCalibration (units, references, provenance)        calibration.rs
 //!           ─▶ parameter file (params_file.rs) ─▶ export / flash / report
 //! ```
@@ -19,6 +21,7 @@ pub mod chain;
 pub mod gyro;
 pub mod input;
 pub mod methods;
+pub mod observations;
 pub mod params_file;
 pub mod references;
 

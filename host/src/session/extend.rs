@@ -17,7 +17,6 @@
 use imucal_protocol::CalibrationSet;
 
 use super::solve::{accel_of, gyro_of, CapturedPose};
-use crate::analysis::dataset::{to_poses, Observation};
 use crate::analysis::effects::EffectKind;
 use crate::analysis::extended_fit::BaseKind;
 use crate::analysis::{
@@ -27,6 +26,7 @@ use crate::analysis::{
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::norm_lm::fit_accel_lm;
 use crate::fit::Vec3;
+use crate::pipeline::observations::{to_poses, Observation};
 use crate::recording::Sensor;
 use imucal_protocol::PoseStats;
 

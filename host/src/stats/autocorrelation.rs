@@ -13,7 +13,7 @@ use super::Vec3;
 
 /// Largest lag-1 autocorrelation of the noise accepted; beyond it the AR(1) correction
 /// (factor `(1 + ρ)/(1 − ρ)³` on the variance of the mean) is itself too uncertain.
-const MAX_NOISE_CORRELATION: f64 = 0.9;
+pub const MAX_NOISE_CORRELATION: f64 = 0.9;
 
 /// Mean, standard error and noise statistics of a run of samples.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -2,7 +2,7 @@
 //!
 //! Each residual component is weighted by the noise it would show from noise alone (the
 //! standard error of the pose mean, propagated through the model: `σ'ᵢ = |∇ₓ(|A(x−b)|/ref)∘σᵢ|`
-//! for the norm model, `σᵢ` per axis for the gyroscope; see [`crate::analysis::dataset`] for `σᵢ` and its
+//! for the norm model, `σᵢ` per axis for the gyroscope; see [`crate::pipeline::observations`] for `σᵢ` and its
 //! correction for correlated samples). If the model is right and the noise is Gaussian,
 //! `χ² = Σ(rᵢ/σᵢ)²` follows `χ²(N − p)`; the residual is called consistent with the noise when
 //! the upper-tail probability is at least [`CONSISTENCY_ALPHA`].

@@ -1,4 +1,4 @@
-//! The observations the residual analysis works on: one per still pose (accelerometer,
+//! The observations `fit`'s verdict and the residual analysis test a model on: one per still pose (accelerometer,
 //! gyroscope, and magnetometer when it has enough still poses) or per short window of the
 //! magnetometer stream, each with its mean reading, the standard error of that mean, its mean
 //! temperature, its mid time, and the specific force measured at the same time.
@@ -168,6 +168,54 @@ pub fn window_observations(
         });
     }
     out
+}
+
+/// Samples per magnetometer window observation (at the sensors' usual 50–100 Hz, a fraction of
+/// a second: short enough that the board turns little within it, long enough for a variance).
+pub const MAG_WINDOW_SAMPLES: usize = 20;
+/// Most magnetometer window observations used, evenly spread over the stream.
+pub const MAX_MAG_WINDOWS: usize = 300;
+
+/// Where the magnetometer's observations come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MagBasis {
+    /// The still poses (enough of them, over enough orientations for an ellipsoid).
+    Poses,
+    /// Short windows of the whole stream.
+    Windows,
+}
+
+impl MagBasis {
+    /// What the observations are, for a verdict: "pose noise", "noise of its 20-sample windows".
+    pub fn noise_text(self, window: usize) -> String {
+        match self {
+            Self::Poses => "pose noise".to_string(),
+            Self::Windows => format!("noise of its {window}-sample windows"),
+        }
+    }
+}
+
+/// The magnetometer's observations: the still poses when there are at least twelve over nine
+/// or more distinct gravity directions (or the holds come from a `pose` column), since only then
+/// do they determine the ellipsoid; otherwise windows of `window` samples of the whole stream
+/// (at most `max_windows`, [`window_observations`]).
+pub fn mag_observations(
+    recording: &Recording,
+    still: Option<&StillReport>,
+    window: usize,
+    max_windows: usize,
+) -> (Vec<Observation>, MagBasis) {
+    if let Some(still) = still {
+        let obs = pose_observations(recording, still, Sensor::Mag);
+        let covered = still.from_pose_column || still.directions.len() >= 9;
+        if obs.len() >= 12 && covered {
+            return (obs, MagBasis::Poses);
+        }
+    }
+    (
+        window_observations(recording, window, max_windows),
+        MagBasis::Windows,
+    )
 }
 
 /// Observations as fit poses (the variance of one sample recovered from the mean's).
