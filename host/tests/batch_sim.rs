@@ -245,3 +245,66 @@ fn a_small_batch_with_a_failed_board_prints_figures_crcs_and_counts_in_words() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_terminated_batch_saves_every_boards_measurements_and_says_how_to_continue() {
+    let dir = scratch_dir("batch-term");
+    let out_dir = dir.join("batch");
+    let child = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim-boards", "2", "--yes", "--no-history"])
+        .arg("-o")
+        .arg(&out_dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("imucal runs");
+    // Stop once a board has saved two positions (each session saves after every pose).
+    let poses_saved = || {
+        std::fs::read_dir(&out_dir)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|e| imucal::session::save::load_poses(&e.path().join("poses.json")).ok())
+            .map(|p| p.len())
+            .max()
+            .unwrap_or(0)
+    };
+    let started = std::time::Instant::now();
+    while poses_saved() < 2 {
+        assert!(started.elapsed().as_secs() < 300, "no pose saved in 300 s");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    // SIGTERM, as `timeout` or a closed session sends it: the same as a Ctrl-C.
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    let out = child.wait_with_output().expect("imucal ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("--resume"), "{stderr}");
+    let boards: Vec<_> = std::fs::read_dir(&out_dir)
+        .expect("the batch directory")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .collect();
+    assert_eq!(boards.len(), 2, "{boards:?}");
+    for board in boards {
+        let progress = imucal::session::load_progress(&board).expect("progress.json");
+        assert!(
+            progress.stopped_because.contains("stopped by the user"),
+            "{progress:?}"
+        );
+        // What was streamed is on disk: the moves between the holds and the magnetometer.
+        let moves = imucal::session::save::load_moves(&board.join("moves.csv")).expect("moves");
+        assert!(!moves.is_empty(), "{}", board.display());
+        assert_eq!(
+            imucal::session::save::load_mag_samples(&board.join("mag_samples.csv"))
+                .expect("magnetometer samples")
+                .len(),
+            progress.mag_samples
+        );
+    }
+}

@@ -211,8 +211,9 @@ pub(super) fn resume_command(args: &CalibrateArgs, dir: &Path) -> String {
 /// process group deliver one interrupt to the process and again to its group.
 const SAME_CTRL_C: Duration = Duration::from_millis(500);
 
-/// A flag set by the first Ctrl-C, which the session notices at its next batch of samples or
-/// stage (it then stops the stream and saves); a second Ctrl-C ends the program at once.
+/// A flag set by the first Ctrl-C (or SIGTERM, SIGHUP: a `timeout`, a closed terminal), which
+/// the session notices at its next batch of samples or stage (it then stops the stream and
+/// saves); a second one ends the program at once.
 pub(super) fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     let handler_flag = Arc::clone(&flag);
@@ -221,7 +222,7 @@ pub(super) fn interrupt_flag() -> anyhow::Result<Arc<AtomicBool>> {
         None => {
             first = Some(Instant::now());
             handler_flag.store(true, Ordering::SeqCst);
-            say!("\nCtrl-C: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
+            say!("\nInterrupted: stopping the session and saving what was measured (Ctrl-C again to quit at once)");
         }
         Some(at) if at.elapsed() < SAME_CTRL_C => {}
         Some(_) => std::process::exit(130),

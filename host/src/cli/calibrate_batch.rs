@@ -15,7 +15,7 @@ use imucal::session::SessionEvent;
 use serde::Serialize;
 
 use super::args::CalibrateArgs;
-use super::calibrate::{field_reference, session_options, unix_now};
+use super::calibrate::{field_reference, interrupt_flag, session_options, unix_now};
 use super::calibrate_sim::Simulated;
 use super::write_policy::{check_outputs, Output};
 
@@ -114,6 +114,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         record_history: !args.history.no_history,
         operator: args.history.operator.clone(),
         station: args.history.station.clone(),
+        interrupt: Some(interrupt_flag()?),
     };
     say!(
         "Batch of {} on one fixture; sessions in {}",
@@ -155,6 +156,23 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     } else {
         print!("{}", batch_table(&report));
+    }
+    if options
+        .interrupt
+        .as_ref()
+        .is_some_and(|flag| flag.load(std::sync::atomic::Ordering::SeqCst))
+    {
+        say!(
+            "Each stopped board's session is saved in {}/<device id>; continue one with \
+             `imucal calibrate --resume {}/<device id> --port <its port>`{}",
+            out_dir.display(),
+            out_dir.display(),
+            if simulated.is_empty() {
+                ""
+            } else {
+                " (a simulated board: --sim --sim-seed <its seed> in place of --port)"
+            }
+        );
     }
     let not_written = report.boards.len() - report.verified;
     let unrecorded = report

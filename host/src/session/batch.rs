@@ -6,6 +6,7 @@
 //! not written, with the reason.
 
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -39,6 +40,9 @@ pub struct BatchOptions {
     pub operator: Option<String>,
     /// Which station, kept in the history.
     pub station: Option<String>,
+    /// Set (by a Ctrl-C handler) to stop every board's session at its next batch of samples;
+    /// each saves what was measured, as a single session does.
+    pub interrupt: Option<Arc<AtomicBool>>,
 }
 
 /// How one board's attempt ended.
@@ -291,6 +295,7 @@ fn board_session(
     // Saved as it goes, so a board lost mid-session keeps what was measured.
     let control = SessionControl {
         save_dir: Some(dir.clone()),
+        interrupt: options.interrupt.clone(),
         ..SessionControl::default()
     };
     let outcome = match run_session_with(&mut client, &options.session, &mut observer, &control) {

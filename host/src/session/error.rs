@@ -103,7 +103,7 @@ pub enum SessionError {
         cause: std::io::Error,
     },
     /// The user stopped the session (Ctrl-C).
-    #[error("the session was stopped by the user (Ctrl-C)")]
+    #[error("the session was stopped by the user (Ctrl-C, or a termination signal)")]
     Interrupted,
     /// The session stopped early; says what the board holds and where the measurements are.
     #[error("{cause}\nThe board holds {board_holds}.\nSession: {saved}.")]
