@@ -416,3 +416,31 @@ fn ctrl_c_stops_the_binary_saves_the_poses_and_says_the_board_keeps_its_set() {
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(dir.with_extension("db"));
 }
+
+#[test]
+fn without_yes_and_without_a_terminal_to_ask_nothing_is_written_to_the_board() {
+    let dir = session_dir("no-one-to-ask");
+    // Input from nowhere: nobody can answer "write these parameters?".
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim", "--sim-seed", "7", "--speed", "30"])
+        .args(["--no-history", "-o"])
+        .arg(&dir)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("imucal runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("nobody to ask") && stderr.contains("--yes"),
+        "{stderr}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("saved"))
+            .expect("JSON");
+    assert_eq!(summary["written"], false, "{summary}");
+    assert_eq!(
+        summary["not_written_because"], "no --yes, and no terminal to ask",
+        "{summary}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -620,7 +620,9 @@ pub struct CalibrateArgs {
     #[arg(long, verbatim_doc_comment)]
     pub analyze: bool,
     /// Unattended: write a good or marginal calibration without asking, and print plain
-    /// progress lines. A poor one is not written (exit code 1) unless --accept-poor.
+    /// progress lines. A poor one is not written (exit code 1) unless --accept-poor. Without
+    /// --yes and without a terminal to ask (input from a pipe or a file), nothing is written:
+    /// the session is saved and exits 1.
     #[arg(long, short = 'y')]
     pub yes: bool,
     /// Write the calibration even when its verdict is poor (by default a poor calibration is

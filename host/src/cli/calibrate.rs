@@ -31,7 +31,9 @@ use super::board::given_or_only_board;
 use super::calibrate_extend::{close_the_loop, Closed};
 use super::calibrate_sim::Simulated;
 use super::calibrate_view::{before_after_table, Terminal};
-use super::write_policy::{check_outputs, refused_poor, Output, WriteDecision, WritePolicy};
+use super::write_policy::{
+    check_outputs, not_asked, refused_poor, Output, WriteDecision, WritePolicy,
+};
 
 fn duration_arg(name: &str, seconds: f64) -> anyhow::Result<Duration> {
     anyhow::ensure!(
@@ -399,6 +401,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         outcome.not_written_because = Some(
             match terminal.decision {
                 Some(WriteDecision::RefusedPoor) => "poor verdict",
+                Some(WriteDecision::NoOneToAsk) => "no --yes, and no terminal to ask",
                 _ => "declined at the prompt",
             }
             .to_string(),
@@ -544,6 +547,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     // Nothing written because of the verdict is a failure for scripts, after all is saved.
     if terminal.decision == Some(WriteDecision::RefusedPoor) {
         return Err(refused_poor("The calibration", &dir.join("params.json")));
+    }
+    if terminal.decision == Some(WriteDecision::NoOneToAsk) {
+        return Err(not_asked(
+            "The calibration",
+            &format!(
+                "write the saved file with `imucal flash {} --yes`",
+                dir.join("params.json").display()
+            ),
+        ));
     }
     if let Some(Closed::RefusedPoor(params)) = closed {
         return Err(refused_poor("The extended set", &params));

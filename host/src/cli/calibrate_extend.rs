@@ -108,7 +108,7 @@ pub(super) fn close_the_loop(
     let question = format!("Write the extended set to the board on {}", outcome.port);
     match policy.decide(outcome.fit.verdict.level, &question) {
         WriteDecision::Write => {}
-        WriteDecision::Declined => {
+        WriteDecision::Declined | WriteDecision::NoOneToAsk => {
             say!("The extended set was not written; the board keeps the base set");
             return Ok(Closed::BaseStays);
         }

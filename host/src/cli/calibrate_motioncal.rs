@@ -18,7 +18,7 @@ use super::args::CalibrateArgs;
 use super::board::given_or_only_board;
 use super::calibrate::{checked_session_dir, field_reference, interrupt_flag, session_options};
 use super::calibrate_view::Terminal;
-use super::write_policy::WritePolicy;
+use super::write_policy::{not_asked, WriteDecision, WritePolicy};
 
 /// Longest wait for the board's `Cal1:`/`Cal2:` echo (Adafruit's sketch prints it every 1.5 s).
 const ECHO_TIMEOUT: Duration = Duration::from_secs(10);
@@ -131,6 +131,17 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             .context("the session summary could not be read back")?;
         println!("{summary}");
     }
+    if terminal.decision == Some(WriteDecision::NoOneToAsk) {
+        let packet = dir.join("motioncal.bin");
+        return Err(not_asked(
+            "The packet",
+            &format!(
+                "send the saved packet yourself (`stty -F {port} raw 115200`, then `cat {} > \
+                 {port}`)",
+                packet.display()
+            ),
+        ));
+    }
     Ok(())
 }
 
@@ -162,9 +173,16 @@ fn print_result(outcome: &MotionCalOutcome, dir: &std::path::Path) {
     print!("{}", outcome.limitations.describe());
     let cal = &outcome.conversion.calibration;
     println!(
-        "Sent to the board: accel offsets {:?} m/s², gyro offsets {:?} rad/s, hard iron {:?} µT, \
-         field {:.2} µT",
-        cal.accel_zerog, cal.gyro_zerorate, cal.mag_hardiron, cal.mag_field
+        "{}: accel offsets {:?} m/s², gyro offsets {:?} rad/s, hard iron {:?} µT, field {:.2} µT",
+        if outcome.echo.is_some() {
+            "Sent to the board"
+        } else {
+            "The packet (not sent)"
+        },
+        cal.accel_zerog,
+        cal.gyro_zerorate,
+        cal.mag_hardiron,
+        cal.mag_field
     );
     match &outcome.echo {
         Some(echo) => println!(

@@ -28,6 +28,8 @@ pub(super) enum WriteDecision {
     Declined,
     /// Not written because its verdict is poor (and neither `--accept-poor` nor "y" said so).
     RefusedPoor,
+    /// Not written: nobody to ask (standard input is not a terminal) and no `--yes`.
+    NoOneToAsk,
 }
 
 impl WritePolicy {
@@ -56,18 +58,19 @@ impl WritePolicy {
 }
 
 impl WritePolicy {
-    /// The decision when no question is needed: `--accept-poor` for a poor set, and `--yes`
-    /// or an input that is not a terminal (nobody to ask) for the rest; `None` means ask.
+    /// The decision when no question is needed: `--accept-poor` for a poor set, `--yes` for
+    /// the rest; without `--yes` and without a terminal to ask, nothing is written (a board is
+    /// changed only when someone said so); `None` means ask.
     fn settled(&self, level: VerdictLevel, interactive: bool) -> Option<WriteDecision> {
         let poor = level == VerdictLevel::Poor;
         if poor && self.accept_poor {
             Some(WriteDecision::Write)
-        } else if self.yes || !interactive {
-            Some(if poor {
-                WriteDecision::RefusedPoor
-            } else {
-                WriteDecision::Write
-            })
+        } else if poor && (self.yes || !interactive) {
+            Some(WriteDecision::RefusedPoor)
+        } else if self.yes {
+            Some(WriteDecision::Write)
+        } else if !interactive {
+            Some(WriteDecision::NoOneToAsk)
         } else {
             None
         }
@@ -107,6 +110,16 @@ impl Confirmation {
             _ => anyhow::bail!("not confirmed; nothing was changed"),
         }
     }
+}
+
+/// The error ending a command that wrote nothing because there was nobody to ask; `later` says
+/// how to write the saved set afterwards.
+pub(super) fn not_asked(what: &str, later: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{what} was saved but not written to the board: standard input is not a terminal, so \
+         there was nobody to ask, and --yes was not given; run with --yes to write without \
+         asking, or {later}"
+    )
 }
 
 /// The error ending a command that wrote nothing because the verdict was poor.
@@ -172,5 +185,20 @@ mod tests {
         );
         assert_eq!(plain.settled(VerdictLevel::Poor, true), None);
         assert_eq!(plain.settled(VerdictLevel::Good, true), None);
+    }
+
+    #[test]
+    fn without_yes_and_without_a_terminal_a_good_set_is_not_written() {
+        let plain = WritePolicy {
+            yes: false,
+            accept_poor: false,
+        };
+        for level in [VerdictLevel::Good, VerdictLevel::Marginal] {
+            assert_eq!(
+                plain.settled(level, false),
+                Some(WriteDecision::NoOneToAsk),
+                "{level:?}"
+            );
+        }
     }
 }
