@@ -421,3 +421,55 @@ fn sets_not_written_are_labelled_and_not_counted_in_the_fleet() {
         );
     }
 }
+
+#[test]
+fn one_recording_fitted_nine_ways_is_no_fleet_of_outliers_because_each_fit_records_its_sigma() {
+    // The same boards' data, fitted with slightly different still-detection settings: the
+    // parameters differ within their own uncertainty, which `fit --params-out` records, so the
+    // fleet weighs them by it and flags none. Without the σ the tiny spread between the fits
+    // made µg differences "gross offsets".
+    let dir = history_support::scratch_dir("fit-sigma-fleet");
+    let db = format!("sqlite://{}", dir.join("history.sqlite").display());
+    let recording = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/real/imucal_nilspod_ferraris.csv");
+    let variants: [&[&str]; 9] = [
+        &["--window", "0.5"],
+        &["--window", "0.4"],
+        &["--window", "0.6"],
+        &["--window", "0.7"],
+        &["--min-hold", "2"],
+        &["--min-hold", "1.5"],
+        &["--window", "0.3"],
+        &["--window", "0.8"],
+        &["--still-margin", "100"],
+    ];
+    for (i, variant) in variants.iter().enumerate() {
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["fit", "--gyro-unit", "dps", "--db", &db])
+            .args(*variant)
+            .arg("--params-out")
+            .arg(dir.join(format!("p{i}.json")))
+            .args(["--device", &format!("board{i}")])
+            .arg(&recording)
+            .output()
+            .expect("imucal runs");
+        assert!(
+            out.status.success(),
+            "{variant:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let history = imucal(&["history", "--db", &db, "board0", "--json"]);
+    let sigma = &history["records"][0]["sigma"];
+    for name in ["accel.b.x", "accel.A.xx", "gyro.b.z"] {
+        assert!(
+            sigma[name].as_f64().is_some_and(|s| s > 0.0),
+            "{name}: {history}"
+        );
+    }
+    let fleet = imucal(&["fleet", "--db", &db, "--json"]);
+    let results = fleet["results"].as_array().expect("results");
+    assert_eq!(results.len(), 9, "{fleet}");
+    assert!(results.iter().all(|b| b["outlier"] == false), "{fleet}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

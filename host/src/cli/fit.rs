@@ -23,7 +23,8 @@ use imucal::history::{CalibrationRecord, RecordSource};
 use imucal::pipeline::chain::CandidateOutcome;
 use imucal::pipeline::methods::method_for_sensor;
 use imucal::pipeline::{
-    check_and_calibrate, params_file, FitOptions, RecordingCalibration, SensorOutcome,
+    check_and_calibrate, parameter_sigma, params_file, FitOptions, RecordingCalibration,
+    SensorOutcome,
 };
 use imucal::recording::{Recording, Sensor};
 use nalgebra::Rotation3;
@@ -463,8 +464,13 @@ fn fitted_but_not_written(
         .collect()
 }
 
-/// Record the fit written by --params-out in the history.
-fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
+/// Record the fit written by --params-out in the history, with its parameters' uncertainty
+/// (the fleet weighs a board's distance from the others by it).
+fn record_fit(
+    args: &FitArgs,
+    file: ParamsFile,
+    calibration: &RecordingCalibration,
+) -> anyhow::Result<()> {
     let recording = &args.input.recording;
     let named = args
         .device
@@ -488,7 +494,8 @@ fn record_fit(args: &FitArgs, file: ParamsFile) -> anyhow::Result<()> {
     let crc = file
         .to_calibration_set(&recording.display().to_string())
         .map_or(0, |set| set.crc32());
-    let record = CalibrationRecord::new(&device, RecordSource::Fit, file, crc);
+    let mut record = CalibrationRecord::new(&device, RecordSource::Fit, file, crc);
+    record.sigma = parameter_sigma(calibration);
     super::history::record(&args.history, record)
 }
 
@@ -556,7 +563,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
                 failed.extend(fitted_but_not_written(&calibration, &file, path));
             }
             match write_params(file, path)? {
-                Some(file) => record_fit(args, file),
+                Some(file) => record_fit(args, file, &calibration),
                 None => Ok(()),
             }
         }

@@ -29,7 +29,7 @@ pub use calibrate::{calibrate, check_and_calibrate, FitOptions};
 pub use calibration::{RecordingCalibration, SensorOutcome};
 pub use chain::{default_accel_chain, ChainChoice};
 pub use input::{check_input, check_input_then, still_intervals, CheckedInput, InputOptions};
-pub use params_file::params_file;
+pub use params_file::{parameter_sigma, params_file};
 pub use references::{ReferenceError, References};
 
 /// Why the pipeline stopped before fitting.

@@ -51,6 +51,36 @@ fn sensor_json(
     })
 }
 
+/// One-sigma uncertainty of the parameters [`params_file`] writes, in the file's units and
+/// named as the history names them (`accel.b.x`, `mag.A.xy`): each fit's standard deviations
+/// re-expressed as its `A` and `b` are. Sensors the file leaves out, and fits without a
+/// covariance, give none; nor does a magnetometer's `A` rotated into the accelerometer frame
+/// (its uncertainty is then the rotation's, not the fit's).
+pub fn parameter_sigma(calibration: &RecordingCalibration) -> BTreeMap<String, f64> {
+    const AXES: [&str; 3] = ["x", "y", "z"];
+    let mut sigma = BTreeMap::new();
+    for outcome in &calibration.sensors {
+        if sensor_json(Some(outcome), calibration).is_err() {
+            continue;
+        }
+        let Some(std) = outcome.fit.as_ref().ok().and_then(|f| f.std.as_ref()) else {
+            continue;
+        };
+        let k = outcome.to_nominal.unwrap_or(1.0);
+        let name = outcome.sensor.name();
+        for (i, row) in AXES.iter().enumerate() {
+            sigma.insert(format!("{name}.b.{row}"), std.b[i] * k);
+            if outcome.a_std_applies() {
+                for (j, col) in AXES.iter().enumerate() {
+                    sigma.insert(format!("{name}.A.{row}{col}"), std.a[(i, j)] / k);
+                }
+            }
+        }
+    }
+    sigma.retain(|_, s| s.is_finite() && *s > 0.0);
+    sigma
+}
+
 /// RMS of the fit in output units (norm fits are relative to `reference`).
 fn residual(outcome: Option<&SensorOutcome>, scale: f64) -> f64 {
     outcome

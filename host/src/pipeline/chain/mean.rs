@@ -3,7 +3,7 @@
 //! `b = A⁻¹·mean(Aᵢbᵢ)`. Diagonal members give a diagonal mean, so the mean of two 6-unknown
 //! axis-aligned models is again one.
 
-use crate::fit::{Calibration, Fit, FitError, Mat3, Method, Pose, Vec3};
+use crate::fit::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Pose, Vec3};
 
 /// The calibration whose output is the mean of the outputs of `members`.
 ///
@@ -29,8 +29,10 @@ pub fn mean_calibration(members: &[Calibration]) -> Result<Calibration, FitError
 }
 
 /// The fit of `method` whose calibration is the mean of `members`, with its residuals on the
-/// pose means, and `loo_rms` from the caller's held-out refits. It carries no covariance: the
-/// members' estimates are correlated (fitted to the same poses) by an amount not modelled.
+/// pose means, and `loo_rms` from the caller's held-out refits. It carries no covariance matrix:
+/// the members' estimates are correlated (fitted to the same poses) by an amount not modelled.
+/// Its standard deviations are the mean of the members' ([`mean_std`]), an upper bound whatever
+/// that correlation.
 pub fn mean_fit(
     method: Method,
     members: &[&Fit],
@@ -47,7 +49,24 @@ pub fn mean_fit(
         .fold(1.0, f64::max);
     let mut fit = Fit::closed_form(method, cal, &means, reference, condition_number);
     fit.loo_rms = loo_rms;
+    fit.std = mean_std(members);
     Ok(fit)
+}
+
+/// Standard deviations of the mean of `members`' parameters: for a mean of `k` estimates,
+/// `Var(mean) = (1/k²)·Σᵢⱼ Cov(i, j) ≤ (1/k²)·(Σᵢ σᵢ)²` (Cauchy–Schwarz, `Cov ≤ σᵢσⱼ`), so the
+/// mean of the members' σ bounds it, entry by entry (the offset's to first order, `A` near the
+/// identity). `None` when a member has none.
+fn mean_std(members: &[&Fit]) -> Option<CalibrationStd> {
+    let stds: Vec<&CalibrationStd> = members
+        .iter()
+        .map(|f| f.std.as_ref())
+        .collect::<Option<_>>()?;
+    let k = stds.len() as f64;
+    (k > 0.0).then(|| CalibrationStd {
+        a: stds.iter().fold(Mat3::zeros(), |sum, s| sum + s.a) / k,
+        b: stds.iter().fold(Vec3::zeros(), |sum, s| sum + s.b) / k,
+    })
 }
 
 #[cfg(test)]
