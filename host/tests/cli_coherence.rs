@@ -33,8 +33,12 @@ fn stderr(out: &Output) -> String {
 
 #[test]
 fn calibrate_refuses_an_option_that_would_have_no_effect_before_any_board_starts() {
-    let cases: [(&[&str], &str); 4] = [
+    let cases: [(&[&str], &str); 5] = [
         (&["--sim", "--sim-faulty", "2"], "--sim-boards"),
+        (
+            &["--sim-boards", "2", "--sim-protocol", "motioncal"],
+            "a batch needs boards running imucal's firmware",
+        ),
         (
             &["--sim", "--sketch-rate", "50"],
             "--sim-protocol motioncal",
@@ -636,4 +640,35 @@ fn a_report_whose_fits_have_findings_says_so_in_its_headline() {
     );
     assert!(page.contains("the model misses something"));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_stopped_session_directory_points_to_resume_and_force_says_what_it_replaces() {
+    let dir = scratch("stopped");
+    let session = dir.join("s");
+    std::fs::create_dir(&session).expect("session directory");
+    let progress = serde_json::json!({
+        "device_id": "01000000004d49530000000000000000",
+        "stage": "stopped",
+        "stopped_because": "the session was stopped by the user (during stage `positions`)",
+        "board_holds": "its earlier calibration",
+        "poses": 11,
+        "mag_samples": 0,
+        "params_crc": null
+    });
+    std::fs::write(session.join("progress.json"), progress.to_string()).expect("progress");
+    let out = imucal_in(
+        &dir,
+        &["calibrate", "--sim", "--yes", "--no-history", "-o", "s"],
+    );
+    let message = stderr(&out);
+    assert!(!out.status.success(), "{message}");
+    assert!(
+        message.contains("holds a stopped session (11 positions measured")
+            && message.contains("calibrate --resume s"),
+        "{message}"
+    );
+    // Nothing was started: the stopped session is as it was.
+    assert!(session.join("progress.json").is_file());
+    assert!(!session.join("poses.json").exists());
 }

@@ -575,3 +575,25 @@ fn export_of_a_session_file_or_directory_names_the_sessions_parameter_file() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn an_input_unit_the_format_does_not_define_is_refused_naming_it() {
+    let dir = scratch("input-unit");
+    let mut file = serde_json::to_value(imucal::device::ParamsFile::from(&plain_set()))
+        .expect("a parameter file serialises");
+    file["accel"]["input_unit"] = serde_json::json!("furlongs");
+    let params = dir.join("params.json");
+    std::fs::write(&params, file.to_string()).expect("write the parameter file");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["export", "--format", "c-header"])
+        .arg(&params)
+        .output()
+        .expect("the imucal binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("accel.input_unit is `furlongs`") && stderr.contains("`counts`"),
+        "{stderr}"
+    );
+    assert!(out.stdout.is_empty(), "nothing is exported");
+}

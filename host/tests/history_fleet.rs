@@ -473,3 +473,23 @@ fn one_recording_fitted_nine_ways_is_no_fleet_of_outliers_because_each_fit_recor
     assert!(results.iter().all(|b| b["outlier"] == false), "{fleet}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_false_alarm_rate_too_small_to_flag_anything_is_refused() {
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args([
+            "fleet",
+            "--db",
+            "sqlite:///nonexistent/never.sqlite",
+            "--false-alarm",
+            "1e-300",
+        ])
+        .output()
+        .expect("imucal runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("--false-alarm is 1e-300") && stderr.contains("1e-12"),
+        "{stderr}"
+    );
+}

@@ -202,7 +202,7 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
                 "unexplained: the final residual"
             };
             out.push_str(&format!(
-                "  {what} ({:.3e} {u} RMS; weighed by each observation's noise {:.1}× it, χ²/dof = {:.1}) is above the floor and no candidate explains it{corr}\n",
+                "  {what} ({:.3e} {u} RMS) is {:.1}× the noise, each observation weighed by its own (χ²/dof = {:.1}; an RMS below the floor's can be far above the noise of the observations that carry it), and no candidate explains it{corr}\n",
                 a.rms_after,
                 a.test_after.reduced().sqrt(),
                 a.test_after.reduced()

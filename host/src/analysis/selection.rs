@@ -202,7 +202,11 @@ pub fn analyse_observations(
                 EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature => {
                     "no temperature, or a constant one, was recorded"
                 }
-                EffectKind::GSensitivity => "no accelerometer was recorded with the gyroscope",
+                EffectKind::GSensitivity => {
+                    "the specific force is not known for every gyroscope hold (no accelerometer \
+                     mean for a hold, or an accelerometer in an unknown unit that was not \
+                     calibrated)"
+                }
                 _ => "the data do not vary in the variable it depends on",
             };
             results.push(EffectResult {

@@ -23,7 +23,11 @@ pub enum Command {
     #[command(
         after_help = "Exit status: 0 when every requested sensor was fitted; 1 when any could \
         not be (standard error says which and why; --params-out still writes the others and \
-        lists it under not_fitted) or on any other error; 2 for a usage error.\n\n\
+        lists it under not_fitted) or on any other error; 2 for a usage error. A sensor fitted \
+        but left out of the --params-out file because its output is not in the board's unit \
+        (counts without --gyro-scale, a field normalised to 1) is said on standard error and \
+        listed under not_fitted; that alone fails the command only when the file would then \
+        hold nothing.\n\n\
         Examples:\n  \
         imucal fit data/real/imucal_nilspod_ferraris.csv --gyro-unit dps\n  \
         imucal fit data/real/imutk_xsens_multipos.csv --accel-unit counts --gyro-unit counts --sensor accel --method chen --json\n  \
@@ -490,6 +494,15 @@ impl CalibrateArgs {
     /// Refuses options that would have no effect in the session the others choose, before a
     /// board is opened: a user who gives one expects it to act.
     pub fn check_combination(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.sim_boards.is_none() || self.sim_protocol != BoardProtocol::Motioncal,
+            UsageError(
+                "--sim-protocol motioncal with --sim-boards: a batch needs boards running \
+                 imucal's firmware (they report an id to record and compare); calibrate a \
+                 simulated sketch board alone with --sim --sim-protocol motioncal"
+                    .to_string()
+            )
+        );
         anyhow::ensure!(
             self.sim_faulty == 0 || self.sim_boards.is_some(),
             UsageError(format!(

@@ -313,6 +313,29 @@ pub(super) fn checked_session_dir(args: &CalibrateArgs) -> anyhow::Result<PathBu
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("imucal-session-{}", unix_now())));
+    // A stopped session there is continued with --resume; --force starts over and says what
+    // it replaces.
+    if let Ok(progress) = imucal::session::load_progress(&dir) {
+        let held = imucal::words::counted(progress.poses, "position");
+        anyhow::ensure!(
+            args.force,
+            "`{}` holds a stopped session ({held} measured, {}); continue it with `imucal \
+             calibrate --resume {}` (and the board's --port or --sim options), choose another \
+             directory, or pass --force to start over there, replacing what it measured",
+            dir.display(),
+            if progress.stopped_because.is_empty() {
+                format!("stage `{}`", progress.stage)
+            } else {
+                progress.stopped_because.clone()
+            },
+            dir.display()
+        );
+        say!(
+            "imucal: warning: --force: starting over in {}, replacing the stopped session's \
+             {held} there",
+            dir.display()
+        );
+    }
     check_outputs(&[Output::Dir(&dir)], &[], args.force)?;
     Ok(dir)
 }

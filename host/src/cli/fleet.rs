@@ -28,11 +28,17 @@ pub struct FleetArgs {
     pub json: bool,
 }
 
+/// Smallest false-alarm rate accepted: its threshold is already tens of thousands of robust
+/// standard deviations for a fleet of a few boards.
+const MIN_FALSE_ALARM: f64 = 1e-12;
+
 /// Run `imucal fleet`.
 pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
-        args.false_alarm > 0.0 && args.false_alarm < 1.0,
-        "--false-alarm is {}, but it must be a probability between 0 and 1 (e.g. 0.001)",
+        (MIN_FALSE_ALARM..1.0).contains(&args.false_alarm),
+        "--false-alarm is {:e}, but it must be a probability from {MIN_FALSE_ALARM:e} to below 1 \
+         (e.g. 0.001): below that the threshold lies beyond any distance a calibration can \
+         measure, and no board could ever be flagged",
         args.false_alarm
     );
     anyhow::ensure!(

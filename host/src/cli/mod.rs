@@ -48,14 +48,13 @@ impl From<ReferenceError> for UsageError {
     }
 }
 
-/// The recording file a path names: the file itself, or a session directory's `recording.csv`
+/// The recording file a path names: the file itself, or a directory's recording ([`directory_recording`])
 /// (so every command that reads a recording takes a session of `imucal calibrate` alike).
 pub fn recording_file(path: &Path) -> anyhow::Result<PathBuf> {
     if !path.is_dir() {
         return Ok(path.to_path_buf());
     }
-    let candidate = path.join("recording.csv");
-    if candidate.is_file() {
+    if let Some(candidate) = directory_recording(path) {
         return Ok(candidate);
     }
     let shown = path.display();
@@ -72,6 +71,15 @@ pub fn recording_file(path: &Path) -> anyhow::Result<PathBuf> {
         "`{shown}` is a directory without a recording.csv; pass a recording file, or a session \
          directory of `imucal calibrate` that holds one"
     )
+}
+
+/// The recording a directory holds: `recording.csv`, or the `readings.csv` every reading of a
+/// MotionCal sketch session is saved in (also when it stopped early).
+pub fn directory_recording(dir: &Path) -> Option<PathBuf> {
+    ["recording.csv", imucal::session::motioncal::READINGS_FILE]
+        .into_iter()
+        .map(|name| dir.join(name))
+        .find(|path| path.is_file())
 }
 
 /// Read the recording named on the command line (a file, or a session directory's);

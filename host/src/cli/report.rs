@@ -139,7 +139,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     // its recording (as `fit` and `analyze` read it), from the recording.
     let is_session =
         path.is_dir() && path.join("params.json").is_file() && path.join("poses.json").is_file();
-    if path.is_dir() && !is_session && !path.join("recording.csv").is_file() {
+    if path.is_dir() && !is_session && super::directory_recording(path).is_none() {
         return Err(not_a_session(path));
     }
     let out = args

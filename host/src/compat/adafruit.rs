@@ -198,8 +198,17 @@ impl AdafruitLimitations {
     /// One line per dropped term and the costs, for the user.
     pub fn describe(&self) -> String {
         let mut text = String::new();
-        if self.unapplied.is_empty() {
+        // Printed to two decimals: a turn that shows as 0.00° is none to the user.
+        let turned = self.mag_rotation_deg >= 0.005;
+        if self.unapplied.is_empty() && !turned {
             text.push_str("The Adafruit library can apply every term of this calibration.\n");
+        } else if self.unapplied.is_empty() {
+            text.push_str(&format!(
+                "The Adafruit library can apply every term of this calibration but the \
+                 magnetometer's turn into the accelerometer frame ({:.2}°): it holds a symmetric \
+                 soft iron, so its headings are off by up to that angle.\n",
+                self.mag_rotation_deg
+            ));
         } else {
             text.push_str("The Adafruit library cannot apply:\n");
             for t in &self.unapplied {
@@ -328,6 +337,25 @@ pub fn limitations(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_turned_magnetometer_frame_is_not_called_every_term_applied() {
+        let mut limits = AdafruitLimitations {
+            unapplied: Vec::new(),
+            accel_error_mg: 0.0,
+            gyro_error_dps: 0.0,
+            mag_error_pct_of_field: 0.0,
+            mag_rotation_deg: 3.1,
+            poses: 0,
+        };
+        let text = limits.describe();
+        assert!(text.contains("but the magnetometer's turn"), "{text}");
+        assert!(text.contains("3.10°"), "{text}");
+        limits.mag_rotation_deg = 0.0;
+        assert!(limits
+            .describe()
+            .contains("can apply every term of this calibration.\n"));
+    }
 
     fn pose(accel: [f64; 3], gyro: [f64; 3], mag: [f64; 3]) -> UnitSample {
         UnitSample {

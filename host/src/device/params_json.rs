@@ -124,6 +124,16 @@ pub enum ParamsFileError {
         /// The format found.
         found: u16,
     },
+    /// A sensor's `input_unit` is not one a parameter file can name.
+    #[error("`{path}`: {sensor}.input_unit is `{unit}`, but the only input unit a parameter file names is `counts` (leave it out for m/s², rad/s or µT); correct it or fit the recording again")]
+    UnknownInputUnit {
+        /// The file.
+        path: String,
+        /// The sensor.
+        sensor: &'static str,
+        /// The unit found.
+        unit: String,
+    },
     /// A top-level key is not one of the file's (a misspelled sensor would otherwise be identity).
     #[error("`{path}`: `{key}` is not a parameter file key; the keys are {}; correct or remove it", KNOWN_KEYS.join(", "))]
     UnknownKey {
@@ -205,6 +215,9 @@ pub struct SensorJson {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_unit: Option<String>,
 }
+
+/// The one `input_unit` a parameter file names: raw counts of a sensor without a known scale.
+pub const COUNTS_UNIT: &str = "counts";
 
 impl Default for SensorJson {
     fn default() -> Self {
@@ -488,8 +501,22 @@ impl ParamsFile {
         Ok(file)
     }
 
-    /// References must be physical magnitudes and residuals non-negative RMS values.
+    /// References must be physical magnitudes, residuals non-negative RMS values, and an input
+    /// unit the one the format defines.
     fn check_metadata(&self, path: &str) -> Result<(), ParamsFileError> {
+        for (sensor, json) in [
+            ("accel", &self.accel),
+            ("gyro", &self.gyro),
+            ("mag", &self.mag),
+        ] {
+            if let Some(unit) = json.input_unit.as_deref().filter(|u| *u != COUNTS_UNIT) {
+                return Err(ParamsFileError::UnknownInputUnit {
+                    path: path.to_string(),
+                    sensor,
+                    unit: unit.to_string(),
+                });
+            }
+        }
         let implausible = |field: &str, value: f64, expected| ParamsFileError::Implausible {
             path: path.to_string(),
             field: field.to_string(),

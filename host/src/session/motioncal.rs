@@ -383,8 +383,10 @@ fn collect<'a, L: Read + Write>(
 }
 
 /// Adds to `fit`'s verdict what the Adafruit library's model costs on the poses: beyond a
-/// budget, the board's readings miss it whatever the fit, so a good verdict becomes marginal
-/// (the packet still improves on the part: its offsets are the largest error).
+/// budget the board's readings miss it whatever the fit, so a good verdict becomes marginal.
+/// Not poor, however far beyond: poor means measure again, and no session can do better with
+/// this library (the packet still improves on the part, whose offsets are its largest error);
+/// the reason says how far, and that firmware applying the full model meets the budget.
 fn judge_what_the_board_applies(
     fit: &mut SessionFit,
     limits: &AdafruitLimitations,
@@ -394,16 +396,24 @@ fn judge_what_the_board_applies(
     if limits.accel_error_mg > budgets.accel_mg {
         reasons.push(format!(
             "the sketch's library applies only the accelerometer's offsets, not its scale and \
-             axis terms: on the {} poses the board's |a| is off by up to {:.2} mg, above the \
-             {:.1} mg budget (params.json keeps the full model for firmware that applies it)",
-            limits.poses, limits.accel_error_mg, budgets.accel_mg
+             axis terms: on the {} poses the board's |a| is off by up to {:.2} mg, {:.1}× the \
+             {:.1} mg budget; measuring again cannot change that, firmware that applies the \
+             full model (params.json) can",
+            limits.poses,
+            limits.accel_error_mg,
+            limits.accel_error_mg / budgets.accel_mg,
+            budgets.accel_mg
         ));
     }
     if limits.mag_error_pct_of_field > budgets.mag_pct {
         reasons.push(format!(
             "the sketch's library holds a symmetric soft iron: on the {} poses the board's |m| \
-             is off by up to {:.2} % of the field, above the {:.1} % budget",
-            limits.poses, limits.mag_error_pct_of_field, budgets.mag_pct
+             is off by up to {:.2} % of the field, {:.1}× the {:.1} % budget; measuring again \
+             cannot change that, firmware that applies the full model (params.json) can",
+            limits.poses,
+            limits.mag_error_pct_of_field,
+            limits.mag_error_pct_of_field / budgets.mag_pct,
+            budgets.mag_pct
         ));
     }
     if !reasons.is_empty() && fit.verdict.level == VerdictLevel::Good {
