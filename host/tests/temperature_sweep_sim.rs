@@ -259,3 +259,59 @@ fn after_analyze_the_summary_and_history_record_the_extended_set_the_board_holds
     assert_eq!(records[0]["params_crc"], extended.as_str(), "{history}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn after_analyze_a_session_that_wrote_nothing_records_the_set_it_saved() {
+    // Input from nowhere and no --yes: nothing is written, deterministically. The session's
+    // saved set is then the extended one in params.json, and the summary and the history must
+    // name it, not the base set the analysis replaced.
+    let dir = std::env::temp_dir().join(format!("imucal-analyze-unwritten-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch directory");
+    let db = format!("sqlite://{}", dir.join("history.sqlite").display());
+    let session = dir.join("session");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["calibrate", "--sim", "--speed", "30"])
+        .args(["--sim-seed", "11", "--rounds", "3", "--analyze"])
+        .args(["--sim-temperature", "sweep"])
+        .args([
+            "--sim-effect",
+            "accel.bias_temperature=2",
+            "--db",
+            &db,
+            "-o",
+        ])
+        .arg(&session)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("run imucal");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("neither is the extended one"), "{stderr}");
+    let crc_of = |path: &Path| format!("{:#010x}", calibration_set(path).crc32());
+    let saved = crc_of(&session.join("params.json"));
+    let base = crc_of(&session.join("params-base.json"));
+    assert_ne!(saved, base, "the analysis added terms");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(session.join("summary.json")).expect("summary.json"),
+    )
+    .expect("summary.json parses");
+    assert_eq!(summary["written"], false, "{summary}");
+    assert_eq!(summary["params_crc"], saved.as_str(), "{summary}");
+    assert_eq!(summary["base_params_crc"], base.as_str(), "{summary}");
+    let history = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["history", "--db", &db, "--json"])
+        .output()
+        .expect("imucal history runs");
+    let history: serde_json::Value = serde_json::from_slice(&history.stdout).expect("JSON");
+    assert_eq!(
+        history["records"][0]["params_crc"],
+        saved.as_str(),
+        "{history}"
+    );
+    assert_eq!(
+        history["records"][0]["board"]["state"], "not_written",
+        "{history}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -451,6 +451,18 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     // `--analyze` wrote it over the base set.
     let mut final_summary = summary(&outcome);
     let mut rest_failure = None;
+    if let Some(Ok(Closed::SavedNotWritten(set))) = closed.as_ref() {
+        // Nothing is on the board: the summary and the history name the saved set, the one
+        // params.json holds and `flash` would write, as a written session does.
+        final_summary.base_params_crc = Some(final_summary.params_crc.clone());
+        final_summary.params = ParamsFile::from(&**set);
+        final_summary.params_crc = format!("{:#010x}", set.crc32());
+        let path = dir.join("summary.json");
+        let text = serde_json::to_string_pretty(&final_summary)
+            .context("the summary could not be encoded")?;
+        std::fs::write(&path, text + "\n")
+            .with_context(|| format!("could not write {}", path.display()))?;
+    }
     if let Some(Ok(Closed::Written { set, status, rest })) = closed.as_ref() {
         final_summary.base_params_crc = Some(final_summary.params_crc.clone());
         final_summary.params = ParamsFile::from(&**set);

@@ -17,8 +17,11 @@ use super::write_policy::{WriteDecision, WritePolicy};
 
 /// How `--analyze` ended: which set the board holds afterwards.
 pub(super) enum Closed {
-    /// The board keeps the base set (nothing to add, declined, or the base set not written).
+    /// The board keeps the base set (nothing to add, or the extended set declined).
     BaseStays,
+    /// Neither set was written (the base set was not): the extended set is the session's
+    /// saved set, `params.json`, the one `imucal flash` would write.
+    SavedNotWritten(Box<CalibrationSet>),
     /// The extended set's verdict kept it off the board; the path of the saved set.
     RefusedPoor(PathBuf),
     /// The extended set is on the board.
@@ -102,7 +105,7 @@ pub(super) fn close_the_loop(
              writes it",
             params_path.display()
         );
-        return Ok(Closed::BaseStays);
+        return Ok(Closed::SavedNotWritten(Box::new(extended.set)));
     }
     // The extended terms come from the same poses, so the base fit's verdict is theirs too.
     let question = format!("Write the extended set to the board on {}", outcome.port);
