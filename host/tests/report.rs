@@ -681,3 +681,36 @@ fn an_unfinished_session_is_reported_when_fitted_and_otherwise_refused_saying_ho
     assert!(stderr.contains("--resume"), "{stderr}");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn poses_of_a_raw_count_recording_are_named_by_the_side_that_is_up_not_by_the_offset() {
+    // IMU-TK's Xsens recording is in raw counts on an offset of about 32768 per axis: named from
+    // the raw means, every pose was "+X+Y+Z up".
+    let dir = scratch("raw-count-labels");
+    let recording =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/real/imutk_xsens_multipos.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .arg("report")
+        .arg(&recording)
+        .args(["--accel-unit", "counts", "--gyro-unit", "counts", "-o"])
+        .arg(dir.join("out"))
+        .output()
+        .expect("imucal runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(dir.join("out").join("report.html")).expect("the page");
+    let sides: std::collections::BTreeSet<&str> = ["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
+        .into_iter()
+        .filter(|side| html.contains(&format!("{side} up")))
+        .collect();
+    // The recording holds the board with each of its six faces up.
+    assert_eq!(sides.len(), 6, "{sides:?}");
+    assert!(
+        !html.contains("+X+Y+Z up #2"),
+        "every pose named by the offset"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -2,7 +2,7 @@
 //! [`ReportData`] — pose means and magnetometer samples before and after, the parameters, the
 //! chain's choice and the checks' findings.
 
-use crate::fit::{Fit, Vec3};
+use crate::fit::{Calibration, Fit, Vec3};
 use crate::geomag::LocalField;
 use crate::pipeline::calibration::once_per_reason;
 use crate::pipeline::{CheckedInput, RecordingCalibration, SensorOutcome};
@@ -61,7 +61,7 @@ pub fn from_calibration(
         match outcome.sensor {
             Sensor::Accel => accel_poses(&mut data, input, calibration, fit),
             Sensor::Mag => mag_samples(&mut data, input, outcome, fit),
-            Sensor::Gyro => gyro_poses(&mut data, input, outcome, fit),
+            Sensor::Gyro => gyro_poses(&mut data, input, calibration, outcome, fit),
         }
     }
     // The headline says how much of what was asked for is in the report.
@@ -126,7 +126,7 @@ fn accel_poses(
         calibrated: means.iter().map(|m| fit.cal.apply(m)).collect(),
         temp_c,
         gravity,
-        labels: pose_labels(input, Sensor::Accel),
+        labels: pose_labels(input, Sensor::Accel, Some(&fit.cal)),
     });
     data.verdict.push(format!(
         "accelerometer: residual RMS {:.2e} of g over {} poses",
@@ -136,8 +136,9 @@ fn accel_poses(
 }
 
 /// Name of each still pose of `sensor`: the side that points up (from the accelerometer's
-/// mean), with the recording's own label when it has one.
-fn pose_labels(input: &CheckedInput, sensor: Sensor) -> Vec<String> {
+/// mean, through its calibration when there is one: raw counts sit on an offset that would make
+/// every pose "+X+Y+Z up"), with the recording's own label when it has one.
+fn pose_labels(input: &CheckedInput, sensor: Sensor, accel: Option<&Calibration>) -> Vec<String> {
     let Some(still) = &input.still else {
         return Vec::new();
     };
@@ -146,10 +147,9 @@ fn pose_labels(input: &CheckedInput, sensor: Sensor) -> Vec<String> {
         .iter()
         .filter(|i| i.pose(sensor).is_some())
         .map(|i| {
-            let side = i
-                .accel
-                .as_ref()
-                .map_or("pose".to_string(), |a| up_label(&a.mean));
+            let side = i.accel.as_ref().map_or("pose".to_string(), |a| {
+                up_label(&accel.map_or(a.mean, |cal| cal.apply(&a.mean)))
+            });
             match i.label {
                 Some(label) => format!("{side} (pose {label})"),
                 None => side,
@@ -161,7 +161,13 @@ fn pose_labels(input: &CheckedInput, sensor: Sensor) -> Vec<String> {
 
 /// The gyroscope's still poses before and after its fit, °/s; left out when the data's unit
 /// has no known factor to rad/s (raw counts without `--gyro-scale`).
-fn gyro_poses(data: &mut ReportData, input: &CheckedInput, outcome: &SensorOutcome, fit: &Fit) {
+fn gyro_poses(
+    data: &mut ReportData,
+    input: &CheckedInput,
+    calibration: &RecordingCalibration,
+    outcome: &SensorOutcome,
+    fit: &Fit,
+) {
     let (Some(still), Some(to_rad)) = (&input.still, outcome.to_nominal) else {
         return;
     };
@@ -177,7 +183,14 @@ fn gyro_poses(data: &mut ReportData, input: &CheckedInput, outcome: &SensorOutco
     data.gyro = Some(GyroPoses {
         raw_dps: means.iter().map(|m| degrees(m * to_rad)).collect(),
         calibrated_dps: means.iter().map(|m| degrees(fit.cal.apply(m))).collect(),
-        labels: pose_labels(input, Sensor::Gyro),
+        labels: pose_labels(
+            input,
+            Sensor::Gyro,
+            calibration
+                .sensor(Sensor::Accel)
+                .and_then(|o| o.fit.as_ref().ok())
+                .map(|f| &f.cal),
+        ),
         scale_fit: Vec::new(),
     });
 }
