@@ -239,6 +239,9 @@ fn the_report_counts_coverage_in_the_same_regions_as_the_session_screen() {
     let mag = data.mag.as_ref().expect("magnetometer samples");
     let report = region_coverage(mag).expect("countable");
     assert_eq!(report.counts, screen.counts);
+    // The plots and the headline rest on the samples the fit used, the positions' and the
+    // tumble's, not on the tumble alone (a short one when the positions covered the sphere).
+    assert_eq!(mag.raw.len(), positions.len() + tumble.len());
     let html = render_html(&data).expect("renders");
     let empty = screen.empty_regions(min);
     assert!(empty.contains(&"-X-Y-Z".to_string()));

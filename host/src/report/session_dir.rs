@@ -51,8 +51,9 @@ struct MagColumns {
     counted: Vec<Vec3>,
 }
 
-/// Reads `mag_samples.csv` (`t_s,mx,my,mz,temp_c,phase`): the tumble samples if there are
-/// any, otherwise every sample; and apart, the samples the session's coverage counted.
+/// Reads `mag_samples.csv` (`t_s,mx,my,mz,temp_c,phase`): the samples of the positions and
+/// the tumble, which the session's fit and coverage used (not those of the wait at rest, which
+/// sit on one direction); every sample without a phase column.
 fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
     let text = read(path)?;
     let mut lines = text.lines();
@@ -93,21 +94,19 @@ fn read_mag_csv(path: &Path) -> Result<MagColumns, ReportError> {
                 })
         };
         let phase_name = phase.and_then(|p| fields.get(p)).copied();
-        let tumble = phase_name == Some("tumble");
+        let fitted = phase_name != Some("rest");
         let reading = Vec3::new(number(mx)?, number(my)?, number(mz)?);
         if phase_name != Some("rest") {
             counted.push(reading);
         }
         rows.push((
-            tumble,
+            fitted,
             number(t)?,
             Vec3::new(number(mx)?, number(my)?, number(mz)?),
             number(temp)?,
         ));
     }
-    if rows.iter().any(|r| r.0) {
-        rows.retain(|r| r.0);
-    }
+    rows.retain(|r| r.0);
     Ok(MagColumns {
         time_s: rows.iter().map(|r| r.1).collect(),
         raw: rows.iter().map(|r| r.2).collect(),
