@@ -442,5 +442,7 @@ fn without_yes_and_without_a_terminal_to_ask_nothing_is_written_to_the_board() {
         summary["not_written_because"], "no --yes, and no terminal to ask",
         "{summary}"
     );
+    // No calibrated stream was measured: no rate, rather than 0 Hz.
+    assert!(summary["stream_rate_hz"].is_null(), "{summary}");
     let _ = std::fs::remove_dir_all(&dir);
 }

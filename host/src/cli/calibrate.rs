@@ -532,8 +532,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             _ => String::new(),
         };
         println!(
-            "Session: {:.1} s {} ({:.1} s wall), {} positions, {} of 26 magnetometer \
+            "Session{}: {:.1} s {} ({:.1} s wall), {} positions, {} of 26 magnetometer \
              directions{stream}; verified: {}",
+            // The time of the run before the stop is not known (the board's clock may have
+            // restarted); the positions and directions are the whole session's.
+            if args.resume.is_some() {
+                " (this run's time; the positions and directions include the resumed run's)"
+            } else {
+                ""
+            },
             outcome.session_seconds,
             if args.sim {
                 "simulated"

@@ -94,8 +94,9 @@ pub struct SessionSummary {
     /// The gyroscope's scale factors and misalignment with their σ (`null` when only the bias
     /// could be calibrated).
     pub gyro_scale: Option<GyroScale>,
-    /// Calibrated samples per second of board time at rest.
-    pub stream_rate_hz: f64,
+    /// Calibrated samples per second of board time at rest; `null` when no calibrated stream
+    /// was measured (nothing written).
+    pub stream_rate_hz: Option<f64>,
     /// Samples lost in transit.
     pub lost_samples: u64,
 }
@@ -143,7 +144,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         gyro_scale: outcome.gyro_scale.clone(),
         verdict: outcome.fit.verdict.clone(),
         notes: outcome.fit.notes.clone(),
-        stream_rate_hz: outcome.stream_rate_hz,
+        stream_rate_hz: (outcome.stream_rate_hz > 0.0).then_some(outcome.stream_rate_hz),
         lost_samples: outcome.lost_samples,
     }
 }
