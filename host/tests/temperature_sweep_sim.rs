@@ -181,6 +181,19 @@ fn analyzed_calibration_holds_g_within_1_mg_at_25_c_and_2_mg_over_10_to_40_c() {
 
 /// `--analyze` writes the extended set over the base set: the summary and the history name the
 /// extended set (its CRC as the board reported it), and the base set's CRC is kept as such.
+/// `calibrate --analyze` of the simulated board (seed 11) over a temperature sweep with an
+/// accelerometer bias that follows temperature, recorded in `db`, saved in `session`.
+fn analysed_sweep(db: &str, session: &Path) -> std::process::Command {
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"));
+    command
+        .args(["calibrate", "--sim", "--speed", "30"])
+        .args(["--sim-seed", "11", "--rounds", "3", "--analyze"])
+        .args(["--sim-temperature", "sweep"])
+        .args(["--sim-effect", "accel.bias_temperature=2", "--db", db, "-o"])
+        .arg(session);
+    command
+}
+
 #[test]
 fn after_analyze_the_summary_and_history_record_the_extended_set_the_board_holds() {
     let dir = std::env::temp_dir().join(format!("imucal-analyze-crc-{}", std::process::id()));
@@ -190,18 +203,8 @@ fn after_analyze_the_summary_and_history_record_the_extended_set_the_board_holds
     let session = dir.join("session");
     let run = |attempt: u32| {
         let _ = std::fs::remove_dir_all(&session);
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
-            .args(["calibrate", "--sim", "--yes", "--json", "--speed", "30"])
-            .args(["--sim-seed", "11", "--rounds", "3", "--analyze"])
-            .args(["--sim-temperature", "sweep"])
-            .args([
-                "--sim-effect",
-                "accel.bias_temperature=2",
-                "--db",
-                &db,
-                "-o",
-            ])
-            .arg(&session)
+        let out = analysed_sweep(&db, &session)
+            .args(["--yes", "--json"])
             .output()
             .expect("run imucal");
         let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
@@ -270,18 +273,7 @@ fn after_analyze_a_session_that_wrote_nothing_records_the_set_it_saved() {
     std::fs::create_dir_all(&dir).expect("scratch directory");
     let db = format!("sqlite://{}", dir.join("history.sqlite").display());
     let session = dir.join("session");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
-        .args(["calibrate", "--sim", "--speed", "30"])
-        .args(["--sim-seed", "11", "--rounds", "3", "--analyze"])
-        .args(["--sim-temperature", "sweep"])
-        .args([
-            "--sim-effect",
-            "accel.bias_temperature=2",
-            "--db",
-            &db,
-            "-o",
-        ])
-        .arg(&session)
+    let out = analysed_sweep(&db, &session)
         .stdin(std::process::Stdio::null())
         .output()
         .expect("run imucal");
