@@ -1,7 +1,9 @@
 //! The guided session's magnetometer alignment from board-averaged poses: a spike the board
 //! averaged into one position's field is screened out by the calibrated magnitude, named in
 //! the fit's notes, and the rotation stays within its normal error. Synthetic poses and
-//! tumble with a known mounting rotation between the two sensors.
+//! tumble with a known mounting rotation between the two sensors. Also, on the same poses, the
+//! verdict of a set extended by the residual analysis: the base fit's held-out reason replaced
+//! by the extended model's.
 
 use imucal::fit::Vec3;
 use imucal::session::targets::twelve_positions;
@@ -137,5 +139,47 @@ fn a_spike_averaged_into_one_position_is_left_out_of_the_alignment_and_named() {
         notes[0].contains(&name) && notes[0].contains("left out of the alignment"),
         "{}",
         notes[0]
+    );
+}
+
+#[test]
+fn terms_that_explain_the_held_out_error_take_its_reason_and_level_out_of_the_verdict() {
+    use imucal::session::solve::{heldout_reason, verdict_with_terms};
+    use imucal::session::VerdictLevel;
+    let mut fit = fit_session(&poses(), &tumble(), G, Some(FIELD_UT), BUDGETS, 0).expect("fitted");
+    let clean = fit.verdict.clone();
+    assert_ne!(clean.level, VerdictLevel::Poor, "{:?}", clean.reasons);
+    let relative = |mg: f64| mg / 1000.0 * 9.806_65 / G;
+    // The base fit as a temperature drift leaves it: a position left out is off by 11.5 mg,
+    // more than five times the 2 mg budget, as the session's verdict says it.
+    let (reason, far) = heldout_reason("accelerometer fit", 11.5, BUDGETS).expect("over budget");
+    assert!(far);
+    fit.accel.loo_rms = Some(relative(11.5));
+    fit.verdict.reasons.push(reason);
+    fit.verdict.level = VerdictLevel::Poor;
+    // Terms that explain it: the reason goes, and the level is the clean fit's again.
+    let explained = verdict_with_terms(&fit, relative(0.3));
+    assert_eq!(explained, clean);
+    // Terms that explain part of it: the reason names the extended model and its figure.
+    let partly = verdict_with_terms(&fit, relative(3.0));
+    assert_eq!(partly.level, VerdictLevel::Marginal, "{:?}", partly.reasons);
+    assert_eq!(
+        partly.reasons.len(),
+        clean.reasons.len() + 1,
+        "{:?}",
+        partly.reasons
+    );
+    assert!(
+        partly
+            .reasons
+            .iter()
+            .any(|r| r.contains("model with the added terms is predicted with 3.00 mg")),
+        "{:?}",
+        partly.reasons
+    );
+    // Terms that do not help: still poor.
+    assert_eq!(
+        verdict_with_terms(&fit, relative(12.0)).level,
+        VerdictLevel::Poor
     );
 }

@@ -626,7 +626,9 @@ pub struct CalibrateArgs {
     /// can apply (bias temperature polynomial, scale temperature coefficient, non-linearity, gyro
     /// g-sensitivity) that the analysis accepts are added to the set, written, verified and
     /// checked at rest again; the written set is saved as params.json (the base set as
-    /// params-base.json) and the analysis as analysis.json.
+    /// params-base.json) and the analysis as analysis.json. The extended set is judged with
+    /// its own model's held-out error: a base set refused as poor for an error the added terms
+    /// explain is replaced by the extended set, which is then offered for writing.
     ///
     /// Example: imucal calibrate --sim --sim-temperature sweep
     /// --sim-effect accel.bias_temperature=2 --rounds 3 --analyze --yes

@@ -463,7 +463,19 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         std::fs::write(&path, text + "\n")
             .with_context(|| format!("could not write {}", path.display()))?;
     }
-    if let Some(Ok(Closed::Written { set, status, rest })) = closed.as_ref() {
+    if let Some(Ok(Closed::Written {
+        set,
+        verdict,
+        status,
+        rest,
+    })) = closed.as_ref()
+    {
+        // The verdict is the written set's; the set is on the board even when the base set
+        // was refused for its verdict and the terms explained why.
+        final_summary.verdict = verdict.clone();
+        final_summary.written = true;
+        final_summary.verified = true;
+        final_summary.not_written_because = None;
         final_summary.base_params_crc = Some(final_summary.params_crc.clone());
         final_summary.params = ParamsFile::from(&**set);
         final_summary.params_crc = format!("{:#010x}", status.active_crc);
@@ -550,7 +562,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             outcome.wall_seconds,
             outcome.poses.len(),
             outcome.coverage.covered(options.mag_min_per_region),
-            if outcome.verified {
+            if final_summary.verified {
                 "yes"
             } else {
                 "no (not written)"
@@ -587,7 +599,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     // Nothing written because of the verdict is a failure for scripts, after all is saved.
-    if terminal.decision == Some(WriteDecision::RefusedPoor) {
+    if terminal.decision == Some(WriteDecision::RefusedPoor) && !final_summary.written {
         return Err(refused_poor("The calibration", &dir.join("params.json")));
     }
     if terminal.decision == Some(WriteDecision::NoOneToAsk) {

@@ -5,10 +5,14 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use imucal::analysis::report;
+use imucal::analysis::result::RecordingAnalysis;
 use imucal::device::DeviceClient;
 use imucal::device::ParamsFile;
+use imucal::recording::Sensor;
+use imucal::session::solve::verdict_with_terms;
 use imucal::session::{
-    analyse_poses, extend_set, rest_errors, stream_for, RestErrors, SessionOptions, SessionOutcome,
+    analyse_poses, extend_set, rest_errors, stream_for, ExtendedSet, RestErrors, SessionOptions,
+    SessionOutcome, Verdict, VerdictLevel,
 };
 use imucal_protocol::StreamKind;
 use imucal_protocol::{CalibrationSet, ParamStatus};
@@ -28,6 +32,9 @@ pub(super) enum Closed {
     Written {
         /// The set written (boxed: a whole parameter set beside the small variants).
         set: Box<CalibrationSet>,
+        /// Its verdict: the base fit's, with the held-out error of the model with the added
+        /// terms ([`verdict_with_terms`]).
+        verdict: Verdict,
         /// The store's state after the commit.
         status: ParamStatus,
         /// The errors at rest with it, or why they could not be measured (the set is on the
@@ -99,7 +106,12 @@ pub(super) fn close_the_loop(
             .to_json(),
     )
     .with_context(|| format!("could not write {}", params_path.display()))?;
-    if !outcome.written {
+    let verdict = extended_verdict(outcome, &analysis, &extended);
+    // A base set refused for its verdict alone is offered again with the terms that explain
+    // what made it poor; one the user declined, or nobody could be asked about, is not.
+    let refused_for_verdict = outcome.not_written_because.as_deref() == Some("poor verdict");
+    let offered_again = refused_for_verdict && verdict.level != VerdictLevel::Poor;
+    if !(outcome.written || offered_again) {
         say!(
             "The base set was not written, so neither is the extended one; `imucal flash {}` \
              writes it",
@@ -107,12 +119,18 @@ pub(super) fn close_the_loop(
         );
         return Ok(Closed::SavedNotWritten(Box::new(extended.set)));
     }
-    // The extended terms come from the same poses, so the base fit's verdict is theirs too.
+    if !outcome.written {
+        say!(
+            "With the added terms the verdict is {} (the base set's was poor): the extended \
+             set is offered in its place",
+            verdict.level.name()
+        );
+    }
     let question = format!("Write the extended set to the board on {}", outcome.port);
-    match policy.decide(outcome.fit.verdict.level, &question) {
+    match policy.decide(verdict.level, &question) {
         WriteDecision::Write => {}
         WriteDecision::Declined | WriteDecision::NoOneToAsk => {
-            say!("The extended set was not written; the board keeps the base set");
+            say!("The extended set was not written; the board keeps the set it had");
             return Ok(Closed::BaseStays);
         }
         WriteDecision::RefusedPoor => return Ok(Closed::RefusedPoor(params_path)),
@@ -137,7 +155,30 @@ pub(super) fn close_the_loop(
     });
     Ok(Closed::Written {
         set: Box::new(extended.set),
+        verdict,
         status,
         rest,
     })
+}
+
+/// The extended set's verdict: the base fit's with the accelerometer's held-out error of the
+/// analysis's final model, when the set carries that model (accelerometer terms added, none of
+/// its accepted effects left out for want of a firmware term); else the base fit's.
+fn extended_verdict(
+    outcome: &SessionOutcome,
+    analysis: &RecordingAnalysis,
+    extended: &ExtendedSet,
+) -> Verdict {
+    let carries_accel_model = extended.added.iter().any(|a| a.starts_with("accel"))
+        && !extended.left_out.iter().any(|l| l.starts_with("accel"));
+    analysis
+        .sensors
+        .iter()
+        .find(|(sensor, _)| *sensor == Sensor::Accel)
+        .and_then(|(_, result)| result.as_ref().ok())
+        .filter(|_| carries_accel_model)
+        .map_or_else(
+            || outcome.fit.verdict.clone(),
+            |accel| verdict_with_terms(&outcome.fit, accel.heldout_rms_after),
+        )
 }

@@ -419,6 +419,79 @@ pub fn fit_session(
     })
 }
 
+/// The reason for a held-out accelerometer error of `loo_mg` (mg RMS) of `model` above its
+/// budget, and whether it is poor: marginal up to five budgets, poor beyond. `None` within the
+/// budget. The session's verdict says it of the "accelerometer fit".
+pub fn heldout_reason(model: &str, loo_mg: f64, budgets: Budgets) -> Option<(String, bool)> {
+    (loo_mg > budgets.accel_mg).then(|| {
+        let far = loo_mg > 5.0 * budgets.accel_mg;
+        (
+            format!(
+                "a position left out of the {model} is predicted with {loo_mg:.2} mg RMS error, \
+                 above the {:.1} mg budget{}: the model does not explain every pose (a pose \
+                 taken while moving, or an effect such as temperature drift)",
+                budgets.accel_mg,
+                if far {
+                    " by more than five times (poor)"
+                } else {
+                    " (marginal up to five times it)"
+                }
+            ),
+            far,
+        )
+    })
+}
+
+/// The verdict of `fit`'s set with terms added by the residual analysis, whose model leaves
+/// a position out with `heldout_relative` RMS error (relative to g): the base fit's held-out
+/// reason is replaced by the extended model's (or dropped when it is within the budget), every
+/// other reason kept, and the level taken again (poor when the new held-out error or one of
+/// the checks that can be poor on their own, the magnetometer's and the alignment's, is).
+pub fn verdict_with_terms(fit: &SessionFit, heldout_relative: f64) -> Verdict {
+    let mg = 1000.0 / STANDARD_GRAVITY;
+    let to_mg = |relative: f64| relative * fit.gravity_mps2 * mg;
+    let old = fit
+        .accel
+        .loo_rms
+        .and_then(|loo| heldout_reason("accelerometer fit", to_mg(loo), fit.budgets));
+    let new = heldout_reason(
+        "model with the added terms",
+        to_mg(heldout_relative),
+        fit.budgets,
+    );
+    let mut reasons = fit.verdict.reasons.clone();
+    let at = old
+        .as_ref()
+        .and_then(|(text, _)| reasons.iter().position(|r| r == text));
+    match (at, &new) {
+        (Some(i), Some((text, _))) => reasons[i] = text.clone(),
+        (Some(i), None) => {
+            reasons.remove(i);
+        }
+        (None, Some((text, _))) => reasons.push(text.clone()),
+        (None, None) => {}
+    }
+    // The checks besides the held-out error, judged again alone.
+    let mut without_heldout = fit.accel.clone();
+    without_heldout.loo_rms = None;
+    let others = judge(
+        &without_heldout,
+        &fit.uncertainties,
+        fit.alignment.as_ref().err(),
+        fit.budgets,
+        fit.gravity_mps2,
+    );
+    let poor = others.level == VerdictLevel::Poor || new.as_ref().is_some_and(|(_, far)| *far);
+    let level = if reasons.is_empty() {
+        VerdictLevel::Good
+    } else if poor {
+        VerdictLevel::Poor
+    } else {
+        VerdictLevel::Marginal
+    };
+    Verdict { level, reasons }
+}
+
 /// The verdict: the expected errors (covariance) must stay within a quarter of the budgets, so
 /// that a 4σ error still meets them, and the held-out accelerometer residual within the budget.
 fn judge(
@@ -447,24 +520,12 @@ fn judge(
             u.accel_norm_mg, budgets.accel_mg
         ));
     }
-    if let Some(loo) = accel.loo_rms {
-        let loo_mg = loo * gravity_mps2 * mg;
-        if loo_mg > budgets.accel_mg {
-            // Marginal up to five budgets, poor beyond: the reason says which.
-            let far = loo_mg > 5.0 * budgets.accel_mg;
-            poor |= far;
-            reasons.push(format!(
-                "a position left out of the accelerometer fit is predicted with {loo_mg:.2} mg \
-                 RMS error, above the {:.1} mg budget{}: the model does not explain every pose \
-                 (a pose taken while moving, or an effect such as temperature drift)",
-                budgets.accel_mg,
-                if far {
-                    " by more than five times (poor)"
-                } else {
-                    " (marginal up to five times it)"
-                }
-            ));
-        }
+    if let Some((reason, far)) = accel
+        .loo_rms
+        .and_then(|loo| heldout_reason("accelerometer fit", loo * gravity_mps2 * mg, budgets))
+    {
+        poor |= far;
+        reasons.push(reason);
     }
     if !within(u.mag_norm_pct, budgets.mag_pct / 4.0) {
         poor |= !within(u.mag_norm_pct, budgets.mag_pct);
