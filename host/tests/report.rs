@@ -615,6 +615,20 @@ fn a_session_with_a_motioncal_sketch_is_reported_and_says_why_samples_and_checks
     let notes = data.notes.join("\n");
     assert!(notes.contains("readings.csv is missing"), "{notes}");
     assert!(notes.contains("MotionCal sketch"), "{notes}");
+    // Its figures are what the library applies: the offsets only, for the accelerometer.
+    assert!(notes.contains("what the sketch board applies"), "{notes}");
+    let set = imucal::device::ParamsFile::load(&dir.join("params.json"))
+        .and_then(|p| p.to_calibration_set("params.json"))
+        .expect("the session's set");
+    let accel = data.accel.as_ref().expect("poses");
+    for (raw, shown) in accel.raw_mps2.iter().zip(&accel.calibrated) {
+        for k in 0..3 {
+            let offset_only = raw[k] - f64::from(set.accel.b[k]);
+            assert!((shown[k] - offset_only).abs() < 1e-9, "{shown} vs {raw}");
+        }
+    }
+    // The sketch prints no temperature: none is shown for its poses.
+    assert!(accel.temp_c.iter().all(Option::is_none));
     render_html(&data).expect("renders");
 
     // With its readings, the magnetometer is plotted from them; the sketch gives no temperature.

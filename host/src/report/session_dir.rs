@@ -12,6 +12,7 @@ use super::{
     ellipsoid_shape, AccelPoses, GyroPoses, MagSamples, ReportData, ReportError, RestCheck,
     SensorParameters, ANALYSIS_TEXT_FILE,
 };
+use crate::compat::AdafruitCalibration;
 use crate::device::ParamsFile;
 use crate::fit::{Mat3, Vec3};
 use imucal_protocol::apply_sensor;
@@ -142,6 +143,34 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     let gravity = params.reference.gravity_mps2;
     let field = params.reference.field_ut;
 
+    // A MotionCal sketch board applies what the Adafruit library holds of the set (offsets, a
+    // symmetric soft iron), not the full model: its figures after calibration are that.
+    let motioncal_path = dir.join("motioncal.json");
+    let motioncal = motioncal_path.is_file();
+    let library = if motioncal {
+        Some(
+            AdafruitCalibration::from_set(&set)
+                .map_err(|e| format_error(&params_path, e.to_string()))?
+                .calibration,
+        )
+    } else {
+        None
+    };
+    // The calibrated reading of sensor `k` (0 accel, 1 gyro, 2 mag) as the board computes it.
+    let calibrate = |k: usize, x: Vec3, temp_c: f64| -> Vec3 {
+        match &library {
+            Some(lib) => {
+                let mut readings = [[0.0; 3]; 3];
+                readings[k] = x.into();
+                Vec3::from(lib.apply(readings[0], readings[1], readings[2])[k])
+            }
+            None => {
+                let sensor = [&set.accel, &set.gyro, &set.mag][k];
+                Vec3::from(apply_sensor(sensor, x.into(), temp_c))
+            }
+        }
+    };
+
     let poses_path = dir.join("poses.json");
     let poses: Value = serde_json::from_str(&read(&poses_path)?)
         .map_err(|e| format_error(&poses_path, e.to_string()))?;
@@ -153,7 +182,8 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         let stats = &pose["stats"];
         let mean = vec3_of(&stats["accel_mean"])
             .ok_or_else(|| format_error(&poses_path, "a pose has no `stats.accel_mean` triple"))?;
-        let t = stats["temp_mean_c"].as_f64();
+        // A sketch prints no temperature: its poses' 25 °C is a label, not a measurement.
+        let t = stats["temp_mean_c"].as_f64().filter(|_| !motioncal);
         labels.push(pose["target"].as_str().map_or_else(
             || up_label(&vec3_of(&pose["target_up"]).unwrap_or(mean)),
             str::to_string,
@@ -168,7 +198,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         calibrated_dps: gyro_raw
             .iter()
             .flatten()
-            .map(|(g, t)| degrees(&Vec3::from(apply_sensor(&set.gyro, (*g).into(), *t))))
+            .map(|(g, t)| degrees(&calibrate(1, *g, *t)))
             .collect(),
         labels: labels.clone(),
         scale_fit: Vec::new(),
@@ -176,7 +206,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     let calibrated = raw
         .iter()
         .zip(&temp)
-        .map(|(x, t)| Vec3::from(apply_sensor(&set.accel, (*x).into(), t.unwrap_or(25.0))))
+        .map(|(x, t)| calibrate(0, *x, t.unwrap_or(25.0)))
         .collect();
     let accel = (!raw.is_empty()).then_some(AccelPoses {
         raw_mps2: raw,
@@ -187,10 +217,15 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     });
 
     // What the directory lacks, and why, from the files that say what kind of session it was.
-    let motioncal_path = dir.join("motioncal.json");
-    let motioncal = motioncal_path.is_file();
     let unfinished = crate::session::load_progress(dir).ok();
     let mut notes = Vec::new();
+    if motioncal {
+        notes.push(
+            "the figures after calibration are what the sketch board applies (the Adafruit \
+             library: offsets and a symmetric soft iron), not the full model params.json keeps"
+                .to_string(),
+        );
+    }
     if let Some(progress) = &unfinished {
         notes.push(format!(
             "the session did not finish (progress.json: {}); its check at rest and summary are \
@@ -237,7 +272,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
     let mag_calibrated = mag_raw
         .iter()
         .zip(&mag_temp)
-        .map(|(x, t)| Vec3::from(apply_sensor(&set.mag, (*x).into(), *t)))
+        .map(|(x, t)| calibrate(2, *x, *t))
         .collect();
     let mag_a = mat3_of(&params.mag.a);
     let mag = (!mag_raw.is_empty()).then(|| MagSamples {
