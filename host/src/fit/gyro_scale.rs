@@ -182,11 +182,15 @@ impl LeastSquaresProblem for GyroProblem {
     }
 }
 
+/// Fewest motions the scale fit takes: each gives three angle components for the nine unknowns
+/// of `A`, and a few more than three keep it from passing through them exactly.
+pub const MIN_MOTIONS: usize = 5;
+
 /// Fit the full gyroscope matrix `A` (bias already removed) from motions between still poses;
 /// `start` defaults to the identity (nominal scale). Residuals are the per-motion angle errors in
 /// radians; `reference` of the result is 1.
 pub fn fit_gyro_scale(motions: &[GyroMotion], start: Option<&Mat3>) -> Result<Fit, FitError> {
-    if motions.len() < 5 {
+    if motions.len() < MIN_MOTIONS {
         return Err(FitError::Underdetermined(format!(
             "only {} motions between still poses for 9 unknowns; turn the board between at least 5 poses (9+ recommended)",
             motions.len()

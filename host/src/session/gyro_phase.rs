@@ -21,6 +21,7 @@ use super::runner::Runner;
 use super::solve::{self, CapturedPose};
 use super::targets::{self, Target};
 use crate::device::UnitSample;
+use crate::fit::gyro_scale::MIN_MOTIONS;
 use crate::fit::norm_lm::fit_accel_lm;
 use crate::fit::{Mat3, Vec3};
 
@@ -31,13 +32,20 @@ impl<L: Read + Write> Runner<'_, L> {
         &mut self,
         captured: &mut Vec<CapturedPose>,
     ) -> Result<String, SessionError> {
-        let most = self.options.max_gyro_moves;
+        // At least as many turns as the scale fit lacks moves (a resumed session that kept
+        // none has to make them all).
+        let most = self
+            .options
+            .max_gyro_moves
+            .max(MIN_MOTIONS.saturating_sub(self.moves.len()));
         let mut added = 0;
         // The prompts count to every turn the phase may ask for, not one more at a time.
         let phase_total = captured.len() + most;
         loop {
             let tilt = tilt_per_axis_deg(&self.moves);
-            if tilt.iter().sum::<f64>() <= 0.0 {
+            // No moves at all (a resumed session that kept none) is asked for below; moves that
+            // are there but could not be integrated are a fault of the stream.
+            if !self.moves.is_empty() && tilt.iter().sum::<f64>() <= 0.0 {
                 return Ok(format!(
                     "none of the {} moves between the holds could be integrated (a gap in the \
                      stream or time stamps that do not increase), so the gyroscope's scale \
@@ -53,6 +61,9 @@ impl<L: Read + Write> Runner<'_, L> {
             );
             let lacking = match &relative {
                 Some(relative) => lacking_rotation(relative, &self.options.gyro_budgets),
+                // Too few moves for the scale fit at all (a resumed session whose moves were
+                // lost): more turns, about the axis turned least.
+                None if self.moves.len() < MIN_MOTIONS => too_few_moves(&tilt, self.moves.len()),
                 None => missing_rotation_advice(&tilt),
             };
             let Some((axis, advice)) = lacking else {
@@ -138,6 +149,24 @@ impl<L: Read + Write> Runner<'_, L> {
 /// diagonal, the misalignment angle in radians off it) from the session's fit of the moves so
 /// far against gravity alone ([`fit_against_gravity`]), with the accelerometer fitted on `captured` and the gyroscope's bias
 /// from the holds' means, its covariance from the fit's own residuals. `None` when a fit fails.
+/// The axis turned least and a sentence asking for turns about it, when there are fewer than
+/// [`MIN_MOTIONS`] moves, the fewest the gyroscope's scale fit takes.
+fn too_few_moves(tilt_deg: &[f64; 3], moves: usize) -> Option<(usize, String)> {
+    let (axis, _) = tilt_deg
+        .iter()
+        .copied()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let (name, example) = axis_turn_example(axis);
+    Some((
+        axis,
+        format!(
+            "the gyroscope's scale needs at least {MIN_MOTIONS} moves between holds and there \
+             are {moves}; turn the board between positions, about {name} first (e.g. {example})"
+        ),
+    ))
+}
+
 fn predicted_relative_sigma(
     captured: &[CapturedPose],
     moves: &[Vec<UnitSample>],
@@ -229,6 +258,19 @@ fn best_turn(from: &Vec3, targets: &[Target], axis: usize) -> Option<Target> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn too_few_moves_ask_for_turns_about_the_axis_turned_least() {
+        let (axis, text) = too_few_moves(&[40.0, 3.0, 25.0], 2).expect("asked");
+        assert_eq!(axis, 1);
+        assert!(
+            text.contains("at least 5 moves") && text.contains("there are 2"),
+            "{text}"
+        );
+        assert!(text.contains("about Y first"), "{text}");
+        // No moves at all (a resumed session that kept none): the first axis.
+        assert_eq!(too_few_moves(&[0.0; 3], 0).map(|(a, _)| a), Some(0));
+    }
 
     /// Angle about body `axis` of the shortest turn from `from` to `to`, radians.
     fn about(from: &Vec3, to: &Vec3, axis: usize) -> f64 {
