@@ -163,7 +163,9 @@ pub(super) fn close_the_loop(
 
 /// The extended set's verdict: the base fit's with the accelerometer's held-out error of the
 /// analysis's final model, when the set carries that model (accelerometer terms added, none of
-/// its accepted effects left out for want of a firmware term); else the base fit's.
+/// its accepted effects left out for want of a firmware term); else the base fit's. The base
+/// fit's figure leaves one pose out, the analysis's whole folds, which leave larger errors: so
+/// the base figure is scaled by the analysis's own ratio after/before, like with like.
 fn extended_verdict(
     outcome: &SessionOutcome,
     analysis: &RecordingAnalysis,
@@ -179,6 +181,14 @@ fn extended_verdict(
         .filter(|_| carries_accel_model)
         .map_or_else(
             || outcome.fit.verdict.clone(),
-            |accel| verdict_with_terms(&outcome.fit, accel.heldout_rms_after),
+            |accel| {
+                let heldout = match outcome.fit.accel.loo_rms {
+                    Some(loo) if accel.heldout_rms_before > 0.0 => {
+                        loo * accel.heldout_rms_after / accel.heldout_rms_before
+                    }
+                    _ => accel.heldout_rms_after,
+                };
+                verdict_with_terms(&outcome.fit, heldout)
+            },
         )
 }
