@@ -74,7 +74,11 @@ fn offset(json: &Value) -> Vec<f64> {
 }
 
 fn file_fit() -> Value {
-    let path = scratch("file").join("mag.csv");
+    // One file per call: tests run in parallel, and one writing the file while another reads
+    // it made the reader see it empty.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    let path = scratch(&format!("file-{call}")).join("mag.csv");
     std::fs::write(&path, mag_recording()).expect("writable");
     fit_mag(&path.display().to_string(), None).expect("a plain file fits")
 }
