@@ -482,14 +482,21 @@ pub fn verdict_with_terms(fit: &SessionFit, heldout_relative: f64) -> Verdict {
         fit.gravity_mps2,
     );
     let poor = others.level == VerdictLevel::Poor || new.as_ref().is_some_and(|(_, far)| *far);
-    let level = if reasons.is_empty() {
-        VerdictLevel::Good
-    } else if poor {
-        VerdictLevel::Poor
-    } else {
-        VerdictLevel::Marginal
-    };
-    Verdict { level, reasons }
+    Verdict::of(reasons, poor)
+}
+
+impl Verdict {
+    /// The verdict of `reasons`: good without any, poor when one of them is, else marginal.
+    fn of(reasons: Vec<String>, poor: bool) -> Self {
+        let level = if reasons.is_empty() {
+            VerdictLevel::Good
+        } else if poor {
+            VerdictLevel::Poor
+        } else {
+            VerdictLevel::Marginal
+        };
+        Self { level, reasons }
+    }
 }
 
 /// The verdict: the expected errors (covariance) must stay within a quarter of the budgets, so
@@ -550,14 +557,7 @@ fn judge(
              hold the positions again, with no magnet or steel near the board"
         ));
     }
-    let level = if reasons.is_empty() {
-        VerdictLevel::Good
-    } else if poor {
-        VerdictLevel::Poor
-    } else {
-        VerdictLevel::Marginal
-    };
-    Verdict { level, reasons }
+    Verdict::of(reasons, poor)
 }
 
 #[cfg(test)]
