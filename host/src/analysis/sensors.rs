@@ -228,7 +228,7 @@ pub fn analyse_sensor(
             })
         }
         Sensor::Mag => {
-            let (obs, _) = dataset::mag_observations(
+            let obs = dataset::mag_observations(
                 recording,
                 Some(still),
                 options.mag_window,

@@ -34,10 +34,10 @@ pub struct SensorOutcome {
     /// gyroscope), or from the noise of single samples (magnetometer).
     pub noise_floor: Option<f64>,
     /// The χ² test of the residual against the noise of the means it rests on, the residual
-    /// analysis's test ([`norm_noise_test`], [`bias_noise_test`]): each pose's, or for the
-    /// magnetometer each window's when the poses do not determine its ellipsoid
-    /// ([`crate::pipeline::observations::mag_observations`]). `None` for models with as many
-    /// unknowns as observations, and when an observation has too few samples for its noise.
+    /// analysis's test: each pose's ([`norm_noise_test`], [`bias_noise_test`]), or for the
+    /// magnetometer the means of its residual over windows of its stream
+    /// ([`stream_noise_test`]). `None` for models with as many unknowns as observations, and
+    /// when an observation has too few samples for its noise.
     pub noise_test: Option<ChiSquareTest>,
     /// What the noise test's observations are, when not the poses ("noise of its 20-sample
     /// windows").

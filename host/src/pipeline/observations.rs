@@ -176,25 +176,6 @@ pub const MAG_WINDOW_SAMPLES: usize = 20;
 /// Most magnetometer window observations used, evenly spread over the stream.
 pub const MAX_MAG_WINDOWS: usize = 300;
 
-/// Where the magnetometer's observations come from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MagBasis {
-    /// The still poses (enough of them, over enough orientations for an ellipsoid).
-    Poses,
-    /// Short windows of the whole stream.
-    Windows,
-}
-
-impl MagBasis {
-    /// What the observations are, for a verdict: "pose noise", "noise of its 20-sample windows".
-    pub fn noise_text(self, window: usize) -> String {
-        match self {
-            Self::Poses => "pose noise".to_string(),
-            Self::Windows => format!("noise of its {window}-sample windows"),
-        }
-    }
-}
-
 /// The magnetometer's observations: the still poses when there are at least twelve over nine
 /// or more distinct gravity directions (or the holds come from a `pose` column), since only then
 /// do they determine the ellipsoid; otherwise windows of `window` samples of the whole stream
@@ -204,18 +185,15 @@ pub fn mag_observations(
     still: Option<&StillReport>,
     window: usize,
     max_windows: usize,
-) -> (Vec<Observation>, MagBasis) {
+) -> Vec<Observation> {
     if let Some(still) = still {
         let obs = pose_observations(recording, still, Sensor::Mag);
         let covered = still.from_pose_column || still.directions.len() >= 9;
         if obs.len() >= 12 && covered {
-            return (obs, MagBasis::Poses);
+            return obs;
         }
     }
-    (
-        window_observations(recording, window, max_windows),
-        MagBasis::Windows,
-    )
+    window_observations(recording, window, max_windows)
 }
 
 /// Observations as fit poses (the variance of one sample recovered from the mean's).
