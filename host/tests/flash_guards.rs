@@ -226,3 +226,22 @@ fn a_file_of_another_board_written_by_force_is_recorded_as_from_that_boards_sess
         }
     );
 }
+
+#[test]
+fn a_gyroscope_matrix_that_mirrors_an_axis_never_reaches_the_board() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let path = temp_file("mirrored.json");
+    let mut set = calibrated_set();
+    // The z rate reversed: every turn about z would read the wrong way after calibration.
+    set.gyro.a[2][2] = -1.0;
+    std::fs::write(&path, ParamsFile::from(&set).to_json()).expect("temp dir writable");
+    let out = flash(&path, &fake.path, &[]);
+    let _ = std::fs::remove_file(&path);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("gyro.A has a negative determinant") && stderr.contains("axis mapping"),
+        "{stderr}"
+    );
+    assert_eq!(fake.state().commits, 0, "nothing committed");
+}

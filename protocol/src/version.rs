@@ -18,7 +18,8 @@ pub struct ProtocolVersion {
 /// and overruns), which an older peer would decode wrongly.
 pub const PROTOCOL_MAJOR: u16 = 3;
 /// Minor version of the protocol implemented by this crate.
-pub const PROTOCOL_MINOR: u16 = 0;
+/// 1: `InvalidParamsReason::MirroredAxes` appended.
+pub const PROTOCOL_MINOR: u16 = 1;
 /// The protocol version implemented by this crate.
 pub const PROTOCOL_VERSION: ProtocolVersion = ProtocolVersion {
     major: PROTOCOL_MAJOR,

@@ -126,6 +126,7 @@ fn every_error_code_has_a_distinct_actionable_description() {
             ParamField::GyroGSensitivity,
         )),
         ErrorCode::InvalidParams(InvalidParamsReason::UnsupportedFormat { found: 1 }),
+        ErrorCode::InvalidParams(InvalidParamsReason::MirroredAxes(SensorKind::Gyro)),
         ErrorCode::FlashError,
     ];
     let descriptions: std::collections::HashSet<_> = codes.iter().map(|c| c.describe()).collect();

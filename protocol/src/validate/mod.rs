@@ -8,6 +8,10 @@
 //! - **Condition number** of each `A`: `κ_F = ‖A‖_F·‖A⁻¹‖_F ≤` [`MAX_CONDITION_FROBENIUS`]. `κ_F`
 //!   needs no eigenvalues: the inverse's norm comes from the adjugate and the determinant.
 //! - **Gain** `‖A‖_F/√3` (the RMS singular value) within [`GAIN_LIMITS`] per sensor.
+//! - **Handedness**: `det A > 0`. Scale errors, misalignment and soft iron never reverse an
+//!   axis; a reflection means the sensor's axes are mapped wrongly into the board frame (a sign
+//!   in the driver's axis mapping), which a calibration must not hide: every raw reading and any
+//!   other consumer of it would still be mirrored.
 //! - **Offsets** `|b_i|` within the sensor's full-scale range: an offset beyond it would put
 //!   every reading on the rail.
 //! - **Reference temperature** of every sensor within [`REFERENCE_TEMP_RANGE_C`].
@@ -123,6 +127,12 @@ pub fn validate_for_ranges(
     Ok(())
 }
 
+/// Determinant of `A`, computed in `f64`.
+pub fn determinant(a: &[[f32; 3]; 3]) -> f64 {
+    let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = a.map(|row| row.map(f64::from));
+    a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+}
+
 /// Frobenius condition number `‖A‖_F·‖A⁻¹‖_F`, computed in `f64`; infinite when `A` is singular.
 pub fn condition_frobenius(a: &[[f32; 3]; 3]) -> f64 {
     let m = a.map(|row| row.map(f64::from));
@@ -196,6 +206,10 @@ fn check_matrix(
     let kappa = condition_frobenius(a);
     if kappa.is_nan() || kappa > MAX_CONDITION_FROBENIUS {
         return Err(InvalidParamsReason::IllConditioned(kind));
+    }
+    // Well conditioned, so the sign of the determinant is not a rounding accident.
+    if determinant(a) < 0.0 {
+        return Err(InvalidParamsReason::MirroredAxes(kind));
     }
     Ok(())
 }

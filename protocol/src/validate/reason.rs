@@ -74,6 +74,9 @@ pub enum InvalidParamsReason {
         /// The version found in the set.
         found: u16,
     },
+    /// A matrix `A` reverses an axis (`det A < 0`): the sensor's axes are mapped wrongly into
+    /// the board frame (protocol 3.1).
+    MirroredAxes(SensorKind),
 }
 
 impl InvalidParamsReason {
@@ -101,6 +104,9 @@ impl InvalidParamsReason {
             }
             Self::UnsupportedFormat { .. } => {
                 "the parameter format version is not the one this side reads; update the firmware or the host tool"
+            }
+            Self::MirroredAxes(_) => {
+                "a calibration matrix reverses an axis, which no scale, misalignment or soft-iron error does; fix the sign of that axis in the driver's axis mapping and measure again"
             }
         }
     }
@@ -170,6 +176,12 @@ impl fmt::Display for InvalidParamsReason {
             Self::UnsupportedFormat { found } => write!(
                 f,
                 "the parameter set has format {found}, this side reads format {PARAMS_FORMAT_VERSION}; {advice}"
+            ),
+            Self::MirroredAxes(s) => write!(
+                f,
+                "{}.A has a negative determinant: it mirrors the sensor's axes, which no scale, \
+                 misalignment or soft-iron error does; {advice}",
+                s.name()
             ),
         }
     }

@@ -93,6 +93,33 @@ fn condition_bound_separates_stretch_ratios_of_ten_and_thirty_one() {
 }
 
 #[test]
+fn a_matrix_that_reverses_an_axis_is_refused_as_mirrored_whatever_the_sensor() {
+    let with = |kind: SensorKind, a: [[f32; 3]; 3]| {
+        let mut set = CalibrationSet::identity();
+        match kind {
+            SensorKind::Accel => set.accel.a = a,
+            SensorKind::Gyro => set.gyro.a = a,
+            SensorKind::Mag => set.mag.a = a,
+        }
+        validate(&set, &scales())
+    };
+    for kind in SensorKind::ALL {
+        // One axis reversed: as well conditioned and scaled as the identity, det = −1.
+        assert_eq!(
+            with(kind, diag(1.0, 1.0, -1.0)),
+            Err(InvalidParamsReason::MirroredAxes(kind))
+        );
+        // Two axes reversed is a half turn about the third: a rotation, accepted.
+        assert_eq!(with(kind, diag(-1.0, -1.0, 1.0)), Ok(()), "{kind:?}");
+    }
+    let sentence = InvalidParamsReason::MirroredAxes(SensorKind::Gyro).to_string();
+    assert!(
+        sentence.starts_with("gyro.A") && sentence.contains("axis mapping"),
+        "{sentence}"
+    );
+}
+
+#[test]
 fn wrong_units_offsets_and_extended_terms_are_refused_with_the_field() {
     use InvalidParamsReason::*;
     // A fit in g instead of m/s²: gain 1/9.8.

@@ -183,6 +183,7 @@ pub fn invalid_params_reason() -> impl Strategy<Value = InvalidParamsReason> {
         sensor().prop_map(InvalidParamsReason::ReferenceTemperatureOutOfRange),
         field.prop_map(InvalidParamsReason::ExtendedTermOutOfRange),
         any::<u16>().prop_map(|found| InvalidParamsReason::UnsupportedFormat { found }),
+        sensor().prop_map(InvalidParamsReason::MirroredAxes),
     ]
 }
 
