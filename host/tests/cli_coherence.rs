@@ -672,3 +672,32 @@ fn a_stopped_session_directory_points_to_resume_and_force_says_what_it_replaces(
     assert!(session.join("progress.json").is_file());
     assert!(!session.join("poses.json").exists());
 }
+
+#[test]
+fn analyze_tests_held_out_the_accelerometer_model_fit_chose_on_six_faces() {
+    let dir = scratch("six-faces");
+    // 13 holds on the six faces, three faces held once: fit scores its models on the 10 poses
+    // they can be refit without; analyze used to refuse the model fit chose.
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let args = ["--gyro-unit", "dps", "--json"];
+    let out = imucal_in(&dir, &[&["fit", recording.as_str()][..], &args].concat());
+    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).expect("fit JSON");
+    let fit_loo = fit["accel"]["loo_rms"]
+        .as_f64()
+        .expect("fit's held-out RMS");
+    let out = imucal_in(
+        &dir,
+        &[&["analyze", recording.as_str()][..], &args].concat(),
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("analyze JSON");
+    let accel = &json["sensors"]["accel"];
+    assert_eq!(accel["heldout_always_trained"], 3, "{accel}");
+    // Same poses held out, but analyze's holds lose a detection window at either end and are
+    // weighed by their own noise: the two held-out RMS agree to within a factor of 1.5.
+    let heldout = accel["heldout_rms_before"].as_f64().expect("held-out RMS");
+    assert!(
+        heldout < 1.5 * fit_loo && heldout > fit_loo / 1.5,
+        "analyze {heldout:.3e}, fit {fit_loo:.3e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

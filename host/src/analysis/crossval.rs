@@ -3,6 +3,9 @@
 //! Splits: leave-one-pose-out when there are at most [`MAX_FOLDS`] observations, otherwise
 //! [`REPEATS`] repetitions of `MAX_FOLDS` folds, each a different pseudo-random balanced
 //! assignment of the poses, so that every fold spans the whole recording in time and temperature.
+//! When the base model cannot be refit on one of those training sets (six faces and nothing
+//! else: a fold that holds out every pose of one face leaves its axis undetermined), leave-one-out
+//! over the poses it can be refit without, the rest never held out ([`Splits`]).
 //! Each observation is predicted by the model fitted without its fold; its held-out loss is the
 //! squared residual in units of its own noise, `Lᵢ = Σₖ(rᵢₖ/σᵢₖ)²` (about 1 per component at the
 //! floor), averaged over the repetitions.
@@ -60,7 +63,8 @@ pub const MIN_GAIN_PER_COMPONENT: f64 = 0.25;
 /// Held-out losses of one model.
 #[derive(Debug, Clone)]
 pub struct HeldOut {
-    /// Per-observation held-out loss `Lᵢ` (noise units), mean over the repetitions.
+    /// Per-observation held-out loss `Lᵢ` (noise units), mean over the repetitions, for each
+    /// observation the splits hold out (in order).
     pub losses: Vec<f64>,
     /// Per-observation held-out residual in physical units (as
     /// [`super::extended_fit::physical_residual`]), RMS over the repetitions.
@@ -143,35 +147,108 @@ pub fn observations_needed(unknowns: usize, components: usize) -> usize {
     }
 }
 
-/// Held-out losses of `effects` over every split, each fold started from `full` (the fit on
-/// all observations). `None` when some fold cannot be fitted.
-pub fn held_out(problem: &Problem, effects: &[EffectKind], full: &ExtendedFit) -> Option<HeldOut> {
+/// The held-out splits of one analysis: every model compared is evaluated on the same ones.
+///
+/// Normally [`repeated_folds`] over every observation. When the base model cannot be refit on
+/// one of those training sets (a fold holds out every pose of one face, and the six faces are
+/// all the orientations there are), leave-one-out over the observations the base model can be
+/// refit without, the others staying in every training set: the rule by which `fit` scores
+/// its models on the poses every compared model can be refit without.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Splits {
+    /// Held-out observations of each split, repetition by repetition.
+    tests: Vec<Vec<usize>>,
+    /// Repetitions (each observation tested is held out once in each).
+    repeats: usize,
+    /// Observations in all.
+    n: usize,
+}
+
+impl Splits {
+    /// [`repetitions`] of [`repeated_folds`] over `n` observations.
+    pub fn folds(n: usize) -> Self {
+        let repeats = repetitions(n);
+        let mut tests = Vec::new();
+        for repeat in 0..repeats {
+            let fold_of = repeated_folds(n, repeat);
+            let k = fold_of.iter().max().map_or(0, |m| m + 1);
+            tests.extend((0..k).map(|fold| (0..n).filter(|&i| fold_of[i] == fold).collect()));
+        }
+        Self { tests, repeats, n }
+    }
+
+    /// The splits of an analysis of `problem`: [`Splits::folds`] when every training set
+    /// determines the base model ([`Problem::determines_base`]), otherwise leave-one-out over
+    /// the observations whose complement does. `None` when fewer than two can be held out, too
+    /// few to compare two models on.
+    pub fn for_problem(problem: &Problem) -> Option<Self> {
+        let n = problem.points.len();
+        let folds = Self::folds(n);
+        if folds.tests.iter().all(|test| {
+            let train: Vec<usize> = (0..n).filter(|i| !test.contains(i)).collect();
+            problem.determines_base(&train)
+        }) {
+            return Some(folds);
+        }
+        let tests: Vec<Vec<usize>> = (0..n)
+            .filter(|&i| {
+                let train: Vec<usize> = (0..n).filter(|&j| j != i).collect();
+                problem.determines_base(&train)
+            })
+            .map(|i| vec![i])
+            .collect();
+        (tests.len() >= 2).then_some(Self {
+            tests,
+            repeats: 1,
+            n,
+        })
+    }
+
+    /// Observations that are never held out (needed by the base model in every training set).
+    pub fn always_trained(&self) -> usize {
+        let mut tested = vec![false; self.n];
+        for &i in self.tests.iter().flatten() {
+            tested[i] = true;
+        }
+        tested.iter().filter(|t| !**t).count()
+    }
+}
+
+/// Held-out losses of `effects` over every split of `splits`, each fold started from `full`
+/// (the fit on all observations), over the observations the splits hold out. `None` when some
+/// fold cannot be fitted.
+pub fn held_out(
+    problem: &Problem,
+    effects: &[EffectKind],
+    full: &ExtendedFit,
+    splits: &Splits,
+) -> Option<HeldOut> {
     let n = problem.points.len();
-    let repeats = repetitions(n);
+    let repeats = splits.repeats.max(1);
     let mut losses = vec![0.0; n];
     let mut squares = vec![0.0; n];
-    let mut split_losses = Vec::new();
+    let mut tested = vec![false; n];
+    let mut split_losses = Vec::with_capacity(splits.tests.len());
     let mut ratio_sum = 0.0;
-    for repeat in 0..repeats {
-        let fold_of = repeated_folds(n, repeat);
-        let k = fold_of.iter().max().map_or(0, |m| m + 1);
-        for fold in 0..k {
-            let train: Vec<usize> = (0..n).filter(|&i| fold_of[i] != fold).collect();
-            let fit = fit_rows(problem, effects, &train, &full.params)?;
-            let test: Vec<usize> = (0..n).filter(|&i| fold_of[i] == fold).collect();
-            let mut split = 0.0;
-            for &i in &test {
-                let loss = problem
-                    .residual(i, effects, fit.params.as_slice())
-                    .norm_squared();
-                let r = super::extended_fit::physical_residual(problem, i, effects, &fit.params).0;
-                losses[i] += loss / repeats as f64;
-                squares[i] += r * r / repeats as f64;
-                split += loss / test.len() as f64;
-            }
-            split_losses.push(split);
-            ratio_sum += test.len() as f64 / train.len() as f64;
+    let mut held = vec![false; n];
+    for test in &splits.tests {
+        held.iter_mut().for_each(|h| *h = false);
+        test.iter().for_each(|&i| held[i] = true);
+        let train: Vec<usize> = (0..n).filter(|&i| !held[i]).collect();
+        let fit = fit_rows(problem, effects, &train, &full.params)?;
+        let mut split = 0.0;
+        for &i in test {
+            let loss = problem
+                .residual(i, effects, fit.params.as_slice())
+                .norm_squared();
+            let r = super::extended_fit::physical_residual(problem, i, effects, &fit.params).0;
+            losses[i] += loss / repeats as f64;
+            squares[i] += r * r / repeats as f64;
+            tested[i] = true;
+            split += loss / test.len() as f64;
         }
+        split_losses.push(split);
+        ratio_sum += test.len() as f64 / train.len() as f64;
     }
     let residual_count = n * problem.components();
     let floor_inflation = noise_scale(
@@ -182,9 +259,17 @@ pub fn held_out(problem: &Problem, effects: &[EffectKind], full: &ExtendedFit) -
     )
     .map_or(1.0, |s| s.variance_factor);
     let test_to_train = ratio_sum / split_losses.len().max(1) as f64;
+    let keep = |v: Vec<f64>| -> Vec<f64> {
+        v.into_iter()
+            .zip(&tested)
+            .filter(|(_, t)| **t)
+            .map(|(x, _)| x)
+            .collect()
+    };
+    let losses = keep(losses);
     losses.iter().all(|v| v.is_finite()).then(|| HeldOut {
         losses,
-        residuals: squares.iter().map(|v| v.sqrt()).collect(),
+        residuals: keep(squares).iter().map(|v| v.sqrt()).collect(),
         split_losses,
         test_to_train,
         floor_inflation,

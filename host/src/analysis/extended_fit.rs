@@ -14,6 +14,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::effects::{EffectKind, BINS};
 use crate::fit::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions};
+use crate::fit::validate::{count_distinct, DISTINCT_DEG};
 use crate::fit::{Calibration, Mat3, Vec3};
 use crate::pipeline::observations::Observation;
 
@@ -172,6 +173,27 @@ impl Problem {
             temp_ref,
             time_ref: (t_mean, t_std),
             force_scale,
+        }
+    }
+
+    /// Distinct orientations (within [`DISTINCT_DEG`]) among the observations `rows`.
+    pub fn distinct_orientations(&self, rows: &[usize]) -> usize {
+        let directions: Vec<Vec3> = rows
+            .iter()
+            .filter_map(|&i| self.points.get(i)?.try_normalize(0.0))
+            .collect();
+        count_distinct(&directions, DISTINCT_DEG)
+    }
+
+    /// Whether the observations `rows` can determine the base model. A norm model's residual is
+    /// one equation per orientation, however often it is repeated, so it needs at least as
+    /// many distinct orientations as unknowns; with fewer the solver still returns parameters,
+    /// but a held-out pose is predicted from a direction they do not constrain. The rest model
+    /// is determined by any observation.
+    pub fn determines_base(&self, rows: &[usize]) -> bool {
+        match self.base {
+            BaseKind::Norm { .. } => self.distinct_orientations(rows) >= self.base_params(),
+            BaseKind::Rest { .. } => !rows.is_empty(),
         }
     }
 

@@ -10,7 +10,8 @@
 //! fall of the mean held-out loss; `status` one of accepted, rejected, confounded,
 //! not_testable), `unexplained` (bool), and the extras `chi2_before`, `chi2_after` (`{chi2, dof,
 //! p_value}`), `n_observations`, `best_correlate` (`{variable, r}` or null),
-//! `temp_time_correlation`, `t_ref_c`. A sensor that could not be analysed has `{"error": str}`.
+//! `temp_time_correlation`, `t_ref_c`, `heldout_always_trained` (observations never held out
+//! because the base model cannot be refit without them; 0 when every one is). A sensor that could not be analysed has `{"error": str}`.
 
 use std::path::Path;
 
@@ -102,6 +103,7 @@ pub fn sensor_json(a: &SensorAnalysis) -> Value {
         "rms_after": finite(a.rms_after),
         "heldout_rms_before": finite(a.heldout_rms_before),
         "heldout_rms_after": finite(a.heldout_rms_after),
+        "heldout_always_trained": a.always_trained,
         "effects": a.effects.iter().map(effect_json).collect::<Vec<_>>(),
         "unexplained": a.unexplained,
         "chi2_before": test_json(&a.test_before),
@@ -167,6 +169,15 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
             "  RMS {:.3e} → {:.3e} {u}; held-out RMS {:.3e} → {:.3e} {u}\n",
             a.rms_before, a.rms_after, a.heldout_rms_before, a.heldout_rms_after
         ));
+        if a.always_trained > 0 {
+            out.push_str(&format!(
+                "  held out: each of the {} observations the base model can be refit without, \
+                 in turn; the base model cannot be refit without any of the other {} (as a rule \
+                 the only pose of its orientation), so they stay in every fit\n",
+                a.observations.len() - a.always_trained,
+                a.always_trained
+            ));
+        }
         if let Some(r) = a.temp_time_correlation {
             out.push_str(&format!(
                 "  temperature–time correlation of the poses: {r:.3}\n"

@@ -40,14 +40,13 @@ pub enum AnalysisError {
         /// Why.
         source: FitError,
     },
-    /// The base model could not be refit on every held-out fold although there are enough
-    /// observations: as a rule, leaving out the poses of one orientation leaves too few
-    /// orientations to determine it.
+    /// The base model cannot be evaluated held out although there are enough observations:
+    /// fewer than two of them can be left out with the rest still determining it.
     #[error(
-        "the {sensor} base model {model} ({unknowns} unknowns) could not be refit on every \
-         held-out fold: the poses show {distinct} distinct orientation(s) (within 5°), and a \
-         fold that leaves out the poses of one of them leaves the others unable to determine \
-         it; record poses in more directions (e.g. the twelve positions)"
+        "the {sensor} base model {model} ({unknowns} unknowns) cannot be tested on poses it was \
+         not fitted on: the poses show {distinct} distinct orientation(s) (within 5°), and \
+         fewer than two of them can be left out with the others still determining the model; \
+         record poses in more directions (e.g. the twelve positions)"
     )]
     Refit {
         /// Sensor name.
@@ -171,6 +170,9 @@ pub struct SensorAnalysis {
     pub heldout_rms_before: f64,
     /// Held-out RMS of the final model.
     pub heldout_rms_after: f64,
+    /// Observations never held out: the base model cannot be refit without them (each is the
+    /// only pose of its face), so the held-out figures are leave-one-out over the others.
+    pub always_trained: usize,
     /// Every candidate tested.
     pub effects: Vec<EffectResult>,
     /// The final residual is above the floor and no candidate explains it.

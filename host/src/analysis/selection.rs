@@ -3,7 +3,7 @@
 //! jointly, temperature and time told apart only when they decorrelate.
 
 use super::crossval::{
-    extend_start, held_out, lack_of_fit_p, observations_needed, Comparison, HeldOut, ALPHA,
+    extend_start, held_out, lack_of_fit_p, observations_needed, Comparison, HeldOut, Splits, ALPHA,
     FORM_ALPHA, MIN_GAIN_PER_COMPONENT,
 };
 use super::effects::{EffectKind, GYRO_FAMILIES, NORM_FAMILIES};
@@ -110,16 +110,27 @@ fn not_fittable(kind: EffectKind, unknowns: usize, n: usize, components: usize) 
     }
 }
 
-/// Fit `effects` on every observation and evaluate held out.
+/// Fit `effects` on every observation and evaluate held out on `splits`.
 fn evaluate(
     problem: &Problem,
     effects: &[EffectKind],
     start: &nalgebra::DVector<f64>,
+    splits: &Splits,
 ) -> Option<(ExtendedFit, HeldOut)> {
     let rows: Vec<usize> = (0..problem.points.len()).collect();
     let fit = fit_rows(problem, effects, &rows, start)?;
-    let ho = held_out(problem, effects, &fit)?;
+    let ho = held_out(problem, effects, &fit, splits)?;
     Some((fit, ho))
+}
+
+/// The splits of the analysis ([`Splits::for_problem`]) and the base model evaluated on them.
+fn evaluate_base(
+    problem: &Problem,
+    start: &nalgebra::DVector<f64>,
+) -> Option<(Splits, ExtendedFit, HeldOut)> {
+    let splits = Splits::for_problem(problem)?;
+    let (fit, ho) = evaluate(problem, &[], start, &splits)?;
+    Some((splits, fit, ho))
 }
 
 /// What [`analyse_observations`] needs besides the observations.
@@ -160,7 +171,7 @@ pub fn analyse_observations(
     let components = problem.components();
     let n = observations.len();
     let base_start = start_params(&problem, start, &[]);
-    let (base_fit, base_ho) = evaluate(&problem, &[], &base_start).ok_or_else(|| {
+    let (splits, base_fit, base_ho) = evaluate_base(&problem, &base_start).ok_or_else(|| {
         let needed = observations_needed(base_start.len(), components);
         if n < needed {
             AnalysisError::TooFewObservations {
@@ -241,7 +252,7 @@ pub fn analyse_observations(
                 let mut effects = current.0.effects.clone();
                 effects.push(kind);
                 let start = extend_start(&current.0.params, kind.param_count());
-                let Some((fit, ho)) = evaluate(&problem, &effects, &start) else {
+                let Some((fit, ho)) = evaluate(&problem, &effects, &start, &splits) else {
                     if best.is_none() {
                         unfittable.push((kind, start.len()));
                     }
@@ -315,7 +326,7 @@ pub fn analyse_observations(
                     let mut effects = fit.effects.clone();
                     effects.push(binned);
                     let start = extend_start(&fit.params, binned.param_count());
-                    let (free_fit, free_ho) = evaluate(&problem, &effects, &start)?;
+                    let (free_fit, free_ho) = evaluate(&problem, &effects, &start, &splits)?;
                     let dof = (n * components).saturating_sub(free_fit.params.len());
                     let p = lack_of_fit_p(fit.cost, free_fit.cost, binned.param_count(), dof);
                     let cmp = Comparison::new(&ho, &free_ho, components);
@@ -349,7 +360,7 @@ pub fn analyse_observations(
         let p = follows_time_p(&timed_residuals(&problem, &current.0, &times));
         let (effects, start) = without_effect(&problem, &current.0, index);
         if p <= ALPHA {
-            if let Some(refit) = evaluate(&problem, &effects, &start) {
+            if let Some(refit) = evaluate(&problem, &effects, &start, &splits) {
                 wrong_form.push((
                     EffectKind::BiasDrift.name(),
                     format!(
@@ -525,6 +536,7 @@ pub fn analyse_observations(
         rms_after: rms(&residuals_after),
         heldout_rms_before: base_ho.rms(),
         heldout_rms_after: final_ho.rms(),
+        always_trained: splits.always_trained(),
         effects: results,
         unexplained,
         best_correlate,

@@ -204,9 +204,13 @@ pub fn count_distinct(directions: &[Vec3], tolerance_deg: f64) -> usize {
     reps.len()
 }
 
-/// Refuse when fewer than `needed` distinct orientations (5° apart) are present.
+/// Orientations closer than this (degrees) count as one: for a norm model they give the same
+/// equation, however often repeated.
+pub const DISTINCT_DEG: f64 = 5.0;
+
+/// Refuse when fewer than `needed` distinct orientations ([`DISTINCT_DEG`] apart) are present.
 pub fn check_distinct(directions: &[Vec3], needed: usize) -> Result<(), FitError> {
-    let distinct = count_distinct(directions, 5.0);
+    let distinct = count_distinct(directions, DISTINCT_DEG);
     if distinct < needed {
         return Err(FitError::Underdetermined(format!(
             "only {distinct} distinct orientations; at least {needed} are needed"
