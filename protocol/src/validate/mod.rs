@@ -8,10 +8,12 @@
 //! - **Condition number** of each `A`: `κ_F = ‖A‖_F·‖A⁻¹‖_F ≤` [`MAX_CONDITION_FROBENIUS`]. `κ_F`
 //!   needs no eigenvalues: the inverse's norm comes from the adjugate and the determinant.
 //! - **Gain** `‖A‖_F/√3` (the RMS singular value) within [`GAIN_LIMITS`] per sensor.
-//! - **Handedness**: `det A > 0`. Scale errors, misalignment and soft iron never reverse an
-//!   axis; a reflection means the sensor's axes are mapped wrongly into the board frame (a sign
-//!   in the driver's axis mapping), which a calibration must not hide: every raw reading and any
-//!   other consumer of it would still be mirrored.
+//! - **Handedness** of the accelerometer and gyroscope: `det A > 0`. Their chips' axes are
+//!   right-handed, and scale errors and misalignment never reverse one; a reflection means an
+//!   axis is mapped wrongly into the board frame (a sign in the driver's axis mapping), which a
+//!   calibration must not hide. The magnetometer is exempt: some chips' magnetometer frame is a
+//!   reflection of their accelerometer's (the LSM9DS1's X axis), and a set that maps one into
+//!   the other rightly has `det A < 0`.
 //! - **Offsets** `|b_i|` within the sensor's full-scale range: an offset beyond it would put
 //!   every reading on the rail.
 //! - **Reference temperature** of every sensor within [`REFERENCE_TEMP_RANGE_C`].
@@ -208,7 +210,7 @@ fn check_matrix(
         return Err(InvalidParamsReason::IllConditioned(kind));
     }
     // Well conditioned, so the sign of the determinant is not a rounding accident.
-    if determinant(a) < 0.0 {
+    if kind != SensorKind::Mag && determinant(a) < 0.0 {
         return Err(InvalidParamsReason::MirroredAxes(kind));
     }
     Ok(())

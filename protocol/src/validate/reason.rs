@@ -74,8 +74,8 @@ pub enum InvalidParamsReason {
         /// The version found in the set.
         found: u16,
     },
-    /// A matrix `A` reverses an axis (`det A < 0`): the sensor's axes are mapped wrongly into
-    /// the board frame (protocol 3.1).
+    /// The accelerometer's or gyroscope's `A` reverses an axis (`det A < 0`): the sensor's axes
+    /// are mapped wrongly into the board frame (protocol 3.1).
     MirroredAxes(SensorKind),
 }
 
