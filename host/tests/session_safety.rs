@@ -14,6 +14,7 @@ use imucal::session::{
     SessionControl, SessionError, SessionEvent, SessionObserver, SessionOptions, MOVES_FILE,
     PROGRESS_FILE,
 };
+use imucal_hil_sim::board::PersonSchedule;
 use imucal_hil_sim::link_faults::ParamTamper;
 use imucal_hil_sim::serve::{SimHandle, SimOptions, SimServer};
 
@@ -28,8 +29,10 @@ enum Sabotage {
     /// None by the observer (the board's link corrupts every parameter read-back: the commit
     /// succeeds, the verification after it fails).
     Nothing,
-    /// Raise the interrupt flag once this many positions are captured.
+    /// Raise the interrupt flag once this many positions are captured (in the round).
     InterruptAfter(usize),
+    /// Raise the interrupt flag at this many captures in all (every round counted).
+    InterruptAtCapture(usize),
     /// Raise the interrupt flag when the set is fitted (no samples are read until the write).
     InterruptWhenFitted,
     /// Raise the interrupt flag when the written set is verified (before the check at rest).
@@ -41,12 +44,21 @@ struct Saboteur<'a> {
     sabotage: Sabotage,
     interrupt: Arc<AtomicBool>,
     prompted: Vec<String>,
+    captures: usize,
 }
 
 impl SessionObserver for Saboteur<'_> {
     fn event(&mut self, event: &SessionEvent<'_>) {
+        if let SessionEvent::Captured { .. } = event {
+            self.captures += 1;
+        }
         match (event, &self.sabotage) {
             (SessionEvent::Prompt { target, .. }, _) => self.prompted.push(target.name.clone()),
+            (SessionEvent::Captured { .. }, Sabotage::InterruptAtCapture(n))
+                if self.captures >= *n =>
+            {
+                self.interrupt.store(true, Ordering::SeqCst);
+            }
             (SessionEvent::Verified(_), Sabotage::VanishAfterCommit) => self.sim.vanish(),
             (SessionEvent::Captured { captured, .. }, Sabotage::InterruptAfter(n))
                 if captured >= n =>
@@ -105,6 +117,7 @@ fn sabotaged_session(
         sabotage,
         interrupt: Arc::clone(&interrupt),
         prompted: Vec::new(),
+        captures: 0,
     };
     let control = SessionControl {
         save_dir: Some(dir.to_path_buf()),
@@ -244,6 +257,7 @@ fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking
         sabotage: Sabotage::InterruptAfter(usize::MAX),
         interrupt: Arc::new(AtomicBool::new(false)),
         prompted: Vec::new(),
+        captures: 0,
     };
     let control = SessionControl {
         save_dir: Some(dir.clone()),
@@ -444,5 +458,67 @@ fn without_yes_and_without_a_terminal_to_ask_nothing_is_written_to_the_board() {
     );
     // No calibrated stream was measured: no rate, rather than 0 Hz.
     assert!(summary["stream_rate_hz"].is_null(), "{summary}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_session_resumed_in_its_second_round_asks_only_for_that_rounds_missing_positions() {
+    let mut sim_options = SimOptions::new(36);
+    sim_options.speed = SPEED;
+    sim_options.schedule = PersonSchedule::Rounds(2);
+    let sim = SimServer::start(sim_options).expect("the simulator starts");
+    let options = SessionOptions {
+        rounds: 2,
+        ..options_for(&sim)
+    };
+    let dir = session_dir("rounds");
+    // Stopped three positions into the second round.
+    let interrupt = Arc::new(AtomicBool::new(false));
+    let mut observer = Saboteur {
+        sim: &sim,
+        sabotage: Sabotage::InterruptAtCapture(15),
+        interrupt: Arc::clone(&interrupt),
+        prompted: Vec::new(),
+        captures: 0,
+    };
+    let control = SessionControl {
+        save_dir: Some(dir.clone()),
+        interrupt: Some(interrupt),
+        ..SessionControl::default()
+    };
+    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let stopped = run_session_with(&mut client, &options, &mut observer, &control);
+    assert!(stopped.is_err(), "the interrupt stops the session");
+    drop(client);
+    let first = load_poses(&dir.join("poses.json")).expect("the poses are saved");
+    assert_eq!(first.len(), 15, "twelve, then three of the second round");
+    let second_round: Vec<String> = first[12..].iter().map(|p| p.target.name.clone()).collect();
+
+    let mut observer = Saboteur {
+        sim: &sim,
+        sabotage: Sabotage::InterruptAfter(usize::MAX),
+        interrupt: Arc::new(AtomicBool::new(false)),
+        prompted: Vec::new(),
+        captures: 0,
+    };
+    let control = SessionControl {
+        save_dir: Some(dir.clone()),
+        resume: first.clone(),
+        resume_mag: load_mag_samples(&dir.join("mag_samples.csv")).expect("samples saved"),
+        resume_moves: load_moves(&dir.join(MOVES_FILE)).expect("moves saved"),
+        interrupt: None,
+    };
+    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let outcome = run_session_with(&mut client, &options, &mut observer, &control)
+        .expect("the resumed session completes");
+    // Captured twice already: neither prompted for nor captured a third time.
+    for name in &second_round {
+        assert!(
+            !observer.prompted.contains(name),
+            "{name} was asked for a third time"
+        );
+    }
+    let twelve_captures = outcome.poses.iter().filter(|p| p.target.index < 12).count();
+    assert_eq!(twelve_captures, 24, "two rounds of the twelve positions");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -218,6 +218,15 @@ fn run_phases<L: Read + Write>(
 
     let mut captured = Vec::new();
     let twelve = targets::twelve_positions();
+    // A resumed session's poses go back to the rounds they were captured in.
+    let indices: Vec<usize> = resumed.iter().map(|p| p.target.index).collect();
+    let mut resumed_rounds = vec![Vec::new(); options.rounds.max(1)];
+    for (pose, round) in resumed
+        .iter()
+        .zip(targets::round_of_each(&indices, options.rounds))
+    {
+        resumed_rounds[round].push(pose.clone());
+    }
     for round in 1..=options.rounds {
         if options.rounds > 1 {
             runner.observer.event(&SessionEvent::Note(format!(
@@ -226,12 +235,7 @@ fn run_phases<L: Read + Write>(
             )));
         }
         // Each round captures every position once more; poses of earlier rounds do not count.
-        // A resumed session's poses count for the first round.
-        let mut this_round = if round == 1 {
-            resumed.to_vec()
-        } else {
-            Vec::new()
-        };
+        let mut this_round = std::mem::take(&mut resumed_rounds[round - 1]);
         runner.capture_targets(
             &twelve,
             &mut this_round,

@@ -197,8 +197,37 @@ pub fn target_at<'a>(targets: &'a [Target], up: &Vec3) -> Option<&'a Target> {
         .map(|(t, _)| t)
 }
 
+/// The round (0-based, at most `rounds − 1`) of each capture of a session, given the target
+/// index of each capture in the order they were made: a session captures every position once
+/// per round, so the `k`-th capture of a position belongs to round `k`. Captures beyond the last
+/// round's stay in it.
+pub fn round_of_each(indices: &[usize], rounds: usize) -> Vec<usize> {
+    let last = rounds.max(1) - 1;
+    let mut seen: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
+    indices
+        .iter()
+        .map(|index| {
+            let count = seen.entry(*index).or_insert(0);
+            let round = (*count).min(last);
+            *count += 1;
+            round
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_positions_second_capture_belongs_to_the_second_round() {
+        // Round 1 complete (0, 1, 2), round 2 begun (1, 0), then a third capture of 1.
+        let rounds = super::round_of_each(&[0, 1, 2, 1, 0, 1], 3);
+        assert_eq!(rounds, vec![0, 0, 0, 1, 1, 2]);
+        // One round: everything in it.
+        assert_eq!(super::round_of_each(&[0, 0, 1], 1), vec![0, 0, 0]);
+        // More captures than rounds: the extra ones stay in the last round.
+        assert_eq!(super::round_of_each(&[4, 4, 4], 2), vec![0, 1, 1]);
+    }
+
     use super::*;
 
     #[test]
