@@ -76,6 +76,7 @@ fn main() -> ExitCode {
 /// `imucal calibrate` in the session its options choose, once they agree with each other.
 fn calibrate(args: &cli::args::CalibrateArgs) -> anyhow::Result<()> {
     args.check_combination()?;
+    cli::history::check_before_writing(&args.history)?;
     if args.talks_motioncal() {
         // A board running the MotionCal sketch has a session of its own.
         cli::calibrate_motioncal::run(args)

@@ -701,3 +701,57 @@ fn analyze_tests_held_out_the_accelerometer_model_fit_chose_on_six_faces() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_history_database_that_cannot_be_used_stops_calibrate_before_a_board_is_written() {
+    let dir = scratch("bad-db");
+    // A database "inside" a regular file cannot be created.
+    std::fs::write(dir.join("a-file"), "not a directory").expect("scratch file");
+    for (how, args) in [
+        ("env", vec![]),
+        ("flag", vec!["--db", "sqlite://a-file/history.sqlite"]),
+    ] {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_imucal"));
+        command
+            .current_dir(&dir)
+            .args(["calibrate", "--sim", "--yes", "-o", how])
+            .args(&args);
+        if how == "env" {
+            command.env("IMUCAL_DB", "mysql://station/history");
+        } else {
+            command.env_remove("IMUCAL_DB");
+        }
+        let out = command.output().expect("the imucal binary runs");
+        assert_eq!(out.status.code(), Some(1), "{how}: {}", stderr(&out));
+        assert!(
+            stderr(&out).contains("nothing was started") && stderr(&out).contains("--no-history"),
+            "{how}: {}",
+            stderr(&out)
+        );
+        assert!(!dir.join(how).exists(), "{how}: no session was started");
+    }
+    // A plain path names a SQLite file: `fit --params-out` records into it.
+    let recording = real("imucal_nilspod_ferraris.csv").display().to_string();
+    let db = dir.join("plain.sqlite");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .current_dir(&dir)
+        .env("IMUCAL_DB", &db)
+        .args([
+            "fit",
+            &recording,
+            "--gyro-unit",
+            "dps",
+            "--params-out",
+            "p.json",
+        ])
+        .output()
+        .expect("the imucal binary runs");
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("Recorded as calibration 1"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(db.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

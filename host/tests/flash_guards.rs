@@ -245,3 +245,57 @@ fn a_gyroscope_matrix_that_mirrors_an_axis_never_reaches_the_board() {
     );
     assert_eq!(fake.state().commits, 0, "nothing committed");
 }
+
+#[test]
+fn a_file_without_a_magnetometer_keeps_the_boards_field_and_the_history_records_what_was_written() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let mut full = calibrated_set();
+    full.reference.field_ut = 48.0;
+    full.residuals.mag_rms = 0.3;
+    let path = temp_file("with-mag.json");
+    std::fs::write(&path, ParamsFile::from(&full).to_json()).expect("temp dir writable");
+    assert!(flash(&path, &fake.path, &[]).status.success());
+
+    // What `fit --params-out` writes for a recording without a magnetometer: the field and the
+    // residual are placeholders, and the file says the magnetometer was not fitted.
+    let mut update = CalibrationSet::identity();
+    update.accel.b = [0.5, 0.5, 0.5];
+    let mut file = ParamsFile::from(&update);
+    file.not_fitted
+        .insert("mag".into(), "not in the recording".into());
+    std::fs::write(&path, file.to_json()).expect("temp dir writable");
+    let db = temp_file("kept-mag.sqlite");
+    let _ = std::fs::remove_file(&db);
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .arg("flash")
+        .arg(&path)
+        .args(["--port", &fake.path, "--db"])
+        .arg(&db)
+        .output()
+        .expect("the imucal binary runs");
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let active = fake.state().active;
+    assert_eq!(active.mag, full.mag, "the board's magnetometer is kept");
+    assert_eq!(
+        active.reference.field_ut, 48.0,
+        "with the field it was fitted to"
+    );
+    assert_eq!(active.residuals.mag_rms, 0.3);
+
+    let records =
+        imucal::history::HistoryStore::open(&imucal::history::DbLocation::Sqlite(db.clone()))
+            .and_then(|mut store| store.records(None))
+            .expect("the history reads back");
+    let _ = std::fs::remove_file(&db);
+    let recorded = &records.last().expect("the flash is recorded").record;
+    assert_eq!(
+        recorded
+            .params
+            .to_calibration_set("history")
+            .expect("a valid set"),
+        active,
+        "the history holds the set whose CRC it records"
+    );
+    assert!(!recorded.params.not_fitted.contains_key("mag"));
+}

@@ -227,9 +227,10 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
         );
     }
     let mut set = file.to_calibration_set(&shown)?;
+    super::history::check_before_writing(&args.history)?;
     let (mut client, _board) = connect(&args.port)?;
     let measured_on = check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
-    merge_with_active(&mut client, &file, &mut set, &args.reset, &shown)?;
+    let kept = merge_with_active(&mut client, &file, &mut set, &args.reset, &shown)?;
     let status = client.write_params_verified(&set)?;
     println!(
         "wrote {shown} to {} (CRC {:#010x}, store sequence {}), committed, and verified by reading it back",
@@ -241,7 +242,7 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     let mut record = imucal::history::CalibrationRecord::new(
         &welcome.device_id.to_string(),
         imucal::history::RecordSource::Flash,
-        file,
+        file.as_written(&set, &kept),
         status.active_crc,
     );
     record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
@@ -300,14 +301,15 @@ fn check_binding(
 }
 
 /// Sensors the file leaves out (absent or not fitted) keep the board's active calibration,
-/// unless `reset` names them; then they become identity.
+/// with its residual and reference magnitude, unless `reset` names them; then they become
+/// identity. Returns the keys of the sensors kept.
 fn merge_with_active(
     client: &mut DeviceClient,
     file: &ParamsFile,
     set: &mut CalibrationSet,
     reset: &[SensorArg],
     shown: &str,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Vec<&'static str>> {
     let left_out: Vec<SensorArg> = [SensorArg::Accel, SensorArg::Gyro, SensorArg::Mag]
         .into_iter()
         .filter(|s| file.left_out().iter().any(|(key, _)| *key == s.key()))
@@ -348,6 +350,7 @@ fn merge_with_active(
             SensorArg::Accel => {
                 set.accel = source.accel;
                 set.residuals.accel_rms = source.residuals.accel_rms;
+                set.reference.gravity_mps2 = source.reference.gravity_mps2;
             }
             SensorArg::Gyro => {
                 set.gyro = source.gyro;
@@ -357,6 +360,8 @@ fn merge_with_active(
             SensorArg::Mag => {
                 set.mag = source.mag;
                 set.residuals.mag_rms = source.residuals.mag_rms;
+                // The file's field is a placeholder when it fitted no magnetometer.
+                set.reference.field_ut = source.reference.field_ut;
             }
         }
         let what = if kept.contains(sensor) {
@@ -370,5 +375,5 @@ fn merge_with_active(
             sensor.key()
         );
     }
-    Ok(())
+    Ok(kept.iter().map(|s| s.key()).collect())
 }

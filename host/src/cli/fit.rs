@@ -513,6 +513,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             &super::input_paths(&args.input),
             args.force,
         )?;
+        super::history::check_before_writing(&args.history)?;
     }
     let references = super::references(&args.reference)?;
     // A method named for one sensor is checked before the data are read.

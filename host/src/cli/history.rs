@@ -48,9 +48,38 @@ pub struct RecordArgs {
     pub no_history: bool,
 }
 
+/// Whether `args` name a history database (`--db` or `$IMUCAL_DB`) rather than leaving the
+/// default.
+fn names_a_database(args: &RecordArgs) -> bool {
+    args.db.is_some()
+        || std::env::var(imucal::history::DB_ENV).is_ok_and(|url| !url.trim().is_empty())
+}
+
+/// Refuse, before a board is opened, a history database named by `--db` or `$IMUCAL_DB` that
+/// cannot be read or created: the calibration would be written to the board and then not
+/// recorded.
+pub fn check_before_writing(args: &RecordArgs) -> anyhow::Result<()> {
+    if args.no_history || !names_a_database(args) {
+        return Ok(());
+    }
+    let source = if args.db.is_some() {
+        "--db"
+    } else {
+        imucal::history::DB_ENV
+    };
+    HistoryStore::open_url(args.db.as_deref()).map_err(|error| {
+        anyhow::anyhow!(
+            "the history database named by {source} cannot be used, so nothing was started: \
+             {error}; fix {source}, or pass --no-history to calibrate without recording"
+        )
+    })?;
+    Ok(())
+}
+
 /// Record `record` with the operator and station of `args`. Call it after the calibration is
-/// saved elsewhere: a failure is an error when `--db` was given (the station asked for that
-/// database) and a warning otherwise; either way it says the calibration itself is kept.
+/// saved elsewhere: a failure is an error when `--db` or `$IMUCAL_DB` named the database (the
+/// station asked for it) and a warning otherwise; either way it says the calibration itself is
+/// kept.
 pub fn record(args: &RecordArgs, mut record: CalibrationRecord) -> anyhow::Result<()> {
     if args.no_history {
         return Ok(());
@@ -66,7 +95,7 @@ pub fn record(args: &RecordArgs, mut record: CalibrationRecord) -> anyhow::Resul
             );
             Ok(())
         }
-        Err(error) if args.db.is_some() => Err(error.into()),
+        Err(error) if names_a_database(args) => Err(error.into()),
         Err(error) => {
             say!("imucal: warning: {error}");
             Ok(())

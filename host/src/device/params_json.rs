@@ -634,6 +634,47 @@ impl ParamsFile {
         }
     }
 
+    /// The file as `flash` wrote it to a board (`written`, the set it committed): each sensor
+    /// the file left out takes what was written for it, with its residual and reference
+    /// magnitude (gravity for the accelerometer, the field for the magnetometer). Those in
+    /// `kept` kept the board's own calibration and are no longer listed as not fitted; the
+    /// others were set to identity and stay listed. What a history records of a flash, so that
+    /// its parameters are the ones the board's CRC is of.
+    pub fn as_written(&self, written: &CalibrationSet, kept: &[&str]) -> Self {
+        let mut out = self.clone();
+        for (sensor, why) in self.left_out() {
+            match sensor {
+                "accel" => {
+                    out.accel = SensorJson::from(&written.accel);
+                    out.residuals.accel_rms = f64::from(written.residuals.accel_rms);
+                    out.reference.gravity_mps2 = f64::from(written.reference.gravity_mps2);
+                }
+                "gyro" => {
+                    out.gyro = SensorJson::from(&written.gyro);
+                    out.gyro_g_sensitivity = written
+                        .gyro_g_sensitivity
+                        .map(|k| k.map(|row| row.map(f64::from)));
+                    out.residuals.gyro_rms = f64::from(written.residuals.gyro_rms);
+                }
+                _ => {
+                    out.mag = SensorJson::from(&written.mag);
+                    out.residuals.mag_rms = f64::from(written.residuals.mag_rms);
+                    out.reference.field_ut = f64::from(written.reference.field_ut);
+                }
+            }
+            out.absent_sensors.retain(|a| a != sensor);
+            if kept.contains(&sensor) {
+                out.not_fitted.remove(sensor);
+            } else {
+                out.not_fitted.insert(
+                    sensor.to_string(),
+                    format!("set to identity by flash --reset ({why})"),
+                );
+            }
+        }
+        out
+    }
+
     /// Why the file is of no use to a board, when it calibrates no sensor at all: writing or
     /// exporting it would only put identities in place of a calibration.
     pub fn holds_nothing(&self) -> Option<String> {

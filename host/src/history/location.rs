@@ -1,5 +1,5 @@
-//! Where the history lives: `sqlite://PATH`, a libpq-style `postgres://` URL, or the default
-//! SQLite file in the user's data directory.
+//! Where the history lives: `sqlite://PATH` or a plain path, a libpq-style `postgres://` URL,
+//! or the default SQLite file in the user's data directory.
 
 use std::path::PathBuf;
 
@@ -23,7 +23,7 @@ pub enum DbLocation {
 
 impl DbLocation {
     /// Parse `url`: `sqlite://PATH` (`sqlite:///abs/path` or `sqlite://relative/path`),
-    /// `postgres://…` or `postgresql://…`.
+    /// `postgres://…` or `postgresql://…`, or a plain path, which names a SQLite file.
     pub fn parse(url: &str) -> Result<Self, HistoryError> {
         let url = url.trim();
         if let Some(path) = url.strip_prefix("sqlite://") {
@@ -35,10 +35,16 @@ impl DbLocation {
         if url.starts_with("postgres://") || url.starts_with("postgresql://") {
             return Ok(Self::Postgres(url.to_string()));
         }
-        Err(bad_url(
-            url,
-            "it is neither a sqlite:// nor a postgres:// URL",
-        ))
+        if url.is_empty() {
+            return Err(bad_url(url, "it names nothing"));
+        }
+        if url.contains("://") {
+            return Err(bad_url(
+                url,
+                "it is neither a sqlite:// nor a postgres:// URL",
+            ));
+        }
+        Ok(Self::Sqlite(PathBuf::from(url)))
     }
 
     /// `--db` if given, else `$IMUCAL_DB`, else the default SQLite file
@@ -131,6 +137,18 @@ mod tests {
         assert!(
             error.contains("sqlite://") && error.contains("postgres://"),
             "{error}"
+        );
+    }
+
+    #[test]
+    fn a_plain_path_names_a_sqlite_file() {
+        assert_eq!(
+            DbLocation::parse("/tmp/station/history.sqlite").unwrap(),
+            DbLocation::Sqlite(PathBuf::from("/tmp/station/history.sqlite"))
+        );
+        assert_eq!(
+            DbLocation::parse("history.db").unwrap(),
+            DbLocation::Sqlite(PathBuf::from("history.db"))
         );
     }
 

@@ -34,7 +34,7 @@ pub use fleet::{
     fleet_report, is_outlier_against_fleet, Finding, FleetCheck, FleetError, FleetOptions,
     FleetReport,
 };
-pub use location::DbLocation;
+pub use location::{DbLocation, DB_ENV};
 pub use record::{BoardWrite, CalibrationRecord, RecordSource, RecordVerdict, TemperatureSpan};
 pub use store::{record_calibration, HistoryStore, RecordId, StoredRecord};
 
@@ -69,7 +69,7 @@ pub enum HistoryError {
         cause: String,
     },
     /// A command that only reads found no SQLite file where the history should be.
-    #[error("there is no history database at `{path}`: nothing has been recorded there yet (`imucal calibrate` and `imucal fit --params-out` record into it); pass --db, or set IMUCAL_DB, to name the database your station records into")]
+    #[error("there is no history database at `{path}`: nothing has been recorded there yet (`imucal calibrate`, `imucal flash` and `imucal fit --params-out` record into it); pass --db, or set IMUCAL_DB, to name the database your station records into")]
     Missing {
         /// The file looked for.
         path: String,
