@@ -145,7 +145,7 @@ fn a_board_of_another_major_answers_hello_itself_with_its_version() {
         .collect();
     assert!(
         matches!(&messages[0], DeviceMessage::Event(Event::Log(line))
-        if line.text.as_str() == format!("refused Hello: the host speaks imucal protocol {ours}.0, this board speaks {theirs}.0"))
+        if line.text.as_str() == format!("refused Hello: the host speaks imucal protocol {ours}.{}, this board speaks {theirs}.0", imucal_protocol::PROTOCOL_MINOR))
     );
     assert_eq!(
         messages[1],

@@ -16,7 +16,8 @@
 //! 2. The eight corner positions (the board balanced on a corner, [`crate::poser::corner_holds`]),
 //!    which a host may ask for after the twelve: each is held like the twelve while the host
 //!    captures it. A person who can read the host's screen ([`Screen`]) takes the corner it
-//!    names, and goes on to the tumble as soon as it asks for turning. Without the screen the
+//!    names, waits after each capture until the screen names the next step, and goes on to the
+//!    tumble as soon as it asks for turning. Without the screen the
 //!    corners are held in a fixed order, and a corner the host has not asked to capture within
 //!    [`CORNER_PATIENCE_S`] means it wants something else: the person goes on to the tumble.
 //! 3. A tumble for the magnetometer that fills in what the turns between the positions have not
@@ -346,8 +347,16 @@ impl Person {
             if self.captured.is_none() && prompts.poses_captured > at_start {
                 self.captured = Some((t_s, starts_before));
             }
+            // After a corner, a person who reads the screen waits for it to name the next step
+            // rather than guess: the host may take a while to choose (at simulated speeds its
+            // computing time is many simulated seconds).
+            let waits_for_screen = index >= self.hold_count && self.screen.0 != Screen::Unknown;
             let prompted = self.captured.is_some_and(|(at_s, starts)| {
-                prompts.stream_starts > starts || t_s - at_s >= NO_PROMPT_MOVE_ON_S
+                if waits_for_screen {
+                    self.screen.1 >= at_s
+                } else {
+                    prompts.stream_starts > starts || t_s - at_s >= NO_PROMPT_MOVE_ON_S
+                }
             });
             if prompted && self.moving_at_s.is_none() {
                 self.moving_at_s = Some(t_s + REACTION_S);
@@ -795,6 +804,46 @@ mod tests {
             if person.phase() == (PersonPhase::Hold { index: 14 }) {
                 break;
             }
+            t_s += STEP_S;
+        }
+        assert_eq!(person.phase(), PersonPhase::Hold { index: 14 });
+    }
+
+    #[test]
+    fn a_person_who_reads_the_screen_stays_on_a_captured_corner_until_it_names_the_next_step() {
+        let mut person = guided_person();
+        let corners = crate::poser::corner_up_directions();
+        let screen = |up: Vector3<f64>| Screen::Pose {
+            up: [up.x, up.y, up.z],
+        };
+        drive(&mut person, screen(corners[5]), |p| {
+            p.phase() == PersonPhase::Hold { index: 17 }
+        })
+        .expect("the named corner is held");
+        let start = person.segment_start_s;
+        let mut prompts = Prompts {
+            streaming: true,
+            capture_requests: 13,
+            poses_captured: 12,
+            stream_starts: 12,
+            screen: screen(corners[5]),
+            ..Prompts::default()
+        };
+        // Captured at 0.8 s and streaming again; the host takes 10 s to choose the next corner
+        // (at 60× real time, a sixth of a second of its computing).
+        let mut t_s = start;
+        while t_s < start + 10.0 {
+            if t_s - start >= 0.8 {
+                prompts.poses_captured = 13;
+                prompts.stream_starts = 13;
+            }
+            person.observe(t_s, prompts).expect("the person moves");
+            t_s += STEP_S;
+        }
+        assert_eq!(person.phase(), PersonPhase::Hold { index: 17 }, "waited");
+        prompts.screen = screen(corners[2]);
+        while t_s < start + 20.0 && person.phase() != (PersonPhase::Hold { index: 14 }) {
+            person.observe(t_s, prompts).expect("the person moves");
             t_s += STEP_S;
         }
         assert_eq!(person.phase(), PersonPhase::Hold { index: 14 });

@@ -70,6 +70,9 @@ pub enum SessionError {
     /// The data could not be fitted.
     #[error("the calibration could not be fitted: {0}; run the session again")]
     Fit(#[from] FitError),
+    /// A sensor's data could not be fitted.
+    #[error("the calibration could not be fitted: {0}; run the session again")]
+    SensorFit(#[from] super::solve::SensorFitError),
     /// An option is out of range.
     #[error("{name} is {value}, but it must be {requirement}; change that option")]
     InvalidOption {

@@ -81,6 +81,9 @@ pub enum MotionCalSessionError {
     /// The data could not be fitted.
     #[error("the calibration could not be fitted: {0}")]
     Fit(#[from] FitError),
+    /// A sensor's data could not be fitted.
+    #[error("the calibration could not be fitted: {0}")]
+    SensorFit(#[from] super::solve::SensorFitError),
     /// The fit has no form the packet can carry.
     #[error(transparent)]
     Compat(#[from] CompatError),

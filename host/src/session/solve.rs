@@ -316,6 +316,21 @@ pub fn expected_mag_error_pct(points: &[Vec3], field_ut: Option<f64>, max_points
         .unwrap_or(f64::INFINITY)
 }
 
+/// A sensor of a session that could not be fitted, and why.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("the {sensor}: {source}")]
+pub struct SensorFitError {
+    /// `accelerometer`, `gyroscope` or `magnetometer`.
+    pub sensor: &'static str,
+    /// Why.
+    pub source: FitError,
+}
+
+/// `result` with the sensor it is of named in its error.
+fn of_sensor<T>(sensor: &'static str, result: Result<T, FitError>) -> Result<T, SensorFitError> {
+    result.map_err(|source| SensorFitError { sensor, source })
+}
+
 /// Fit every sensor and build the parameter set; `mag_points` are raw magnetometer readings
 /// (µT) from the tumble, `created_unix_s` stamps the set.
 pub fn fit_session(
@@ -325,15 +340,21 @@ pub fn fit_session(
     field_ut: Option<f64>,
     budgets: Budgets,
     created_unix_s: u64,
-) -> Result<SessionFit, FitError> {
+) -> Result<SessionFit, SensorFitError> {
     let accel_poses: Vec<Pose> = poses.iter().map(|p| pose_of(&p.stats, accel_of)).collect();
     let gyro_poses: Vec<Pose> = poses.iter().map(|p| pose_of(&p.stats, gyro_of)).collect();
-    let accel_choice = default_accel_chain(&accel_poses, gravity_mps2)?;
+    let accel_choice = of_sensor(
+        "accelerometer",
+        default_accel_chain(&accel_poses, gravity_mps2),
+    )?;
     let accel = accel_choice.fit.clone();
-    let gyro = fit_gyro_bias(&gyro_poses, 1.0)?;
+    let gyro = of_sensor("gyroscope", fit_gyro_bias(&gyro_poses, 1.0))?;
     // A spike in the stream would dominate the ellipsoid: screened like a recording's.
     let screening = screen_stream(mag_points);
-    let (mag, field, field_source) = fit_mag(&screening.kept(mag_points), field_ut)?;
+    let (mag, field, field_source) = of_sensor(
+        "magnetometer",
+        fit_mag(&screening.kept(mag_points), field_ut),
+    )?;
 
     let accel_up: Vec<Vec3> = accel_poses
         .iter()
