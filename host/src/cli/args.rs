@@ -357,7 +357,8 @@ pub struct ReferenceArgs {
     /// no effect, and a warning says so).
     #[arg(long)]
     pub gyro_scale: Option<f64>,
-    /// Magnetometer fits use at most this many samples, evenly thinned (0, the default, = all:
+    /// Magnetometer fits use at most this many samples: runs that repeat one reading within the
+    /// noise (a pause) are kept as one sample first, then the rest evenly (0, the default, = all:
     /// the fits take about 0.3 s per 10⁶ samples, and thinning loses held-out accuracy); an
     /// ellipsoid needs at least 12.
     #[arg(long, default_value_t = 0, value_parser = sample_cap)]

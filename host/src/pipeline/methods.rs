@@ -5,6 +5,8 @@
 //! choice of [`super::chain`].
 
 use crate::fit::{self, Fit, FitError, Method, Pose, Vec3};
+use crate::stats::distributions::chi2_quantile_per_dof;
+use crate::stats::robust::stream_noise;
 
 /// Methods offered for the accelerometer (`--method`; the default is [`super::chain`]).
 pub const ACCEL_METHODS: [Method; 8] = [
@@ -197,6 +199,60 @@ pub fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
         .collect()
 }
 
+/// Tail probability at which a stream sample counts as having left the reading its run began
+/// with ([`thin_redundant_indices`]): a board held still breaks its run about once per
+/// thousand samples.
+const REDUNDANT_RUN_BREAK: f64 = 1e-3;
+
+/// The indices of at most `max` of the stream `points` (all when `max` is 0 or larger), thinned
+/// first where the samples are redundant. A run of consecutive samples that stay within the
+/// noise of the run's first one (the board held still, or turning slower than the noise
+/// shows) repeats one reading and is kept as its middle sample: a sample leaves the run when
+/// `Σₖ((xₖ − x₀ₖ)/σₖ)²`, which for two noisy readings of one field is `2·χ²(3)`, passes its
+/// `1 − `[`REDUNDANT_RUN_BREAK`] quantile (σ the stream's noise, [`stream_noise`]). Only then,
+/// if more than `max` remain, are they evenly spaced. Evenly spacing the raw stream instead
+/// lets a long pause crowd out the turning: minutes still in one position leave thousands of
+/// copies of one direction and few of the others.
+pub fn thin_redundant_indices(points: &[Vec3], max: usize) -> Vec<usize> {
+    if max == 0 || points.len() <= max {
+        return (0..points.len()).collect();
+    }
+    let runs = match stream_noise(points) {
+        Some(sigma) if sigma.iter().all(|s| *s > 0.0 && s.is_finite()) => {
+            let limit = 2.0 * 3.0 * chi2_quantile_per_dof(1.0 - REDUNDANT_RUN_BREAK, 3.0);
+            let mut kept = Vec::new();
+            let mut start = 0;
+            for i in 1..=points.len() {
+                let leaves = i == points.len() || {
+                    let d = (points[i] - points[start]).component_div(&sigma);
+                    d.norm_squared() > limit
+                };
+                if leaves {
+                    kept.push((start + i - 1) / 2);
+                    start = i;
+                }
+            }
+            kept
+        }
+        _ => (0..points.len()).collect(),
+    };
+    if runs.len() <= max {
+        return runs;
+    }
+    thin_indices(runs.len(), max)
+        .into_iter()
+        .map(|i| runs[i])
+        .collect()
+}
+
+/// The points of [`thin_redundant_indices`].
+pub fn thin_redundant(points: &[Vec3], max: usize) -> Vec<Vec3> {
+    thin_redundant_indices(points, max)
+        .into_iter()
+        .filter_map(|i| points.get(i).copied())
+        .collect()
+}
+
 /// The indices [`thin`] keeps out of `len` items.
 pub fn thin_indices(len: usize, max: usize) -> Vec<usize> {
     if max == 0 || len <= max {
@@ -210,6 +266,74 @@ pub fn thin_indices(len: usize, max: usize) -> Vec<usize> {
 mod tests {
     use super::*;
     use crate::synthetic::hard_and_soft_iron_cloud;
+
+    /// Deterministic standard normal draws (sum of twelve uniforms, SplitMix64).
+    fn normals(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            let mut sum = 0.0;
+            for _ in 0..12 {
+                state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+                let mut z = state;
+                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+                z ^= z >> 31;
+                sum += (z >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            sum - 6.0
+        }
+    }
+
+    #[test]
+    fn thinning_keeps_the_requested_count_in_order() {
+        let points: Vec<Vec3> = (0..1000).map(|i| Vec3::new(i as f64, 0.0, 0.0)).collect();
+        let thinned = thin(&points, 300);
+        assert_eq!(thinned.len(), 300);
+        assert!(thinned.windows(2).all(|w| w[1].x > w[0].x));
+        assert_eq!(thin(&points, 0).len(), 1000);
+        assert_eq!(thin_redundant(&points, 0).len(), 1000);
+        assert_eq!(thin_redundant(&points, 5000).len(), 1000);
+    }
+
+    #[test]
+    fn a_long_pause_does_not_crowd_out_the_turning_when_the_stream_is_thinned() {
+        // 2000 samples turning along a spiral over a 50 µT sphere (about 2 µT apart), then
+        // 100 000 samples held still in one direction, all with 0.3 µT of noise per axis.
+        let mut noise = normals(7);
+        let sigma = 0.3;
+        let mut stream: Vec<Vec3> = (0..2000)
+            .map(|i| {
+                let t = i as f64 / 2000.0;
+                let polar = std::f64::consts::PI * t;
+                let azimuth = 40.0 * polar;
+                Vec3::new(
+                    polar.sin() * azimuth.cos(),
+                    polar.sin() * azimuth.sin(),
+                    polar.cos(),
+                ) * 50.0
+            })
+            .collect();
+        stream.extend(std::iter::repeat_n(Vec3::new(0.0, 0.0, 50.0), 100_000));
+        for p in &mut stream {
+            *p += Vec3::new(noise(), noise(), noise()) * sigma;
+        }
+        let turning = |kept: &[usize]| kept.iter().filter(|&&i| i < 2000).count();
+        // Evenly spaced, the pause takes 98 % of the 3000 samples kept.
+        assert!(turning(&thin_indices(stream.len(), 3000)) < 60);
+        let kept = thin_redundant_indices(&stream, 3000);
+        assert!(kept.len() <= 3000);
+        // Most of the turning is kept: only near the spiral's poles, where consecutive samples
+        // are closer than the noise, do runs of them merge.
+        assert!(
+            turning(&kept) > 1400,
+            "{} of {} kept samples turn",
+            turning(&kept),
+            kept.len()
+        );
+        // The pause is kept as runs that break at most about once per thousand samples.
+        let still = kept.len() - turning(&kept);
+        assert!((1..=200).contains(&still), "{still} still samples kept");
+    }
 
     #[test]
     fn li_on_magnetometer_samples_reports_a_held_out_rms_on_either_side_of_the_size_rule() {

@@ -270,7 +270,7 @@ fn run_phases<L: Read + Write>(
     let fit_start = Instant::now();
     let mut fit = fit_session(
         &captured,
-        &solve::thin(&turning, options.mag_max_fit_samples),
+        &crate::pipeline::methods::thin_redundant(&turning, options.mag_max_fit_samples),
         options.gravity_mps2,
         options.field_ut,
         options.budgets,

@@ -30,12 +30,13 @@ use super::mag_guidance::Attitude;
 use super::motion::MotionMonitor;
 use super::options::SessionOptions;
 use super::runner::unix_now;
-use super::solve::{fit_session, thin, Budgets, CapturedPose, SessionFit, VerdictLevel};
+use super::solve::{fit_session, Budgets, CapturedPose, SessionFit, VerdictLevel};
 use super::targets::{target_at, twelve_positions, Target};
 use crate::compat::adafruit::{limitations, AdafruitLimitations, Conversion};
 use crate::compat::{AdafruitCalibration, CompatError, EchoCheck, MotionCalClient, MotionCalError};
 use crate::device::UnitSample;
 use crate::fit::{FitError, Vec3};
+use crate::pipeline::methods::thin_redundant;
 use crate::stats::descriptive::mean_variance;
 use crate::stats::robust::screen_vectors;
 
@@ -449,7 +450,7 @@ pub fn run_motioncal_session<L: Read + Write>(
     let session = &options.session;
     let mut fit = fit_session(
         &collector.poses,
-        &thin(&collector.mag_points, session.mag_max_fit_samples),
+        &thin_redundant(&collector.mag_points, session.mag_max_fit_samples),
         session.gravity_mps2,
         session.field_ut,
         session.budgets,

@@ -55,7 +55,8 @@ pub struct SessionOptions {
     pub mag_accept_fraction: f64,
     /// Longest magnetometer phase.
     pub mag_timeout: Duration,
-    /// Most magnetometer samples fitted (evenly thinned; 0 = all).
+    /// Most magnetometer samples fitted (pauses kept as one sample, then evenly thinned; 0 =
+    /// all; [`crate::pipeline::methods::thin_redundant`]).
     pub mag_max_fit_samples: usize,
     /// Stillness (after the window first says still) not kept before the rest measurement, s
     /// (board time).

@@ -35,6 +35,7 @@ use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::norm_lm::fit_mag_lm;
 use crate::fit::{Calibration, Fit, FitError, Mat3, Pose, Vec3};
 use crate::pipeline::chain::{default_accel_chain, ChainChoice};
+use crate::pipeline::methods::thin_redundant;
 use crate::stats::robust::screen_stream;
 
 /// Standard gravity, m/s² (the unit of "mg").
@@ -271,17 +272,6 @@ fn sensor_calibration(cal: &Calibration) -> SensorCalibration {
     }
 }
 
-/// Evenly thin `points` to at most `max` (0 = keep all).
-pub fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
-    if max == 0 || points.len() <= max {
-        return points.to_vec();
-    }
-    let step = points.len() as f64 / max as f64;
-    (0..max)
-        .filter_map(|i| points.get((i as f64 * step) as usize).copied())
-        .collect()
-}
-
 /// The magnetometer fit with the reference chosen as described by [`FieldSource`].
 fn fit_mag(points: &[Vec3], field_ut: Option<f64>) -> Result<(Fit, f64, FieldSource), FitError> {
     match field_ut {
@@ -305,11 +295,11 @@ fn fit_mag(points: &[Vec3], field_ut: Option<f64>) -> Result<(Fit, f64, FieldSou
 }
 
 /// The magnetometer fit's expected `|m|` error in its worst direction, % (1σ), for the raw
-/// readings `points` (µT) fitted as [`fit_session`] fits them (at most `max_points`, evenly
-/// thinned as the session does, then screened for spikes); infinite when the fit fails or gives
-/// no covariance.
+/// readings `points` (µT) fitted as [`fit_session`] fits them (at most `max_points`, thinned
+/// as the session does, then screened for spikes); infinite when the fit fails or gives no
+/// covariance.
 pub fn expected_mag_error_pct(points: &[Vec3], field_ut: Option<f64>, max_points: usize) -> f64 {
-    let thinned = thin(points, max_points);
+    let thinned = thin_redundant(points, max_points);
     fit_mag(&screen_stream(&thinned).kept(&thinned), field_ut)
         .ok()
         .and_then(|(fit, field, _)| max_norm_sigma(&fit).map(|s| s / field * 100.0))
@@ -676,14 +666,5 @@ mod tests {
             "half sphere {upper} %, whole {whole} %"
         );
         assert!(expected_mag_error_pct(&[], Some(48.0), 3000).is_infinite());
-    }
-
-    #[test]
-    fn thinning_keeps_the_requested_count_in_order() {
-        let points: Vec<Vec3> = (0..1000).map(|i| Vec3::new(i as f64, 0.0, 0.0)).collect();
-        let thinned = thin(&points, 300);
-        assert_eq!(thinned.len(), 300);
-        assert!(thinned.windows(2).all(|w| w[1].x > w[0].x));
-        assert_eq!(thin(&points, 0).len(), 1000);
     }
 }
