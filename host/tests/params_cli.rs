@@ -145,6 +145,21 @@ fn a_reset_leaves_the_identity_set_verified_by_read_back() {
     let (crc, set) = active(&sim);
     assert_eq!(crc, identity.crc32());
     assert_eq!(set, identity);
+    // The history's newest record of the board is the reset, so its fleet and changes no
+    // longer describe the erased set.
+    let records = imucal::history::HistoryStore::open(&imucal::history::DbLocation::Sqlite(
+        dir.join("history.sqlite"),
+    ))
+    .and_then(|mut store| store.records(None))
+    .expect("the history reads back");
+    let newest = &records.last().expect("the reset is recorded").record;
+    assert_eq!(newest.source, imucal::history::RecordSource::Reset);
+    assert_eq!(newest.params_crc, identity.crc32());
+    assert_eq!(
+        newest.params.fitted_sensors().len(),
+        0,
+        "every sensor reset"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -55,6 +55,9 @@ pub struct ResetArgs {
     /// Reset without asking (needed when standard input is not a terminal).
     #[arg(long, short = 'y')]
     pub yes: bool,
+    /// Where to record the reset.
+    #[command(flatten)]
+    pub history: super::history::RecordArgs,
 }
 
 /// Runs a `params` command.
@@ -112,6 +115,7 @@ fn reset(args: &ResetArgs) -> anyhow::Result<()> {
         "resetting erases the board's calibration, and standard input is not a terminal to ask \
          on; pass --yes to reset (save the set first with `imucal params get -o FILE`)",
     )?;
+    super::history::check_before_writing(&args.history)?;
     let (mut client, _board) = connect(&args.port)?;
     let (set, crc) = read_active(&mut client)?;
     let device_id = client.welcome().device_id;
@@ -138,5 +142,22 @@ fn reset(args: &ResetArgs) -> anyhow::Result<()> {
         status.active_crc,
         status.active_seq
     );
-    Ok(())
+    // The history says what the board holds now, so that its fleet and changes do not go on
+    // describing the erased set.
+    let mut file = imucal::device::ParamsFile::from(&identity);
+    for sensor in imucal::device::params_json::SENSOR_KEYS {
+        file.not_fitted.insert(
+            sensor.to_string(),
+            "reset to identity by `imucal params reset`".into(),
+        );
+    }
+    let welcome = client.welcome();
+    let mut record = imucal::history::CalibrationRecord::new(
+        &device_id.to_string(),
+        imucal::history::RecordSource::Reset,
+        file,
+        status.active_crc,
+    );
+    record.firmware_version = Some(super::history::firmware_text(&welcome.firmware_version));
+    super::history::record(&args.history, record)
 }

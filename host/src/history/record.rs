@@ -22,6 +22,8 @@ pub enum RecordSource {
     Fit,
     /// `imucal flash`: a parameter file written to a board.
     Flash,
+    /// `imucal params reset`: the board's calibration set to identity.
+    Reset,
 }
 
 impl RecordSource {
@@ -31,6 +33,7 @@ impl RecordSource {
             Self::Guided => "guided",
             Self::Fit => "fit",
             Self::Flash => "flash",
+            Self::Reset => "reset",
         }
     }
 
@@ -40,6 +43,7 @@ impl RecordSource {
             "guided" => Some(Self::Guided),
             "fit" => Some(Self::Fit),
             "flash" => Some(Self::Flash),
+            "reset" => Some(Self::Reset),
             _ => None,
         }
     }
