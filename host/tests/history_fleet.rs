@@ -493,3 +493,53 @@ fn a_false_alarm_rate_too_small_to_flag_anything_is_refused() {
         "{stderr}"
     );
 }
+
+#[test]
+fn matrix_entries_a_model_does_not_estimate_are_not_pooled_and_sensors_on_too_few_boards_are_named()
+{
+    // Twenty boards whose gyroscope was fitted for its offset only (A exactly the identity),
+    // of which five also have a magnetometer: too few for its spread.
+    let records: Vec<CalibrationRecord> = (0..20)
+        .map(|b| {
+            let mut record = board_record(3000 + b);
+            record.params.gyro.a = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+            if b >= 5 {
+                record
+                    .params
+                    .not_fitted
+                    .insert("mag".into(), "not in the recording".into());
+            }
+            record
+        })
+        .collect();
+    let refs: Vec<&CalibrationRecord> = records.iter().collect();
+    let model = FleetModel::fit(&refs, &FleetOptions::default()).expect("twenty boards");
+    let mut store = HistoryStore::open(&databases("fixed_entries")[0]).expect("store");
+    for record in &records {
+        store.record(record).expect("recorded");
+    }
+    let report = fleet_report(&mut store, &FleetOptions::default()).expect("a report");
+    let tested: Vec<&str> = report
+        .parameters
+        .iter()
+        .map(|p| p.parameter.as_str())
+        .collect();
+    assert!(
+        !tested.iter().any(|p| p.starts_with("gyro.A")),
+        "placeholders pooled as measurements: {tested:?}"
+    );
+    assert!(tested.contains(&"gyro.b.x") && tested.contains(&"accel.A.xy"));
+    assert!(
+        report
+            .untested
+            .iter()
+            .any(|u| u.parameter == "mag.b.x" && u.boards == 5),
+        "{:?}",
+        report.untested
+    );
+    // A board whose gyroscope A was estimated is still compared on the entries it has.
+    assert!(model
+        .distances(&board_record(3100))
+        .iter()
+        .all(|f| !f.parameter.starts_with("gyro.A")));
+}

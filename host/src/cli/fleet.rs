@@ -81,6 +81,25 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
             p.parameter, p.boards, p.median, sd, p.threshold_z, p.min, p.max
         );
     }
+    if !report.untested.is_empty() {
+        // One line per sensor and kind: `mag.b on 6 boards`.
+        let mut groups: Vec<(String, usize, usize)> = Vec::new();
+        for u in &report.untested {
+            let group: String = u
+                .parameter
+                .rsplit_once('.')
+                .map_or(u.parameter.clone(), |(g, _)| g.into());
+            match groups.iter_mut().find(|(g, _, _)| *g == group) {
+                Some(entry) => entry.1 = entry.1.max(u.boards),
+                None => groups.push((group, u.boards, u.needed)),
+            }
+        }
+        let text: Vec<String> = groups
+            .iter()
+            .map(|(g, boards, needed)| format!("{g} (on {boards} of the {needed} boards needed)"))
+            .collect();
+        println!("not tested, too few boards have them: {}", text.join(", "));
+    }
     for board in report.results.iter().filter(|b| !b.not_compared.is_empty()) {
         println!(
             "{}: not compared with the fleet: {} (its parameters map raw counts, the fleet's \

@@ -162,6 +162,8 @@ pub struct FleetReport {
     pub threshold_z: f64,
     /// Per parameter.
     pub parameters: Vec<ParameterStats>,
+    /// Parameters too few boards have to be tested.
+    pub untested: Vec<Untested>,
     /// Per board, outliers first: the set on each board, and each board's attempt not
     /// written since (`not_written` says why).
     pub results: Vec<BoardResult>,
@@ -272,6 +274,18 @@ impl Column {
 pub struct FleetModel {
     boards: usize,
     parameters: Vec<ParameterStats>,
+    untested: Vec<Untested>,
+}
+
+/// A parameter some boards have but too few to give the fleet's spread.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Untested {
+    /// The parameter, e.g. `mag.b.x`.
+    pub parameter: String,
+    /// Boards that have it.
+    pub boards: usize,
+    /// Boards it needs (with its sensor's other axes pooled).
+    pub needed: usize,
 }
 
 impl FleetModel {
@@ -301,6 +315,7 @@ impl FleetModel {
         // smallest pool (three axes) reach the minimum.
         let min_pooled_boards = options.min_spread_values.div_ceil(3).max(3);
         let mut parameters = Vec::new();
+        let mut untested = Vec::new();
         for column in columns {
             let own = column.deviations.len();
             let family = pooled
@@ -311,6 +326,11 @@ impl FleetModel {
             } else if own >= min_pooled_boards && family.len() >= options.min_spread_values {
                 (family, family.len())
             } else {
+                untested.push(Untested {
+                    parameter: column.name,
+                    boards: own,
+                    needed: min_pooled_boards,
+                });
                 continue;
             };
             let Some(spread) = Column::spread(deviations, own) else {
@@ -344,7 +364,11 @@ impl FleetModel {
             let dof = MAD_EFFICIENCY * stats.spread_values as f64;
             stats.threshold_z = t_upper_quantile(per_parameter, dof.max(1.0));
         }
-        Ok(Self { boards, parameters })
+        Ok(Self {
+            boards,
+            parameters,
+            untested,
+        })
     }
 
     /// The largest threshold on `|z|` over the parameters.
@@ -471,6 +495,7 @@ pub fn fleet_report(
         false_alarm_per_board: options.false_alarm_per_board,
         threshold_z: model.threshold_z(),
         parameters: model.parameters.clone(),
+        untested: model.untested.clone(),
         results,
     })
 }
@@ -481,7 +506,8 @@ pub const METHOD: &str = "per parameter: median and 1.4826·MAD of the fleet (50
     |z| exceeds the Student-t (ν = 0.37·values) quantile for the false-alarm rate per board \
     split over the parameters tested (Bonferroni); a parameter's own spread when ≥ 20 boards \
     have it, else the deviations of its sensor's axes of the same kind pooled (one datasheet \
-    tolerance per part)";
+    tolerance per part); matrix entries a record's model does not estimate (exactly 0 or 1) are \
+    not counted";
 
 fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
     let distances = model.distances(&stored.record);
@@ -521,12 +547,21 @@ fn comparable_parameters(record: &CalibrationRecord) -> BTreeMap<String, f64> {
         .map(|(sensor, _)| sensor)
         .collect();
     let mut parameters = record.parameters();
-    parameters.retain(|name, _| {
+    parameters.retain(|name, value| {
         name.split('.')
             .next()
             .is_none_or(|sensor| !foreign.contains(&sensor))
+            && !fixed_by_the_model(name, *value)
     });
     parameters
+}
+
+/// Whether a matrix entry is one the fitted model does not estimate: exactly 1 or 0, as a
+/// model that fits the offset only leaves the whole matrix, and an axis-aligned one the
+/// entries off the diagonal. No estimated entry comes out exactly 0 or 1; pooling such
+/// placeholders with estimates would make them look like measurements that agree perfectly.
+fn fixed_by_the_model(name: &str, value: f64) -> bool {
+    name.split('.').nth(1) == Some("A") && (value == 0.0 || value == 1.0)
 }
 
 /// Test `record` against the fleet in `store` (the newest set on every other board) before
