@@ -141,7 +141,9 @@ pub(super) fn gyro_scale_rows(value: &Value, a: &Mat3) -> Vec<(String, String)> 
             .join(", "),
     )];
     rows.push((
-        "largest misalignment between axes (± one standard deviation)".to_string(),
+        "largest off-diagonal angle A_ij/A_jj, mounting and cross-axis together (not the \
+         axes' angles off 90° in the parameter table; ± one standard deviation)"
+            .to_string(),
         format!(
             "{} ± {}",
             with_unit(number("misalignment_deg"), "°"),
