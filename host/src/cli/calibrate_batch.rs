@@ -207,6 +207,9 @@ fn batch_table(report: &BatchReport) -> String {
         "\n{:<24} {:<34} {:<20} {:<10} {:<8} {:>7} {:>7}  cause / error\n",
         "port", "device", "status", "verdict", "outlier", "wall s", "cpu s"
     );
+    // A cause of several lines (a stopped session says what the board holds and where its
+    // data are) keeps its first line in the table and follows it in full.
+    let mut details = String::new();
     for board in &report.boards {
         let verdict = board
             .summary
@@ -241,6 +244,13 @@ fn batch_table(report: &BatchReport) -> String {
             })
             .or_else(|| board.history_error.clone())
             .unwrap_or_default();
+        let why = match why.split_once('\n') {
+            Some((first, _)) => {
+                details += &format!("\n{}:\n{why}\n", board.port);
+                format!("{first} (in full below)")
+            }
+            None => why,
+        };
         let status = match board.status {
             BoardStatus::Verified => "verified",
             BoardStatus::RefusedOutlier => "refused: outlier",
@@ -268,5 +278,52 @@ fn batch_table(report: &BatchReport) -> String {
         count_boards(report.boards.len()),
         report.wall_seconds
     );
-    out
+    out + &details
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imucal::session::batch::{BoardResult, BoardStatus};
+
+    #[test]
+    fn a_cause_of_several_lines_keeps_one_table_row_and_follows_in_full() {
+        let board = |port: &str, error: &str| BoardResult {
+            port: port.into(),
+            device_id: None,
+            status: BoardStatus::Failed,
+            outlier: false,
+            outlier_check: None,
+            error: Some(error.into()),
+            session_dir: None,
+            recorded_as: None,
+            history_error: None,
+            history_write_seconds: None,
+            summary: None,
+            wall_seconds: Some(1.0),
+            host_cpu_seconds: None,
+        };
+        let report = BatchReport {
+            boards: vec![
+                board(
+                    "/dev/pts/1",
+                    "the board stopped answering\nThe board holds its earlier calibration.",
+                ),
+                board("/dev/pts/2", "no board on the port"),
+            ],
+            verified: 0,
+            wall_seconds: 1.0,
+        };
+        let table = batch_table(&report);
+        let rows: Vec<&str> = table.lines().filter(|l| l.contains(" failed ")).collect();
+        assert_eq!(rows.len(), 2, "{table}");
+        assert!(
+            rows[0].ends_with("the board stopped answering (in full below)"),
+            "{table}"
+        );
+        assert!(rows[1].ends_with("no board on the port"), "{table}");
+        assert!(table.ends_with(
+            "/dev/pts/1:\nthe board stopped answering\nThe board holds its earlier calibration.\n"
+        ));
+    }
 }
