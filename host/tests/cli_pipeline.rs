@@ -465,19 +465,22 @@ fn analyze_studies_the_accelerometer_in_a_model_that_fit_does_not_refuse() {
 }
 
 #[test]
-fn analyze_says_why_six_faces_cannot_carry_the_accelerometer_analysis() {
+fn analyze_holds_out_on_six_faces_only_the_poses_the_model_can_spare_and_says_so() {
     let recording = real("imucal_nilspod_ferraris.csv");
     let out = imucal(&["analyze", &recording, "--gyro-unit", "dps"]);
     let stdout = text(&out.stdout);
-    let accel = stdout
-        .lines()
-        .find(|l| l.starts_with("accel: not analysed"))
-        .unwrap_or_else(|| panic!("the accelerometer is not analysed: {stdout}"));
     assert!(
-        accel.contains("6 distinct orientation") && accel.contains("held-out fold"),
-        "{accel}"
+        stdout.contains("accel — base model minmax+axis-aligned — 13 observations"),
+        "{stdout}"
     );
-    assert!(!accel.contains("did not converge"), "{accel}");
+    let held_out = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("held out:"))
+        .unwrap_or_else(|| panic!("no note of the poses held out: {stdout}"));
+    assert!(
+        held_out.contains("each of the 10 observations") && held_out.contains("other 3"),
+        "{held_out}"
+    );
 }
 
 #[test]
@@ -667,22 +670,23 @@ fn analyze_prints_the_base_fits_fit_gives_for_the_same_recording_and_options() {
     }
     // The analysis builds on the model `fit` chose, not on one it chose again.
     assert!(
-        analyze.contains("accel: not analysed: the accel base model minmax+axis-aligned"),
+        analyze.contains("accel — base model minmax+axis-aligned"),
         "{analyze}"
     );
 }
 
 #[test]
 fn analyze_fails_naming_the_sensor_it_could_not_analyse_after_reporting_the_others() {
-    // Six faces cannot carry the accelerometer's analysis; the gyroscope's is still done.
-    let recording = real("imucal_nilspod_ferraris.csv");
+    // Raw gyroscope counts read as rad/s: `fit` leaves the gyroscope out, so it cannot be
+    // analysed; the accelerometer's analysis is still done.
+    let recording = real("tsi_mpu6050_multipos.csv");
     let dir = temp_file("partial-analysis-report");
     let _ = std::fs::remove_dir_all(&dir);
     let out = imucal(&[
         "analyze",
         &recording,
-        "--gyro-unit",
-        "dps",
+        "--accel-unit",
+        "counts",
         "--report",
         &dir,
     ]);
@@ -690,14 +694,14 @@ fn analyze_fails_naming_the_sensor_it_could_not_analyse_after_reporting_the_othe
     let written = PathBuf::from(&dir).join("analysis.json").is_file();
     let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
-    assert!(stdout.contains("gyro — base model gyro-bias"), "{stdout}");
+    assert!(stdout.contains("accel — base model"), "{stdout}");
     assert!(written, "the report of what could be analysed is written");
     let last = stderr.lines().last().unwrap_or_default();
     assert!(
-        last.starts_with("imucal: accel not analysed") && last.contains("held-out fold"),
+        last.starts_with("imucal: gyro not analysed") && last.contains("not fitted"),
         "{stderr}"
     );
-    assert!(!last.contains("gyro"), "{stderr}");
+    assert!(!last.contains("accel"), "{stderr}");
     for command in ["fit", "analyze"] {
         let help = text(&imucal(&[command, "--help"]).stdout);
         assert!(

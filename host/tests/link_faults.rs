@@ -275,15 +275,17 @@ fn a_board_of_another_protocol_major_is_refused_with_both_versions_named_on_both
         assert_eq!(
             error.to_string(),
             format!(
-                "{} speaks imucal protocol {major}.0, this imucal speaks {ours}.0; {advice}",
-                sim.port_path()
+                "{} speaks imucal protocol {major}.0, this imucal speaks {ours}.{}; {advice}",
+                sim.port_path(),
+                imucal_protocol::PROTOCOL_MINOR
             )
         );
         assert_eq!(sim.fault_stats().hellos_refused, 1);
         assert_eq!(
             sim.take_notes(),
             vec![format!(
-                "refused Hello: the host speaks imucal protocol {ours}.0, this board speaks {major}.0"
+                "refused Hello: the host speaks imucal protocol {ours}.{}, this board speaks {major}.0",
+                imucal_protocol::PROTOCOL_MINOR
             )]
         );
     }
@@ -305,8 +307,9 @@ fn the_cli_reports_a_protocol_mismatch_and_exits_non_zero() {
     assert!(!output.status.success());
     assert!(
         stderr.contains(&format!(
-            "speaks imucal protocol {}.0, this imucal speaks {ours}.0",
-            ours + 1
+            "speaks imucal protocol {}.0, this imucal speaks {ours}.{}",
+            ours + 1,
+            imucal_protocol::PROTOCOL_MINOR
         )),
         "stderr: {stderr}"
     );

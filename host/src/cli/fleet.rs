@@ -8,7 +8,8 @@ use imucal::history::{fleet_report, FleetOptions, HistoryStore};
 /// Arguments of `imucal fleet`.
 #[derive(Debug, Args)]
 pub struct FleetArgs {
-    /// History database: `sqlite://PATH` or `postgres://user@host/db[?host=/socket/dir&port=N]`
+    /// History database: a file path, `sqlite://PATH` or
+    /// `postgres://user@host/db[?host=/socket/dir&port=N]`
     /// (default: `$IMUCAL_DB`, else `$XDG_DATA_HOME/imucal/history.sqlite`).
     #[arg(long, value_name = "URL")]
     pub db: Option<String>,

@@ -16,7 +16,8 @@ use imucal::history::{
 pub struct HistoryArgs {
     /// Only this board (its id as `imucal info` prints it); all boards when left out.
     pub device: Option<String>,
-    /// History database: `sqlite://PATH` or `postgres://user@host/db[?host=/socket/dir&port=N]`
+    /// History database: a file path, `sqlite://PATH` or
+    /// `postgres://user@host/db[?host=/socket/dir&port=N]`
     /// (default: `$IMUCAL_DB`, else `$XDG_DATA_HOME/imucal/history.sqlite`).
     #[arg(long, value_name = "URL")]
     pub db: Option<String>,
@@ -32,7 +33,7 @@ pub struct HistoryArgs {
 #[derive(Debug, Clone, Default, Args)]
 pub struct RecordArgs {
     /// History database to record the calibration in (`imucal fit` records what it writes with
-    /// --params-out, nothing else): `sqlite://PATH` or
+    /// --params-out, nothing else): a file path, `sqlite://PATH` or
     /// `postgres://user@host/db[?host=/socket/dir&port=N]` (default: `$IMUCAL_DB`, else
     /// `$XDG_DATA_HOME/imucal/history.sqlite`).
     #[arg(long, value_name = "URL")]
@@ -67,12 +68,34 @@ pub fn check_before_writing(args: &RecordArgs) -> anyhow::Result<()> {
     } else {
         imucal::history::DB_ENV
     };
-    HistoryStore::open_url(args.db.as_deref()).map_err(|error| {
+    let refuse = |error: String| {
         anyhow::anyhow!(
             "the history database named by {source} cannot be used, so nothing was started: \
              {error}; fix {source}, or pass --no-history to calibrate without recording"
         )
-    })?;
+    };
+    let location = DbLocation::resolve(args.db.as_deref()).map_err(|e| refuse(e.to_string()))?;
+    match &location {
+        // A file not there yet is created when something is recorded (a command may end up
+        // recording nothing): only where it would go is checked now.
+        DbLocation::Sqlite(path) if !path.exists() => {
+            let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+            let existing = parent
+                .into_iter()
+                .flat_map(Path::ancestors)
+                .find(|a| a.exists());
+            if let Some(dir) = existing.filter(|d| !d.is_dir()) {
+                return Err(refuse(format!(
+                    "`{}` cannot be created: `{}` is not a directory",
+                    path.display(),
+                    dir.display()
+                )));
+            }
+        }
+        _ => {
+            HistoryStore::open(&location).map_err(|e| refuse(e.to_string()))?;
+        }
+    }
     Ok(())
 }
 

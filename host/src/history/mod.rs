@@ -42,7 +42,7 @@ pub use store::{record_calibration, HistoryStore, RecordId, StoredRecord};
 #[derive(Debug, thiserror::Error)]
 pub enum HistoryError {
     /// The `--db` value is not a database URL.
-    #[error("`{url}` is not a history database: {why}; use sqlite://PATH or postgres://user@host/db (add ?host=/socket/dir&port=N for a Unix socket)")]
+    #[error("`{url}` is not a history database: {why}; use a file path, sqlite://PATH or postgres://user@host/db (add ?host=/socket/dir&port=N for a Unix socket)")]
     BadUrl {
         /// The URL (password hidden).
         url: String,
