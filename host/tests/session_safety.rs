@@ -111,6 +111,19 @@ fn sabotaged_session(
     Result<imucal::session::SessionOutcome, SessionError>,
     Vec<String>,
 ) {
+    sabotaged_session_with(sim, &options_for(sim), sabotage, dir)
+}
+
+/// [`sabotaged_session`] with the session's `options`.
+fn sabotaged_session_with(
+    sim: &SimHandle,
+    options: &SessionOptions,
+    sabotage: Sabotage,
+    dir: &Path,
+) -> (
+    Result<imucal::session::SessionOutcome, SessionError>,
+    Vec<String>,
+) {
     let interrupt = Arc::new(AtomicBool::new(false));
     let mut observer = Saboteur {
         sim,
@@ -125,7 +138,7 @@ fn sabotaged_session(
         ..SessionControl::default()
     };
     let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
-    let result = run_session_with(&mut client, &options_for(sim), &mut observer, &control);
+    let result = run_session_with(&mut client, options, &mut observer, &control);
     (result, observer.prompted)
 }
 
@@ -473,23 +486,9 @@ fn a_session_resumed_in_its_second_round_asks_only_for_that_rounds_missing_posit
     };
     let dir = session_dir("rounds");
     // Stopped three positions into the second round.
-    let interrupt = Arc::new(AtomicBool::new(false));
-    let mut observer = Saboteur {
-        sim: &sim,
-        sabotage: Sabotage::InterruptAtCapture(15),
-        interrupt: Arc::clone(&interrupt),
-        prompted: Vec::new(),
-        captures: 0,
-    };
-    let control = SessionControl {
-        save_dir: Some(dir.clone()),
-        interrupt: Some(interrupt),
-        ..SessionControl::default()
-    };
-    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
-    let stopped = run_session_with(&mut client, &options, &mut observer, &control);
+    let (stopped, _) =
+        sabotaged_session_with(&sim, &options, Sabotage::InterruptAtCapture(15), &dir);
     assert!(stopped.is_err(), "the interrupt stops the session");
-    drop(client);
     let first = load_poses(&dir.join("poses.json")).expect("the poses are saved");
     assert_eq!(first.len(), 15, "twelve, then three of the second round");
     let second_round: Vec<String> = first[12..].iter().map(|p| p.target.name.clone()).collect();
