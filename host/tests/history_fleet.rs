@@ -543,3 +543,29 @@ fn matrix_entries_a_model_does_not_estimate_are_not_pooled_and_sensors_on_too_fe
         .iter()
         .all(|f| !f.parameter.starts_with("gyro.A")));
 }
+
+#[test]
+fn a_recording_fitted_without_a_board_is_tested_against_the_fleet_but_not_counted_in_it() {
+    let mut store = HistoryStore::open(&databases("offline_recording")[0]).expect("store");
+    for b in 0..8 {
+        store.record(&board_record(4000 + b)).expect("recorded");
+    }
+    // What `fit --params-out` records for a recording fitted without --device.
+    let mut offline = board_record(4100);
+    offline.device_id = format!("{}nilspod", imucal::history::RECORDING_DEVICE_PREFIX);
+    store.record(&offline).expect("recorded");
+    let report = fleet_report(&mut store, &FleetOptions::default()).expect("a report");
+    assert_eq!(report.boards, 8, "the recording is no board");
+    let result = report
+        .results
+        .iter()
+        .find(|r| r.device_id == offline.device_id)
+        .expect("the recording is tested");
+    assert!(
+        result
+            .not_written
+            .as_deref()
+            .is_some_and(|why| why.contains("on no board")),
+        "{result:?}"
+    );
+}

@@ -488,7 +488,11 @@ fn record_fit(
         }
         None => {
             let stem = recording.file_stem().unwrap_or(recording.as_os_str());
-            format!("recording:{}", stem.to_string_lossy())
+            format!(
+                "{}{}",
+                imucal::history::RECORDING_DEVICE_PREFIX,
+                stem.to_string_lossy()
+            )
         }
     };
     let crc = file

@@ -109,10 +109,23 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
             board.not_compared.join(", ")
         );
     }
+    let offline = |b: &&imucal::history::fleet::BoardResult| {
+        b.device_id
+            .starts_with(imucal::history::RECORDING_DEVICE_PREFIX)
+    };
+    let recordings = report.results.iter().filter(offline).count();
+    if recordings > 0 {
+        println!(
+            "\n{recordings} recording{} fitted offline without a board named tested against \
+             the fleet but not counted in it (`fit --params-out --device ID` records one as \
+             that board's)",
+            if recordings == 1 { "" } else { "s" }
+        );
+    }
     let attempts = report
         .results
         .iter()
-        .filter(|b| b.not_written.is_some())
+        .filter(|b| b.not_written.is_some() && !offline(b))
         .count();
     if attempts > 0 {
         println!(
@@ -130,6 +143,10 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
     println!("\n{} outlying", count_boards(outliers.len()));
     for board in outliers {
         match &board.not_written {
+            Some(_) if offline(&board) => println!(
+                "{} (calibration #{}, a recording fitted offline, on no board)",
+                board.device_id, board.record_id
+            ),
             Some(why) => println!(
                 "{} (calibration #{}, NOT WRITTEN to the board: {why})",
                 board.device_id, board.record_id

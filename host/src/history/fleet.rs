@@ -457,7 +457,8 @@ fn fleet_now(
     // Records come oldest first, so the last one seen per device wins.
     for stored in store.records(None)? {
         let device = stored.record.device_id.clone();
-        if stored.record.board.on_board() {
+        // A recording fitted offline without a board named is tested, not counted.
+        if stored.record.board.on_board() && !stored.record.names_no_board() {
             not_written.remove(&device);
             on_board.insert(device, stored);
         } else {
@@ -531,6 +532,11 @@ fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
             .collect(),
         not_written: match &stored.record.board {
             BoardWrite::NotWritten { reason } => Some(reason.clone()),
+            _ if stored.record.names_no_board() => Some(
+                "a recording fitted offline, on no board (`fit --params-out --device ID` \
+                 records it as that board's)"
+                    .into(),
+            ),
             _ => None,
         },
     }

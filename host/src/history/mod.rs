@@ -35,7 +35,10 @@ pub use fleet::{
     FleetReport,
 };
 pub use location::{DbLocation, DB_ENV};
-pub use record::{BoardWrite, CalibrationRecord, RecordSource, RecordVerdict, TemperatureSpan};
+pub use record::{
+    BoardWrite, CalibrationRecord, RecordSource, RecordVerdict, TemperatureSpan,
+    RECORDING_DEVICE_PREFIX,
+};
 pub use store::{record_calibration, HistoryStore, RecordId, StoredRecord};
 
 /// Why the history could not be opened, written or read.

@@ -11,6 +11,11 @@ use crate::device::params_json::SensorJson;
 use crate::device::ParamsFile;
 use crate::session::{CapturedPose, SessionFit, SessionSummary, Uncertainties};
 
+/// How `fit --params-out` names the "device" of a recording fitted without `--device`:
+/// `recording:` and the file's stem. Such a record describes no board, so the fleet does not
+/// count it.
+pub const RECORDING_DEVICE_PREFIX: &str = "recording:";
+
 /// What produced a calibration record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -24,6 +29,14 @@ pub enum RecordSource {
     Flash,
     /// `imucal params reset`: the board's calibration set to identity.
     Reset,
+}
+
+impl CalibrationRecord {
+    /// Whether the record is of a recording fitted offline without a board named
+    /// ([`RECORDING_DEVICE_PREFIX`]).
+    pub fn names_no_board(&self) -> bool {
+        self.device_id.starts_with(RECORDING_DEVICE_PREFIX)
+    }
 }
 
 impl RecordSource {
