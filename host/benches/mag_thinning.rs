@@ -1,5 +1,7 @@
 //! Held-out accuracy of the default magnetometer fit with every sample against the same fit on
-//! 2000 evenly thinned samples, on the real recordings in `data/real/`.
+//! 2000 samples, evenly thinned or thinned where redundant first (the library's
+//! `thin_redundant`, which `--max-mag-samples` and sessions use), on the real recordings in
+//! `data/real/`.
 //!
 //! Blocked cross-validation: each recording is cut into 10 contiguous blocks of time; each block
 //! in turn is held out, the fit is made on the other nine (all their samples, or 2000 of them
@@ -13,6 +15,7 @@ use std::time::Instant;
 
 use imucal::fit::norm_lm::fit_mag_lm;
 use imucal::fit::Vec3;
+use imucal::pipeline::methods::thin_redundant;
 use imucal::recording::{LoadOptions, Recording, Sensor};
 
 const FOLDS: usize = 10;
@@ -25,15 +28,16 @@ fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
     (0..max).map(|i| points[i * points.len() / max]).collect()
 }
 
-/// RMS held-out error over the folds, and the total fitting time in seconds.
-fn held_out(points: &[Vec3], max: Option<usize>) -> (f64, f64) {
+/// RMS held-out error over the folds, and the total fitting time in seconds; `thinning` picks
+/// the training samples.
+fn held_out(points: &[Vec3], thinning: Option<fn(&[Vec3], usize) -> Vec<Vec3>>) -> (f64, f64) {
     let n = points.len();
     let (mut sum_sq, mut count, mut seconds) = (0.0, 0usize, 0.0);
     for k in 0..FOLDS {
         let (lo, hi) = (k * n / FOLDS, (k + 1) * n / FOLDS);
         let train: Vec<Vec3> = points[..lo].iter().chain(&points[hi..]).copied().collect();
-        let train = match max {
-            Some(m) => thin(&train, m),
+        let train = match thinning {
+            Some(pick) => pick(&train, THINNED),
             None => train,
         };
         let start = Instant::now();
@@ -63,12 +67,15 @@ fn main() {
             .expect("a magnetometer recording")
             .to_vec();
         let (all, t_all) = held_out(&points, None);
-        let (thinned, t_thin) = held_out(&points, Some(THINNED));
+        let (thinned, t_thin) = held_out(&points, Some(thin));
+        let (redundant, t_redundant) = held_out(&points, Some(thin_redundant));
         println!(
             "{name}: {} samples; held-out RMS all {all:.5e} ({t_all:.2} s for {FOLDS} fits), \
-             thinned to {THINNED} {thinned:.5e} ({t_thin:.2} s); thinning costs {:+.2} %",
+             thinned evenly to {THINNED} {thinned:.5e} ({t_thin:.2} s, {:+.2} %), where \
+             redundant first {redundant:.5e} ({t_redundant:.2} s, {:+.2} %)",
             points.len(),
-            100.0 * (thinned - all) / all
+            100.0 * (thinned - all) / all,
+            100.0 * (redundant - all) / all
         );
     }
 }
