@@ -205,43 +205,64 @@ pub fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
 const REDUNDANT_RUN_BREAK: f64 = 1e-3;
 
 /// The indices of at most `max` of the stream `points` (all when `max` is 0 or larger), thinned
-/// first where the samples are redundant. A run of consecutive samples that stay within the
-/// noise of the run's first one (the board held still, or turning slower than the noise
-/// shows) repeats one reading and is kept as its middle sample: a sample leaves the run when
-/// `Σₖ((xₖ − x₀ₖ)/σₖ)²`, which for two noisy readings of one field is `2·χ²(3)`, passes its
-/// `1 − `[`REDUNDANT_RUN_BREAK`] quantile (σ the stream's noise, [`stream_noise`]). Only then,
-/// if more than `max` remain, are they evenly spaced. Evenly spacing the raw stream instead
-/// lets a long pause crowd out the turning: minutes still in one position leave thousands of
-/// copies of one direction and few of the others.
+/// where the samples are redundant and only as much as `max` needs.
+///
+/// The stream is cut into runs of consecutive samples that stay within the noise of the run's
+/// first one (the board held still, or turning slower than the noise shows): a sample leaves
+/// the run when `Σₖ((xₖ − x₀ₖ)/σₖ)²`, which for two noisy readings of one field is `2·χ²(3)`,
+/// passes its `1 − `[`REDUNDANT_RUN_BREAK`] quantile (σ the stream's noise, [`stream_noise`]).
+/// Every run then keeps at most `c` of its samples, evenly spaced within it, with `c` the
+/// largest cap that keeps `max` or fewer in all: short runs (the turning) are kept whole and
+/// only the long ones (pauses) give up samples. With more runs than `max`, one sample per run
+/// is kept and those are evenly spaced. Evenly spacing the raw stream instead lets a long pause
+/// crowd out the turning: minutes still in one position leave thousands of copies of one
+/// direction and few of the others.
 pub fn thin_redundant_indices(points: &[Vec3], max: usize) -> Vec<usize> {
     if max == 0 || points.len() <= max {
         return (0..points.len()).collect();
     }
-    let runs = match stream_noise(points) {
-        Some(sigma) if sigma.iter().all(|s| *s > 0.0 && s.is_finite()) => {
-            let limit = 2.0 * 3.0 * chi2_quantile_per_dof(1.0 - REDUNDANT_RUN_BREAK, 3.0);
-            let mut kept = Vec::new();
-            let mut start = 0;
-            for i in 1..=points.len() {
-                let leaves = i == points.len() || {
-                    let d = (points[i] - points[start]).component_div(&sigma);
-                    d.norm_squared() > limit
-                };
-                if leaves {
-                    kept.push((start + i - 1) / 2);
-                    start = i;
-                }
-            }
-            kept
-        }
-        _ => (0..points.len()).collect(),
+    let Some(sigma) = stream_noise(points).filter(|s| s.iter().all(|v| *v > 0.0 && v.is_finite()))
+    else {
+        return thin_indices(points.len(), max);
     };
-    if runs.len() <= max {
-        return runs;
+    let limit = 2.0 * 3.0 * chi2_quantile_per_dof(1.0 - REDUNDANT_RUN_BREAK, 3.0);
+    // Runs as (start, length).
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut start = 0;
+    for i in 1..=points.len() {
+        let leaves = i == points.len() || {
+            let d = (points[i] - points[start]).component_div(&sigma);
+            d.norm_squared() > limit
+        };
+        if leaves {
+            runs.push((start, i - start));
+            start = i;
+        }
     }
-    thin_indices(runs.len(), max)
-        .into_iter()
-        .map(|i| runs[i])
+    if runs.len() >= max {
+        return thin_indices(runs.len(), max)
+            .into_iter()
+            .map(|r| runs[r].0 + runs[r].1 / 2)
+            .collect();
+    }
+    // The largest cap whose total fits: the total grows with the cap, so bisect.
+    let kept_with = |cap: usize| runs.iter().map(|(_, len)| (*len).min(cap)).sum::<usize>();
+    let (mut low, mut high) = (1, runs.iter().map(|(_, len)| *len).max().unwrap_or(1));
+    while low < high {
+        let mid = low + (high - low).div_ceil(2);
+        if kept_with(mid) <= max {
+            low = mid;
+        } else {
+            high = mid - 1;
+        }
+    }
+    let cap = low;
+    runs.iter()
+        .flat_map(|&(start, len)| {
+            let keep = len.min(cap);
+            // Centred in `keep` equal parts of the run.
+            (0..keep).map(move |k| start + (2 * k + 1) * len / (2 * keep))
+        })
         .collect()
 }
 
@@ -322,17 +343,16 @@ mod tests {
         assert!(turning(&thin_indices(stream.len(), 3000)) < 60);
         let kept = thin_redundant_indices(&stream, 3000);
         assert!(kept.len() <= 3000);
-        // Most of the turning is kept: only near the spiral's poles, where consecutive samples
-        // are closer than the noise, do runs of them merge.
-        assert!(
-            turning(&kept) > 1400,
+        // The turning is kept whole; only the pause gives up samples, down to what is left.
+        assert_eq!(
+            turning(&kept),
+            2000,
             "{} of {} kept samples turn",
             turning(&kept),
             kept.len()
         );
-        // The pause is kept as runs that break at most about once per thousand samples.
         let still = kept.len() - turning(&kept);
-        assert!((1..=200).contains(&still), "{still} still samples kept");
+        assert!((900..=1000).contains(&still), "{still} still samples kept");
     }
 
     #[test]
