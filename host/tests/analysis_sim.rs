@@ -358,3 +358,49 @@ fn a_time_drift_during_warm_up_is_not_written_as_temperature_when_the_plateau_co
     );
     assert!(accepted(got).contains(&"bias_drift"), "{}", describe(got));
 }
+
+/// `imucal analyze` starts from the model `fit` chose. On these sweeps `fit`'s leave-one-out
+/// prefers the axis-aligned model (the temperature bias inflates every model's held-out error
+/// alike), while the poses determine the full one: the analysis's base must still be the full
+/// norm model, or the misalignment left out was accepted as a non-linearity (truth: none) and
+/// the temperature bias itself rejected as "another form".
+#[test]
+fn analyze_finds_the_temperature_bias_alone_when_fit_chose_the_axis_aligned_model() {
+    for (seed, size) in [(7, 2.0), (7, 1.0)] {
+        let mut config = SimConfig::new(seed, ScheduleKind::Sweep);
+        config.effects.push(EffectRequest {
+            kind: SimEffect::BiasTemperature,
+            sensor: Some(SensorKind::Accel),
+            size,
+        });
+        let rec = simulate_recording(&config).expect("simulation runs");
+        let dir = std::env::temp_dir().join(format!("imucal-analysis-cli-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join(format!("sweep-{seed}-{size}.csv"));
+        write_csv(&rec, std::fs::File::create(&path).expect("create csv")).expect("write csv");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .arg("analyze")
+            .arg(&path)
+            .arg("--json")
+            .output()
+            .expect("the imucal binary runs");
+        let _ = std::fs::remove_file(&path);
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("analyze JSON");
+        let accel = &json["sensors"]["accel"];
+        assert_eq!(accel["base_model"], "lm", "seed {seed} × {size}: {accel}");
+        let accepted: Vec<&str> = accel["effects"]
+            .as_array()
+            .expect("effects")
+            .iter()
+            .filter(|e| e["accepted"] == true)
+            .filter_map(|e| e["name"].as_str())
+            .collect();
+        assert_eq!(accepted, ["bias_temperature"], "seed {seed} × {size}");
+        if accel["base_fit"]["method"] != "lm" {
+            assert!(
+                accel["base_note"].is_string(),
+                "the change of model is said"
+            );
+        }
+    }
+}

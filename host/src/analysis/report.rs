@@ -11,7 +11,8 @@
 //! not_testable), `unexplained` (bool), and the extras `chi2_before`, `chi2_after` (`{chi2, dof,
 //! p_value}`), `n_observations`, `best_correlate` (`{variable, r}` or null),
 //! `temp_time_correlation`, `t_ref_c`, `heldout_always_trained` (observations never held out
-//! because the base model cannot be refit without them; 0 when every one is). A sensor that could not be analysed has `{"error": str}`.
+//! because the base model cannot be refit without them; 0 when every one is), `base_note` (why
+//! the base is not the model `fit` chose, or null). A sensor that could not be analysed has `{"error": str}`.
 
 use std::path::Path;
 
@@ -104,6 +105,7 @@ pub fn sensor_json(a: &SensorAnalysis) -> Value {
         "heldout_rms_before": finite(a.heldout_rms_before),
         "heldout_rms_after": finite(a.heldout_rms_after),
         "heldout_always_trained": a.always_trained,
+        "base_note": a.base_note,
         "effects": a.effects.iter().map(effect_json).collect::<Vec<_>>(),
         "unexplained": a.unexplained,
         "chi2_before": test_json(&a.test_before),
@@ -169,6 +171,9 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
             "  RMS {:.3e} → {:.3e} {u}; held-out RMS {:.3e} → {:.3e} {u}\n",
             a.rms_before, a.rms_after, a.heldout_rms_before, a.heldout_rms_after
         ));
+        if let Some(note) = &a.base_note {
+            out.push_str(&format!("  {note}\n"));
+        }
         if a.always_trained > 0 {
             out.push_str(&format!(
                 "  held out: each of the {} observations the base model can be refit without, \

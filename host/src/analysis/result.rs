@@ -173,6 +173,8 @@ pub struct SensorAnalysis {
     /// Observations never held out: the base model cannot be refit without them (each is the
     /// only pose of its face), so the held-out figures are leave-one-out over the others.
     pub always_trained: usize,
+    /// Why the base model is not the one `fit` chose, when it is not.
+    pub base_note: Option<String>,
     /// Every candidate tested.
     pub effects: Vec<EffectResult>,
     /// The final residual is above the floor and no candidate explains it.

@@ -537,6 +537,7 @@ pub fn analyse_observations(
         heldout_rms_before: base_ho.rms(),
         heldout_rms_after: final_ho.rms(),
         always_trained: splits.always_trained(),
+        base_note: None,
         effects: results,
         unexplained,
         best_correlate,

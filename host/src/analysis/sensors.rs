@@ -32,8 +32,11 @@ pub fn analyse_recording(
 
 /// Analyse every sensor of a recording on top of the pipeline's `calibration` of it (what `fit`
 /// prints for the same data and options): a sensor the pipeline could not fit is not analysed,
-/// with the pipeline's reason, and the accelerometer's base model is the one the pipeline
-/// chose, not a second choice made on the analysis's own observations.
+/// with the pipeline's reason. The accelerometer's analysis starts from the model the pipeline
+/// fitted, and its base is the full norm model whenever the pipeline could determine it (an
+/// effect must not be credited with what misalignment explains, however the pipeline's
+/// leave-one-out chose among its models); the axis-aligned model (6 unknowns) only where the
+/// pipeline refused the full one. The analysis says when its base is not the model `fit` chose.
 pub fn analyse_calibration(
     recording: &Recording,
     still: &StillReport,
@@ -41,21 +44,48 @@ pub fn analyse_calibration(
     calibration: &RecordingCalibration,
 ) -> RecordingAnalysis {
     analyse_each(recording, |sensor, accel_cal| {
-        match calibration.sensor(sensor).map(|o| &o.fit) {
+        let outcome = calibration.sensor(sensor);
+        match outcome.map(|o| &o.fit) {
             Some(Err(reason)) => Err(AnalysisError::Refused(format!("not fitted: {reason}"))),
             Some(Ok(fit)) if sensor == Sensor::Accel => {
                 let obs = accel_observations(recording, still)?;
-                // Min/max, axis-aligned and their mean share the 6 unknowns.
+                // The pipeline's chain says whether it could determine the full model; a method
+                // given by name leaves that to the chain's own test on these poses.
+                let full_refused = match outcome.and_then(|o| o.chain.as_ref()) {
+                    Some(chain) => lm_refused(&chain.candidates),
+                    None => default_accel_chain(&to_poses(&obs), options.gravity)
+                        .map_or(unknowns(fit.method) == 6, |c| lm_refused(&c.candidates)),
+                };
+                let chosen = fit.method.name();
                 let base = NormBase {
-                    model: fit.method.name(),
-                    axis_aligned: unknowns(fit.method) == 6,
+                    // Min/max, axis-aligned and their mean share the 6 unknowns.
+                    model: match (full_refused, unknowns(fit.method)) {
+                        (true, 6) => chosen,
+                        (true, _) => "axis-aligned",
+                        (false, _) => "lm",
+                    },
+                    axis_aligned: full_refused,
                     start: fit.cal,
                 };
-                analyse_accel(recording, options, obs, base)
+                let mut analysis = analyse_accel(recording, options, obs, base)?;
+                if !full_refused && fit.method != Method::Lm {
+                    analysis.base_note = Some(format!(
+                        "the base is the full norm model (9 unknowns), not {chosen}, which `fit` \
+                         chose: misalignment it leaves out must not be credited to an effect"
+                    ));
+                }
+                Ok(analysis)
             }
             _ => analyse_sensor(recording, still, options, sensor, accel_cal),
         }
     })
+}
+
+/// Whether the chain refused the full norm model (the poses cannot determine it).
+fn lm_refused(candidates: &[crate::pipeline::chain::Candidate]) -> bool {
+    candidates
+        .iter()
+        .any(|c| c.method == Method::Lm && matches!(c.outcome, CandidateOutcome::Refused(_)))
 }
 
 /// `analyse` of each sensor of `recording` in turn, the accelerometer's final calibration
@@ -150,9 +180,7 @@ pub fn analyse_sensor(
             // of the chain refuses, the generic solver restarts from the sphere.
             let base = match default_accel_chain(&to_poses(&obs), options.gravity) {
                 Ok(choice) => {
-                    let axis_aligned = choice.candidates.iter().any(|c| {
-                        c.method == Method::Lm && matches!(c.outcome, CandidateOutcome::Refused(_))
-                    });
+                    let axis_aligned = lm_refused(&choice.candidates);
                     NormBase {
                         model: if axis_aligned { "axis-aligned" } else { "lm" },
                         axis_aligned,

@@ -53,7 +53,8 @@ pub(super) fn close_the_loop(
     json: bool,
     policy: WritePolicy,
 ) -> anyhow::Result<Closed> {
-    let analysis = analyse_poses(&outcome.poses, options.gravity_mps2);
+    let mut analysis = analyse_poses(&outcome.poses, options.gravity_mps2);
+    imucal::session::extend::note_accel_base(&mut analysis, outcome.fit.accel.method);
     std::fs::write(
         dir.join("analysis.json"),
         serde_json::to_string_pretty(&report::to_json(&analysis))?,

@@ -71,6 +71,24 @@ fn usable(pose: &CapturedPose) -> bool {
         && pose.t_s.is_finite()
 }
 
+/// Says on the accelerometer's analysis of `analysis` that its base, the full norm model, is
+/// not `chosen`, the model the session fitted and wrote, when it is not.
+pub fn note_accel_base(analysis: &mut RecordingAnalysis, chosen: crate::fit::Method) {
+    if chosen == crate::fit::Method::Lm {
+        return;
+    }
+    for (sensor, result) in &mut analysis.sensors {
+        if let (Sensor::Accel, Ok(a)) = (sensor, result) {
+            a.base_note = Some(format!(
+                "the base is the full norm model (9 unknowns), not {}, which the session \
+                 fitted: misalignment it leaves out must not be credited to an effect, and an \
+                 extended set carries the full matrix",
+                chosen.name()
+            ));
+        }
+    }
+}
+
 /// Analyse the accelerometer and gyroscope of a session's poses (nominal units: m/s², rad/s)
 /// against local gravity `gravity_mps2`. Poses with non-finite statistics are left out.
 pub fn analyse_poses(poses: &[CapturedPose], gravity_mps2: f64) -> RecordingAnalysis {
