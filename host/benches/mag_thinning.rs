@@ -28,9 +28,12 @@ fn thin(points: &[Vec3], max: usize) -> Vec<Vec3> {
     (0..max).map(|i| points[i * points.len() / max]).collect()
 }
 
+/// Picks at most the given number of training samples.
+type Thinning = fn(&[Vec3], usize) -> Vec<Vec3>;
+
 /// RMS held-out error over the folds, and the total fitting time in seconds; `thinning` picks
 /// the training samples.
-fn held_out(points: &[Vec3], thinning: Option<fn(&[Vec3], usize) -> Vec<Vec3>>) -> (f64, f64) {
+fn held_out(points: &[Vec3], thinning: Option<Thinning>) -> (f64, f64) {
     let n = points.len();
     let (mut sum_sq, mut count, mut seconds) = (0.0, 0usize, 0.0);
     for k in 0..FOLDS {
