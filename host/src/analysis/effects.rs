@@ -106,10 +106,10 @@ impl EffectKind {
                 .collect(),
             EffectKind::ScaleNonlinearity => axes
                 .iter()
-                .map(|a| (format!("q_{a}"), format!("1/{unit}")))
+                .map(|a| (format!("q_{a}"), format!("1/({unit})")))
                 .chain(
                     axes.iter()
-                        .map(|a| (format!("k_{a}"), format!("1/{unit}²"))),
+                        .map(|a| (format!("k_{a}"), format!("1/({unit})²"))),
                 )
                 .collect(),
             EffectKind::GSensitivity => axes
@@ -158,6 +158,19 @@ pub fn celsius_power(power: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn non_linearity_coefficients_are_labelled_per_unit_of_the_reading_unambiguously() {
+        let labels = EffectKind::ScaleNonlinearity.param_labels("m/s²");
+        assert!(
+            labels.contains(&("q_x".into(), "1/(m/s²)".into())),
+            "{labels:?}"
+        );
+        assert!(
+            labels.contains(&("k_z".into(), "1/(m/s²)²".into())),
+            "{labels:?}"
+        );
+    }
 
     #[test]
     fn temperature_powers_are_written_with_superscripts() {
