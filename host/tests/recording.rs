@@ -323,3 +323,25 @@ fn imutk_text_files_read_back_the_same_samples_as_the_csv_copy() {
         "{message}"
     );
 }
+
+#[test]
+fn rows_that_repeat_the_row_before_exactly_are_read_once_and_counted() {
+    let dir = scratch("repeated-rows");
+    let text = "t_s,ax,ay,az,mx,my,mz\n\
+                0.00,0.1,0.2,9.8,20,0,40\n\
+                0.01,0.1,0.2,9.8,20,0,40\n\
+                0.01,0.1,0.2,9.8,20,0,40\n\
+                0.02,0.1,0.2,9.7,20,0,40\n\
+                0.02,0.1,0.2,9.8,20,0,40\n\
+                0.03,0.1,0.2,9.8,20,0,40\n";
+    let path = write(&dir, "repeated.csv", text);
+    let recording = Recording::load(&path, &LoadOptions::default()).expect("loads");
+    // The third row repeats the second exactly and is left out; the fifth repeats only the
+    // fourth's time stamp (a different value) and stays. A quantised sensor at rest repeats
+    // its values at new time stamps, which also stay.
+    assert_eq!(recording.repeated_rows, 1);
+    assert_eq!(recording.time, vec![0.0, 0.01, 0.02, 0.02, 0.03]);
+    assert_eq!(recording.accel.as_ref().map(Vec::len), Some(5));
+    assert_eq!(recording.mag.as_ref().map(|m| m.samples.len()), Some(5));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -69,6 +69,7 @@ fn six_face_recording(seed: u64, hold_s: f64) -> (Recording, Vec<(f64, f64, Vec3
         ignored_columns: Vec::new(),
         units: Units::default(),
         read_as_imutk: false,
+        repeated_rows: 0,
     };
     (rec, truth)
 }

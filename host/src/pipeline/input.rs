@@ -122,11 +122,22 @@ pub fn check_input_then<T: Send>(
                 .contains(&Sensor::Mag)
                 .then(|| checked_mag_points(&recording, options, stated_field_ut, then_mag))
         });
-        let time_warnings = if recording.time_from_file {
+        let mut time_warnings = if recording.time_from_file {
             input_checks::time_stamp_warnings(&recording.time)
         } else {
             Vec::new()
         };
+        if recording.repeated_rows > 0 {
+            time_warnings.insert(
+                0,
+                format!(
+                    "{} repeated the row before them exactly (time stamp and every value) and \
+                     were read once: a logger wrote those samples twice, and counted twice they \
+                     would shrink every noise estimate and σ",
+                    crate::words::counted(recording.repeated_rows, "row")
+                ),
+            );
+        }
         let accel_unit = match (sensors.contains(&Sensor::Accel), &recording.accel) {
             (true, Some(accel)) => {
                 input_checks::check_accel_unit(accel, recording.units.accel).err()

@@ -347,6 +347,7 @@ pub(super) fn load(
         units: options.units,
         time,
         read_as_imutk: false,
+        repeated_rows: 0,
     };
     for (sensor, samples) in table.sensors {
         match sensor {

@@ -144,5 +144,6 @@ pub(super) fn load(
         ignored_columns: Vec::new(),
         units: options.units,
         read_as_imutk: true,
+        repeated_rows: 0,
     })
 }

@@ -359,6 +359,7 @@ pub fn parse(
         ignored_columns: Vec::new(),
         units,
         read_as_imutk: false,
+        repeated_rows: 0,
     })
 }
 

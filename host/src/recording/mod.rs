@@ -292,6 +292,10 @@ pub struct Recording {
     /// True when the main file was read as IMU-TK text, whose time stamps are in the unit
     /// [`LoadOptions::imutk_time_scale`] gives (other formats name theirs).
     pub read_as_imutk: bool,
+    /// Rows left out because they repeated the row before them exactly, time stamp and every
+    /// value (a logger that wrote a sample twice): counted twice, a sample would shrink every
+    /// noise estimate and σ it enters.
+    pub repeated_rows: usize,
 }
 
 /// File format of a recording.
@@ -362,6 +366,9 @@ impl Recording {
                 });
             }
         }
+        // Before a magnetometer of its own file is added: one on the main rows is compared
+        // and thinned with them.
+        recording.repeated_rows = recording.drop_repeated_rows();
         if recording.mag.is_none() {
             let sibling = || {
                 let ok = !options.no_mag_sibling && path.as_os_str() != lines::STDIN_PATH;
@@ -389,6 +396,73 @@ impl Recording {
             ));
         }
         Ok(recording)
+    }
+
+    /// Leave out every row that repeats the row before it exactly: the same time stamp read
+    /// from the file and the same value in every column. Returns how many were left out.
+    fn drop_repeated_rows(&mut self) -> usize {
+        let n = self.time.len();
+        if !self.time_from_file || n < 2 {
+            return 0;
+        }
+        let same3 = |v: Option<&[Vec3]>, i: usize| {
+            v.is_none_or(|x| {
+                x[i].iter()
+                    .zip(x[i - 1].iter())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            })
+        };
+        let mag_on_rows = self
+            .mag
+            .as_ref()
+            .filter(|m| m.time.len() == n)
+            .map(|m| m.samples.as_slice());
+        let keep: Vec<bool> = (0..n)
+            .map(|i| {
+                i == 0
+                    || self.time[i].to_bits() != self.time[i - 1].to_bits()
+                    || !same3(self.accel.as_deref(), i)
+                    || !same3(self.gyro.as_deref(), i)
+                    || !same3(mag_on_rows, i)
+                    || self
+                        .temp_c
+                        .as_ref()
+                        .is_some_and(|t| t[i].to_bits() != t[i - 1].to_bits())
+                    || self
+                        .labels
+                        .as_ref()
+                        .is_some_and(|l| l.per_row.get(i) != l.per_row.get(i - 1))
+            })
+            .collect();
+        let dropped = keep.iter().filter(|k| !**k).count();
+        if dropped == 0 {
+            return 0;
+        }
+        fn retain<T>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut i = 0;
+            v.retain(|_| {
+                i += 1;
+                keep[i - 1]
+            });
+        }
+        retain(&mut self.time, &keep);
+        for column in [&mut self.accel, &mut self.gyro].into_iter().flatten() {
+            retain(column, &keep);
+        }
+        if let Some(t) = &mut self.temp_c {
+            retain(t, &keep);
+        }
+        if let Some(l) = &mut self.labels {
+            retain(&mut l.per_row, &keep);
+        }
+        if let Some(m) = self.mag.as_mut().filter(|m| m.time.len() == n) {
+            retain(&mut m.time, &keep);
+            retain(&mut m.samples, &keep);
+            if let Some(t) = &mut m.temp_c {
+                retain(t, &keep);
+            }
+        }
+        dropped
     }
 
     /// Number of rows of the main stream.

@@ -137,6 +137,7 @@ fn parse_lines(
             mag: MagUnit::Ut,
         },
         read_as_imutk: false,
+        repeated_rows: 0,
     })
 }
 
