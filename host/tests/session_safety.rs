@@ -114,6 +114,36 @@ fn sabotaged_session(
     sabotaged_session_with(sim, &options_for(sim), sabotage, dir)
 }
 
+/// A session on `sim` with `options` that resumes what `dir` saved (`poses`, `mag`, `moves`),
+/// run to its end; with the names of the positions it prompted for.
+fn resumed_session(
+    sim: &SimHandle,
+    options: &SessionOptions,
+    dir: &Path,
+    poses: Vec<imucal::session::CapturedPose>,
+    mag: Vec<imucal::session::MagSample>,
+    moves: Vec<Vec<imucal::device::UnitSample>>,
+) -> (imucal::session::SessionOutcome, Vec<String>) {
+    let mut observer = Saboteur {
+        sim,
+        sabotage: Sabotage::InterruptAfter(usize::MAX),
+        interrupt: Arc::new(AtomicBool::new(false)),
+        prompted: Vec::new(),
+        captures: 0,
+    };
+    let control = SessionControl {
+        save_dir: Some(dir.to_path_buf()),
+        resume: poses,
+        resume_mag: mag,
+        resume_moves: moves,
+        interrupt: None,
+    };
+    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
+    let outcome = run_session_with(&mut client, options, &mut observer, &control)
+        .expect("the resumed session completes");
+    (outcome, observer.prompted)
+}
+
 /// [`sabotaged_session`] with the session's `options`.
 fn sabotaged_session_with(
     sim: &SimHandle,
@@ -265,26 +295,17 @@ fn an_interrupted_session_keeps_its_poses_and_samples_and_resumes_without_asking
     assert!(first_moves.len() >= 3, "{} moves", first_moves.len());
 
     // Resume on the same board: the five positions are neither prompted for nor captured again.
-    let mut observer = Saboteur {
-        sim: &sim,
-        sabotage: Sabotage::InterruptAfter(usize::MAX),
-        interrupt: Arc::new(AtomicBool::new(false)),
-        prompted: Vec::new(),
-        captures: 0,
-    };
-    let control = SessionControl {
-        save_dir: Some(dir.clone()),
-        resume: first.clone(),
-        resume_mag: first_mag.clone(),
-        resume_moves: first_moves.clone(),
-        interrupt: None,
-    };
-    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
-    let outcome = run_session_with(&mut client, &options_for(&sim), &mut observer, &control)
-        .expect("the resumed session completes");
+    let (outcome, prompted) = resumed_session(
+        &sim,
+        &options_for(&sim),
+        &dir,
+        first.clone(),
+        first_mag.clone(),
+        first_moves.clone(),
+    );
     for pose in &first {
         assert!(
-            !observer.prompted.contains(&pose.target.name),
+            !prompted.contains(&pose.target.name),
             "{} was asked for again",
             pose.target.name
         );
@@ -493,27 +514,18 @@ fn a_session_resumed_in_its_second_round_asks_only_for_that_rounds_missing_posit
     assert_eq!(first.len(), 15, "twelve, then three of the second round");
     let second_round: Vec<String> = first[12..].iter().map(|p| p.target.name.clone()).collect();
 
-    let mut observer = Saboteur {
-        sim: &sim,
-        sabotage: Sabotage::InterruptAfter(usize::MAX),
-        interrupt: Arc::new(AtomicBool::new(false)),
-        prompted: Vec::new(),
-        captures: 0,
-    };
-    let control = SessionControl {
-        save_dir: Some(dir.clone()),
-        resume: first.clone(),
-        resume_mag: load_mag_samples(&dir.join("mag_samples.csv")).expect("samples saved"),
-        resume_moves: load_moves(&dir.join(MOVES_FILE)).expect("moves saved"),
-        interrupt: None,
-    };
-    let mut client = DeviceClient::open(sim.port_path()).expect("connect to the simulator");
-    let outcome = run_session_with(&mut client, &options, &mut observer, &control)
-        .expect("the resumed session completes");
+    let (outcome, prompted) = resumed_session(
+        &sim,
+        &options,
+        &dir,
+        first,
+        load_mag_samples(&dir.join("mag_samples.csv")).expect("samples saved"),
+        load_moves(&dir.join(MOVES_FILE)).expect("moves saved"),
+    );
     // Captured twice already: neither prompted for nor captured a third time.
     for name in &second_round {
         assert!(
-            !observer.prompted.contains(name),
+            !prompted.contains(name),
             "{name} was asked for a third time"
         );
     }
