@@ -129,17 +129,9 @@ pub fn validate_for_ranges(
     Ok(())
 }
 
-/// Determinant of `A`, computed in `f64`.
-pub fn determinant(a: &[[f32; 3]; 3]) -> f64 {
+/// The cofactors of `A` in `f64`, row by row (`adj(A) = Cᵀ`), and its determinant.
+fn cofactors_and_determinant(a: &[[f32; 3]; 3]) -> ([f64; 9], f64) {
     let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = a.map(|row| row.map(f64::from));
-    a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
-}
-
-/// Frobenius condition number `‖A‖_F·‖A⁻¹‖_F`, computed in `f64`; infinite when `A` is singular.
-pub fn condition_frobenius(a: &[[f32; 3]; 3]) -> f64 {
-    let m = a.map(|row| row.map(f64::from));
-    let [[a00, a01, a02], [a10, a11, a12], [a20, a21, a22]] = m;
-    // Cofactors: adj(A) = Cᵀ, and ‖adj(A)‖_F = ‖C‖_F.
     let cofactors = [
         a11 * a22 - a12 * a21,
         a12 * a20 - a10 * a22,
@@ -152,6 +144,19 @@ pub fn condition_frobenius(a: &[[f32; 3]; 3]) -> f64 {
         a00 * a11 - a01 * a10,
     ];
     let det = a00 * cofactors[0] + a01 * cofactors[1] + a02 * cofactors[2];
+    (cofactors, det)
+}
+
+/// Determinant of `A`, computed in `f64`.
+pub fn determinant(a: &[[f32; 3]; 3]) -> f64 {
+    cofactors_and_determinant(a).1
+}
+
+/// Frobenius condition number `‖A‖_F·‖A⁻¹‖_F`, computed in `f64`; infinite when `A` is singular.
+pub fn condition_frobenius(a: &[[f32; 3]; 3]) -> f64 {
+    let m = a.map(|row| row.map(f64::from));
+    // ‖adj(A)‖_F = ‖C‖_F.
+    let (cofactors, det) = cofactors_and_determinant(a);
     let norm = sqrt_f64(m.iter().flatten().map(|v| v * v).sum::<f64>());
     let adjugate_norm = sqrt_f64(cofactors.iter().map(|v| v * v).sum::<f64>());
     if det == 0.0 {
