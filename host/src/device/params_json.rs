@@ -642,24 +642,23 @@ impl ParamsFile {
     /// its parameters are the ones the board's CRC is of.
     pub fn as_written(&self, written: &CalibrationSet, kept: &[&str]) -> Self {
         let mut out = self.clone();
+        let whole = Self::from(written);
         for (sensor, why) in self.left_out() {
             match sensor {
                 "accel" => {
-                    out.accel = SensorJson::from(&written.accel);
-                    out.residuals.accel_rms = f64::from(written.residuals.accel_rms);
-                    out.reference.gravity_mps2 = f64::from(written.reference.gravity_mps2);
+                    out.accel = whole.accel.clone();
+                    out.residuals.accel_rms = whole.residuals.accel_rms;
+                    out.reference.gravity_mps2 = whole.reference.gravity_mps2;
                 }
                 "gyro" => {
-                    out.gyro = SensorJson::from(&written.gyro);
-                    out.gyro_g_sensitivity = written
-                        .gyro_g_sensitivity
-                        .map(|k| k.map(|row| row.map(f64::from)));
-                    out.residuals.gyro_rms = f64::from(written.residuals.gyro_rms);
+                    out.gyro = whole.gyro.clone();
+                    out.gyro_g_sensitivity = whole.gyro_g_sensitivity;
+                    out.residuals.gyro_rms = whole.residuals.gyro_rms;
                 }
                 _ => {
-                    out.mag = SensorJson::from(&written.mag);
-                    out.residuals.mag_rms = f64::from(written.residuals.mag_rms);
-                    out.reference.field_ut = f64::from(written.reference.field_ut);
+                    out.mag = whole.mag.clone();
+                    out.residuals.mag_rms = whole.residuals.mag_rms;
+                    out.reference.field_ut = whole.reference.field_ut;
                 }
             }
             out.absent_sensors.retain(|a| a != sensor);
