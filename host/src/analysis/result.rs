@@ -205,6 +205,16 @@ pub struct CalibrationTerms {
     pub gyro_g_sensitivity: Option<[[f32; 3]; 3]>,
 }
 
+/// The sentence saying that an accelerometer analysis's base, the full norm model, is not
+/// `chosen`, the model that `by` fitted (`` `fit` `` or "the session").
+pub fn full_base_note(chosen: &str, by: &str) -> String {
+    format!(
+        "the base is the full norm model (9 unknowns), not {chosen}, which {by} fitted: \
+         misalignment it leaves out must not be credited to an effect, and an extended set \
+         carries the full matrix"
+    )
+}
+
 impl SensorAnalysis {
     /// Accepted effects.
     pub fn accepted(&self) -> impl Iterator<Item = &EffectResult> {

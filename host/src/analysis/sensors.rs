@@ -69,10 +69,7 @@ pub fn analyse_calibration(
                 };
                 let mut analysis = analyse_accel(recording, options, obs, base)?;
                 if !full_refused && fit.method != Method::Lm {
-                    analysis.base_note = Some(format!(
-                        "the base is the full norm model (9 unknowns), not {chosen}, which `fit` \
-                         chose: misalignment it leaves out must not be credited to an effect"
-                    ));
+                    analysis.base_note = Some(super::result::full_base_note(chosen, "`fit`"));
                 }
                 Ok(analysis)
             }

@@ -79,11 +79,9 @@ pub fn note_accel_base(analysis: &mut RecordingAnalysis, chosen: crate::fit::Met
     }
     for (sensor, result) in &mut analysis.sensors {
         if let (Sensor::Accel, Ok(a)) = (sensor, result) {
-            a.base_note = Some(format!(
-                "the base is the full norm model (9 unknowns), not {}, which the session \
-                 fitted: misalignment it leaves out must not be credited to an effect, and an \
-                 extended set carries the full matrix",
-                chosen.name()
+            a.base_note = Some(crate::analysis::result::full_base_note(
+                chosen.name(),
+                "the session",
             ));
         }
     }
