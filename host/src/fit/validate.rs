@@ -92,18 +92,7 @@ pub fn face_of(direction: &Vec3, tolerance_deg: f64) -> Option<usize> {
 /// For each of the six faces, the index of the pose best aligned with it (direction taken from
 /// the median centre). Refuses with "no pose with −Z up" (etc.) when a face is missing.
 pub fn find_faces(poses: &[Pose]) -> Result<[usize; 6], FitError> {
-    let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
-    let centre = median_centre(&means);
-    let mut best: [Option<(usize, f64)>; 6] = [None; 6];
-    for (i, m) in means.iter().enumerate() {
-        let d = m - centre;
-        if let Some(face) = face_of(&d, FACE_TOLERANCE_DEG) {
-            let alignment = d[face / 2].abs() / d.norm();
-            if best[face].is_none_or(|(_, a)| alignment > a) {
-                best[face] = Some((i, alignment));
-            }
-        }
-    }
+    let best = best_face_poses(poses);
     let missing: Vec<&str> = (0..6)
         .filter(|&f| best[f].is_none())
         .map(|f| FACE_NAMES[f])
@@ -121,9 +110,36 @@ pub fn find_faces(poses: &[Pose]) -> Result<[usize; 6], FitError> {
     }
     let mut out = [0usize; 6];
     for (slot, b) in out.iter_mut().zip(best.iter()) {
-        *slot = b.map(|(i, _)| i).unwrap_or_default();
+        *slot = b.unwrap_or_default();
     }
     Ok(out)
+}
+
+/// The faces (names as in [`FACE_NAMES`]) no pose points along, within [`FACE_TOLERANCE_DEG`]
+/// of the median centre: empty when [`find_faces`] succeeds.
+pub fn missing_faces(poses: &[Pose]) -> Vec<&'static str> {
+    let best = best_face_poses(poses);
+    (0..6)
+        .filter(|&f| best[f].is_none())
+        .map(|f| FACE_NAMES[f])
+        .collect()
+}
+
+/// Per face, the best-aligned pose seen from the median centre, if any.
+fn best_face_poses(poses: &[Pose]) -> [Option<usize>; 6] {
+    let means: Vec<Vec3> = poses.iter().map(|p| p.mean).collect();
+    let centre = median_centre(&means);
+    let mut best: [Option<(usize, f64)>; 6] = [None; 6];
+    for (i, m) in means.iter().enumerate() {
+        let d = m - centre;
+        if let Some(face) = face_of(&d, FACE_TOLERANCE_DEG) {
+            let alignment = d[face / 2].abs() / d.norm();
+            if best[face].is_none_or(|(_, a)| alignment > a) {
+                best[face] = Some((i, alignment));
+            }
+        }
+    }
+    best.map(|b| b.map(|(i, _)| i))
 }
 
 /// Unit directions of `points` as seen from their mean (zero-length ones are skipped).

@@ -157,7 +157,21 @@ pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, F
         Method::Frosio => fit::frosio::fit_frosio(points, reference, &FROSIO),
         Method::Merayo => fit::merayo::fit_merayo(points, reference, true),
         Method::AxisAligned => fit::axis_aligned::fit_axis_aligned(points, reference),
-        Method::MinMax => fit::minmax::fit_minmax(&as_poses(points), reference),
+        Method::MinMax => {
+            let poses = as_poses(points);
+            let missing = fit::validate::missing_faces(&poses);
+            if !missing.is_empty() {
+                return Err(FitError::Underdetermined(format!(
+                    "no sample has the field along {} (within {}° of the axis, seen from the \
+                     median centre); min/max needs the field along each axis both ways: turn \
+                     the board through every direction, or use the default method, which fits \
+                     the ellipsoid from any directions",
+                    missing.join(", "),
+                    fit::validate::FACE_TOLERANCE_DEG
+                )));
+            }
+            fit::minmax::fit_minmax(&poses, reference)
+        }
         Method::SixPosition
         | Method::Chen
         | Method::GyroBias
@@ -353,6 +367,29 @@ mod tests {
         );
         let still = kept.len() - turning(&kept);
         assert!((900..=1000).contains(&still), "{still} still samples kept");
+    }
+
+    #[test]
+    fn magnetometer_minmax_without_the_field_along_an_axis_names_the_field_not_a_face_up() {
+        // A hemisphere of directions: the field never points along −Z.
+        let points: Vec<Vec3> = (0..400)
+            .map(|i| {
+                let polar = 0.5 * std::f64::consts::FRAC_PI_2 * (i % 20) as f64 / 20.0;
+                let azimuth = i as f64 * 0.7;
+                Vec3::new(
+                    polar.sin() * azimuth.cos(),
+                    polar.sin() * azimuth.sin(),
+                    polar.cos(),
+                ) * 50.0
+            })
+            .collect();
+        let Err(FitError::Underdetermined(why)) = fit_mag(Method::MinMax, &points, 50.0) else {
+            panic!("min/max on a cap of directions must be refused");
+        };
+        assert!(why.contains("field along"), "{why}");
+        assert!(!why.contains(" up"), "accelerometer wording: {why}");
+        // The full sphere fits.
+        assert!(fit_mag(Method::MinMax, &hard_and_soft_iron_cloud(400, 3), 50.0).is_ok());
     }
 
     #[test]
