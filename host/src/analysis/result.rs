@@ -5,7 +5,7 @@
 use imucal_protocol::{BiasTemperature, Nonlinearity, SensorCalibration};
 
 use super::effects::EffectKind;
-use super::extended_fit::{physical_factor, ExtendedFit, Problem};
+use super::extended_fit::{physical_factor, BaseKind, ExtendedFit, Problem};
 use crate::fit::{Calibration, FitError};
 use crate::pipeline::observations::Observation;
 use crate::recording::Sensor;
@@ -226,6 +226,42 @@ impl SensorAnalysis {
     /// Whether the base residual is consistent with the noise.
     pub fn consistent_with_noise(&self) -> bool {
         self.test_before.consistent()
+    }
+
+    /// Covariance of the final model's base parameters `A`, `b` in data units, named as
+    /// [`crate::fit::Fit::param_names`] (`A11 A12 A13 A22 A23 A33 b1 b2 b3` for the full norm
+    /// model, `A11 A22 A33 b1 b2 b3` axis-aligned, `b1 b2 b3` at rest): the marginal block of
+    /// the joint fit with its effects (so the terms' correlation with the base is in it), at the
+    /// reference temperature, scaled by the final model's Birge ratio `max(1, χ²/ν)` as the
+    /// base fits' uncertainties are. `None` when the joint fit's covariance is singular.
+    pub fn base_covariance(&self) -> Option<(Vec<String>, nalgebra::DMatrix<f64>)> {
+        let joint = self.final_fit.covariance.as_ref()?;
+        let s = self.problem.scale;
+        let (names, factors): (Vec<&str>, Vec<f64>) = match self.problem.base {
+            BaseKind::Norm {
+                reference,
+                axis_aligned: true,
+            } => (
+                vec!["A11", "A22", "A33", "b1", "b2", "b3"],
+                [[reference / s; 3], [s; 3]].concat(),
+            ),
+            BaseKind::Norm { reference, .. } => (
+                vec!["A11", "A12", "A13", "A22", "A23", "A33", "b1", "b2", "b3"],
+                [vec![reference / s; 6], vec![s; 3]].concat(),
+            ),
+            BaseKind::Rest { .. } => (vec!["b1", "b2", "b3"], vec![s; 3]),
+        };
+        let n = names.len();
+        if joint.nrows() < n {
+            return None;
+        }
+        let birge = (self.test_after.chi2 / self.test_after.dof).max(1.0);
+        let cov = nalgebra::DMatrix::from_fn(n, n, |r, c| {
+            joint[(r, c)] * factors[r] * factors[c] * birge
+        });
+        cov.iter()
+            .all(|v| v.is_finite())
+            .then(|| (names.into_iter().map(String::from).collect(), cov))
     }
 
     /// The final model in the protocol's `CalibrationSet` form: `A`, `b`, and each accepted

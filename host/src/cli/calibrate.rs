@@ -451,25 +451,39 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     // `--analyze` wrote it over the base set.
     let mut final_summary = summary(&outcome);
     let mut rest_failure = None;
-    if let Some(Ok(Closed::SavedNotWritten(set))) = closed.as_ref() {
+    if let Some(Ok(Closed::SavedNotWritten(set, uncertainties))) = closed.as_ref() {
         // Nothing is on the board: the summary and the history name the saved set, the one
         // params.json holds and `flash` would write, as a written session does.
         final_summary.base_params_crc = Some(final_summary.params_crc.clone());
         final_summary.params = ParamsFile::from(&**set);
         final_summary.params_crc = format!("{:#010x}", set.crc32());
-        let path = dir.join("summary.json");
-        let text = serde_json::to_string_pretty(&final_summary)
-            .context("the summary could not be encoded")?;
-        std::fs::write(&path, text + "\n")
-            .with_context(|| format!("could not write {}", path.display()))?;
+        final_summary.base_uncertainties = Some(final_summary.uncertainties);
+        final_summary.uncertainties = **uncertainties;
+        write_summary(&dir, &final_summary)?;
+    }
+    if let Some(Ok(Closed::RevertedAtRest {
+        worse,
+        extended_path,
+    })) = closed.as_ref()
+    {
+        final_summary.notes.push(format!(
+            "the extended set ({}) checked worse at rest than the base set ({}) and the base \
+             set was written back",
+            extended_path.display(),
+            worse.join("; ")
+        ));
+        write_summary(&dir, &final_summary)?;
     }
     if let Some(Ok(Closed::Written {
         set,
+        uncertainties,
+        note,
         verdict,
         status,
         rest,
     })) = closed.as_ref()
     {
+        final_summary.notes.extend(note.iter().cloned());
         // The verdict is the written set's; the set is on the board even when the base set
         // was refused for its verdict and the terms explained why.
         final_summary.verdict = verdict.clone();
@@ -479,6 +493,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         final_summary.base_params_crc = Some(final_summary.params_crc.clone());
         final_summary.params = ParamsFile::from(&**set);
         final_summary.params_crc = format!("{:#010x}", status.active_crc);
+        final_summary.base_uncertainties = Some(final_summary.uncertainties);
+        final_summary.uncertainties = **uncertainties;
         final_summary.on_board_after = rest.as_ref().ok().copied();
         // The scalar figures describe the set on the board; unknown when its check failed.
         let on_board = rest.as_ref().ok();
@@ -489,11 +505,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         final_summary.mag_rest_error_pct = on_board.map(|a| a.mag_error_pct);
         final_summary.gyro_rest_error_dps = on_board.map(|a| a.gyro_rate_dps);
         rest_failure = rest.as_ref().err().map(|e| format!("{e:#}"));
-        let path = dir.join("summary.json");
-        let text = serde_json::to_string_pretty(&final_summary)
-            .context("the summary could not be encoded")?;
-        std::fs::write(&path, text + "\n")
-            .with_context(|| format!("could not write {}", path.display()))?;
+        write_summary(&dir, &final_summary)?;
     }
     // Recorded only once the session directory holds the calibration, and also when the
     // analysis failed: the board holds a set either way.
@@ -615,6 +627,14 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         return Err(refused_poor("The extended set", &params));
     }
     Ok(())
+}
+
+/// Write `summary.json` of the session in `dir` again (the set on the board changed).
+fn write_summary(dir: &Path, summary: &impl serde::Serialize) -> anyhow::Result<()> {
+    let path = dir.join("summary.json");
+    let text = serde_json::to_string_pretty(summary).context("the summary could not be encoded")?;
+    std::fs::write(&path, text + "\n")
+        .with_context(|| format!("could not write {}", path.display()))
 }
 
 #[cfg(test)]

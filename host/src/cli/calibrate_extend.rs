@@ -9,7 +9,8 @@ use imucal::analysis::result::RecordingAnalysis;
 use imucal::device::DeviceClient;
 use imucal::device::ParamsFile;
 use imucal::recording::Sensor;
-use imucal::session::solve::verdict_with_terms;
+use imucal::session::extend::extended_uncertainties;
+use imucal::session::solve::{verdict_with_terms, Uncertainties};
 use imucal::session::{
     analyse_poses, extend_set, rest_errors, stream_for, ExtendedSet, RestErrors, SessionOptions,
     SessionOutcome, Verdict, VerdictLevel,
@@ -24,14 +25,26 @@ pub(super) enum Closed {
     /// The board keeps the base set (nothing to add, or the extended set declined).
     BaseStays,
     /// Neither set was written (the base set was not): the extended set is the session's
-    /// saved set, `params.json`, the one `imucal flash` would write.
-    SavedNotWritten(Box<CalibrationSet>),
+    /// saved set, `params.json`, the one `imucal flash` would write; with its uncertainties.
+    SavedNotWritten(Box<CalibrationSet>, Box<Uncertainties>),
     /// The extended set's verdict kept it off the board; the path of the saved set.
     RefusedPoor(PathBuf),
+    /// The extended set was written, checked worse at rest than the base set ([`RestErrors::worse_than`])
+    /// and gave way to it: the board and `params.json` hold the base set again.
+    RevertedAtRest {
+        /// The quantities that were worse, one sentence each.
+        worse: Vec<String>,
+        /// Where the extended set was kept.
+        extended_path: PathBuf,
+    },
     /// The extended set is on the board.
     Written {
         /// The set written (boxed: a whole parameter set beside the small variants).
         set: Box<CalibrationSet>,
+        /// Its uncertainties ([`extended_uncertainties`]).
+        uncertainties: Box<Uncertainties>,
+        /// Said when it reads worse at rest than the base set, within its uncertainty.
+        note: Option<String>,
         /// Its verdict: the base fit's, with the held-out error of the model with the added
         /// terms ([`verdict_with_terms`]).
         verdict: Verdict,
@@ -108,6 +121,12 @@ pub(super) fn close_the_loop(
     )
     .with_context(|| format!("could not write {}", params_path.display()))?;
     let verdict = extended_verdict(outcome, &analysis, &extended);
+    let uncertainties = Box::new(extended_uncertainties(
+        &outcome.fit.uncertainties,
+        &extended,
+        &analysis,
+        outcome.fit.gravity_mps2,
+    ));
     // A base set refused for its verdict alone is offered again with the terms that explain
     // what made it poor; one the user declined, or nobody could be asked about, is not.
     let refused_for_verdict = outcome.not_written_because.as_deref() == Some("poor verdict");
@@ -118,7 +137,10 @@ pub(super) fn close_the_loop(
              writes it",
             params_path.display()
         );
-        return Ok(Closed::SavedNotWritten(Box::new(extended.set)));
+        return Ok(Closed::SavedNotWritten(
+            Box::new(extended.set),
+            uncertainties,
+        ));
     }
     if !outcome.written {
         say!(
@@ -154,8 +176,64 @@ pub(super) fn close_the_loop(
         rest_errors(&samples, outcome.fit.gravity_mps2, outcome.fit.field_ut)
             .context("no calibrated samples arrived for the check at rest")
     });
+    // Terms the holds supported can still be wrong where the board lies now: a set that checks
+    // worse at rest than the base set did on the same board, and worse than it claims, gives
+    // way to it.
+    if let (Ok(with_terms), Some(with_base)) = (&rest, outcome.after.as_ref()) {
+        let gyro_sigma_dps = uncertainties
+            .gyro_bias_dps
+            .iter()
+            .map(|s| s * s)
+            .sum::<f64>()
+            .sqrt();
+        let worse = with_terms.worse_than(with_base, [uncertainties.accel_norm_mg, gyro_sigma_dps]);
+        if !worse.is_empty() {
+            say!(
+                "The extended set checks worse at rest than the base set and than its own \
+                 uncertainty: {}; the base set is written back",
+                worse.join("; ")
+            );
+            let status = client.write_params_verified(&outcome.fit.set)?;
+            say!(
+                "Base set written back, committed, read back and compared: CRC {:#010x} (store \
+                 sequence {})",
+                status.active_crc,
+                status.active_seq
+            );
+            // params.json names the set on the board; the extended one is kept beside it.
+            let extended_path = dir.join("params-extended.json");
+            std::fs::rename(&params_path, &extended_path)
+                .and_then(|()| std::fs::copy(&base_path, &params_path).map(|_| ()))
+                .with_context(|| format!("could not restore {}", params_path.display()))?;
+            return Ok(Closed::RevertedAtRest {
+                worse,
+                extended_path,
+            });
+        }
+    }
+    // Worse here but within what the set claims: kept, and said.
+    let note = match (&rest, outcome.after.as_ref()) {
+        (Ok(with_terms), Some(with_base)) => {
+            let worse = with_terms.worse_than(with_base, [0.0, 0.0]);
+            (!worse.is_empty()).then(|| {
+                format!(
+                    "at rest the extended set reads worse than the base set where the board \
+                     lies now ({}), within its own uncertainty: the base set's offsets were \
+                     fitted with what the added terms now model, so they suit some orientations \
+                     better and others worse",
+                    worse.join("; ")
+                )
+            })
+        }
+        _ => None,
+    };
+    if let Some(note) = &note {
+        say!("Note: {note}");
+    }
     Ok(Closed::Written {
         set: Box::new(extended.set),
+        note,
+        uncertainties,
         verdict,
         status,
         rest,

@@ -8,15 +8,19 @@
 //! for g-sensitivity. Candidates are accepted by held-out error, forward, as in `imucal analyze`.
 //! The magnetometer is not analysed here: its fit uses the tumble, not the poses.
 //!
-//! [`extend_set`] replaces `A`, `b` and the extended terms of each sensor with an accepted effect
+//! [`extend_set`] replaces `b` and the extended terms of each sensor with an accepted effect
 //! that the firmware can apply (bias temperature polynomial, scale temperature coefficient,
-//! non-linearity, gyro g-sensitivity) by the analysis's final model, fitted jointly with them;
-//! a sensor with nothing accepted keeps the session's values, so a set without accepted effects
-//! is written unchanged. A replaced sensor's residual RMS is the final model's.
+//! non-linearity, gyro g-sensitivity) by the analysis's final model, fitted jointly with them,
+//! and the accelerometer's `A` too; the gyroscope keeps the session's `A`, which comes from the
+//! turns the holds do not see. A sensor with nothing accepted keeps the session's values, so a
+//! set without accepted effects is written unchanged. A replaced sensor's residual RMS is the
+//! final model's, and [`extended_uncertainties`] its σ.
 
-use imucal_protocol::CalibrationSet;
+use imucal_protocol::{CalibrationSet, SensorCalibration};
 
-use super::solve::{accel_of, gyro_of, CapturedPose};
+use super::solve::{
+    accel_of, gyro_of, max_norm_sigma_of, CapturedPose, Uncertainties, STANDARD_GRAVITY,
+};
 use crate::analysis::effects::EffectKind;
 use crate::analysis::extended_fit::BaseKind;
 use crate::analysis::{
@@ -25,7 +29,7 @@ use crate::analysis::{
 };
 use crate::fit::gyro_bias::fit_gyro_bias;
 use crate::fit::norm_lm::fit_accel_lm;
-use crate::fit::Vec3;
+use crate::fit::{Mat3, Vec3};
 use crate::pipeline::observations::{to_poses, Observation};
 use crate::recording::Sensor;
 use imucal_protocol::PoseStats;
@@ -175,6 +179,8 @@ pub struct ExtendedSet {
     pub added: Vec<String>,
     /// Accepted effects the firmware has no term for (e.g. `gyro bias_drift`), left out.
     pub left_out: Vec<String>,
+    /// The sensors whose terms now come from the analysis's final model.
+    pub replaced: Vec<Sensor>,
 }
 
 impl ExtendedSet {
@@ -199,6 +205,7 @@ pub fn extend_set(base: &CalibrationSet, analysis: &RecordingAnalysis) -> Extend
     let mut set = *base;
     let mut added = Vec::new();
     let mut left_out = Vec::new();
+    let mut replaced = Vec::new();
     for (sensor, result) in &analysis.sensors {
         let Ok(found) = result else { continue };
         let (with_term, without): (Vec<EffectKind>, Vec<EffectKind>) = accepted(found)
@@ -218,21 +225,88 @@ pub fn extend_set(base: &CalibrationSet, analysis: &RecordingAnalysis) -> Extend
                     (found.rms_after * f64::from(set.reference.gravity_mps2)) as f32;
             }
             Sensor::Gyro => {
-                set.gyro = terms.sensor;
+                // The holds fit the bias and its terms at rest, where A is only the unit's
+                // scale: the session's A (scale and misalignment from the turns) stays.
+                set.gyro = SensorCalibration {
+                    a: base.gyro.a,
+                    ..terms.sensor
+                };
                 set.residuals.gyro_rms = found.rms_after as f32;
-                if terms.gyro_g_sensitivity.is_some() {
-                    set.gyro_g_sensitivity = terms.gyro_g_sensitivity;
+                if let Some(k) = terms.gyro_g_sensitivity {
+                    set.gyro_g_sensitivity = Some(g_sensitivity_through(
+                        &base.gyro.a,
+                        &found.calibration.a,
+                        &k,
+                    ));
                 }
             }
             Sensor::Mag => continue,
         }
         added.extend(with_term.iter().map(|k| describe(*sensor, *k)));
+        replaced.push(*sensor);
     }
     ExtendedSet {
         set,
         added,
         left_out,
+        replaced,
     }
+}
+
+/// The session's uncertainties with those of each sensor [`extend_set`] replaced taken from the
+/// analysis's final model ([`SensorAnalysis::base_covariance`]: at the reference temperature,
+/// with the added terms' correlation): accelerometer offset, scale and `|a|` error, gyroscope
+/// bias. Figures of sensors not replaced are `base`'s.
+pub fn extended_uncertainties(
+    base: &Uncertainties,
+    extended: &ExtendedSet,
+    analysis: &RecordingAnalysis,
+    gravity_mps2: f64,
+) -> Uncertainties {
+    let mut out = *base;
+    let mg = 1000.0 / STANDARD_GRAVITY;
+    for (sensor, result) in &analysis.sensors {
+        let Ok(found) = result else { continue };
+        if !extended.replaced.contains(sensor) {
+            continue;
+        }
+        let Some((names, cov)) = found.base_covariance() else {
+            continue;
+        };
+        let sigma = |name: &str| {
+            names
+                .iter()
+                .position(|n| n == name)
+                .map_or(f64::NAN, |i| cov[(i, i)].max(0.0).sqrt())
+        };
+        match sensor {
+            Sensor::Accel => {
+                out.accel_bias_mg = ["b1", "b2", "b3"].map(|n| sigma(n) * mg);
+                let a = &found.calibration.a;
+                out.accel_scale_ppm = [("A11", 0), ("A22", 1), ("A33", 2)]
+                    .map(|(n, i)| sigma(n) / a[(i, i)].abs().max(f64::MIN_POSITIVE) * 1e6);
+                out.accel_norm_mg =
+                    max_norm_sigma_of(&found.calibration, gravity_mps2, &names, &cov)
+                        .map_or(f64::NAN, |s| s * mg);
+            }
+            Sensor::Gyro => {
+                out.gyro_bias_dps = ["b1", "b2", "b3"].map(|n| sigma(n).to_degrees());
+            }
+            Sensor::Mag => {}
+        }
+    }
+    out
+}
+
+/// The g-sensitivity `K` fitted with the analysis's `A` (`A_an(x − b) − K·f = 0` at rest) as the
+/// firmware applies it after the set's `A` (`A(x − b) − K'·f`): `K' = A·A_an⁻¹·K`.
+fn g_sensitivity_through(a: &[[f32; 3]; 3], a_analysis: &Mat3, k: &[[f32; 3]; 3]) -> [[f32; 3]; 3] {
+    let to_mat = |m: &[[f32; 3]; 3]| Mat3::from_fn(|r, c| f64::from(m[r][c]));
+    let Some(inverse) = a_analysis.try_inverse() else {
+        return *k;
+    };
+    let through = to_mat(a) * inverse * to_mat(k);
+    [0, 1, 2].map(|r| [0, 1, 2].map(|c| through[(r, c)] as f32))
 }
 
 fn accepted(analysis: &SensorAnalysis) -> Vec<EffectKind> {
@@ -302,6 +376,77 @@ mod tests {
             );
         };
         assert_eq!(gyro.observations.len(), 11);
+    }
+
+    #[test]
+    fn an_accepted_g_sensitivity_keeps_the_sessions_gyro_matrix_and_carries_k_through_it() {
+        // Two rounds of the twelve positions; the gyroscope reads b + K·f at rest.
+        let k_true = Mat3::new(2e-4, -3e-4, 1e-4, 4e-4, 1e-4, -2e-4, -1e-4, 3e-4, 2e-4);
+        let b_true = Vec3::new(0.01, -0.02, 0.005);
+        let mut poses = ideal_poses(9.81);
+        let second: Vec<CapturedPose> = poses
+            .iter()
+            .map(|p| CapturedPose {
+                t_s: p.t_s + 100.0,
+                ..p.clone()
+            })
+            .collect();
+        poses.extend(second);
+        for p in &mut poses {
+            let f = Vec3::from(p.stats.accel_mean.map(f64::from));
+            let w = b_true + k_true * f;
+            p.stats.gyro_mean = [w.x as f32, w.y as f32, w.z as f32];
+        }
+        let analysis = analyse_poses(&poses, 9.81);
+        let mut base = CalibrationSet::identity();
+        // The session's A from the turns: 2 % scale error and some misalignment.
+        base.gyro.a = [[1.02, 0.01, 0.0], [0.0, 0.98, -0.01], [0.005, 0.0, 1.01]];
+        let extended = extend_set(&base, &analysis);
+        assert!(
+            extended.added.iter().any(|a| a == "gyro g_sensitivity"),
+            "{:?}",
+            extended.added
+        );
+        assert_eq!(extended.set.gyro.a, base.gyro.a);
+        // A(x − b) − K'·f = 0 at rest needs K' = A·K.
+        let a = Mat3::from_fn(|r, c| f64::from(base.gyro.a[r][c]));
+        let expected = a * k_true;
+        let k = extended.set.gyro_g_sensitivity.expect("K written");
+        for r in 0..3 {
+            for c in 0..3 {
+                assert!(
+                    (f64::from(k[r][c]) - expected[(r, c)]).abs() < 2e-6,
+                    "K'[{r}][{c}] = {} against A·K = {}",
+                    k[r][c],
+                    expected[(r, c)]
+                );
+            }
+        }
+        for axis in 0..3 {
+            assert!((f64::from(extended.set.gyro.b[axis]) - b_true[axis]).abs() < 1e-5);
+        }
+        // The written set's σ: the gyroscope's from the joint fit, the accelerometer's (not
+        // replaced) unchanged.
+        let base_sigma = Uncertainties {
+            accel_bias_mg: [0.1; 3],
+            accel_scale_ppm: [100.0; 3],
+            accel_norm_mg: 0.2,
+            gyro_bias_dps: [1.0; 3],
+            mag_bias_ut: [0.02; 3],
+            mag_norm_pct: 0.1,
+            alignment_deg: 0.02,
+        };
+        let sigma = extended_uncertainties(&base_sigma, &extended, &analysis, 9.81);
+        assert_eq!(extended.replaced, vec![Sensor::Gyro]);
+        assert_eq!(sigma.accel_bias_mg, base_sigma.accel_bias_mg);
+        for s in sigma.gyro_bias_dps {
+            // Exact data: the bias is known far better than the placeholder's 1 °/s.
+            assert!(
+                s.is_finite() && s > 0.0 && s < 0.1,
+                "{:?}",
+                sigma.gyro_bias_dps
+            );
+        }
     }
 
     #[test]

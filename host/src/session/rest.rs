@@ -26,6 +26,8 @@ pub struct RestErrors {
     pub mag_noise_pct: f64,
     /// `|ω̄|`, °/s.
     pub gyro_rate_dps: f64,
+    /// Standard error of `|ω̄|` from the sample scatter, °/s.
+    pub gyro_noise_dps: f64,
     /// Largest per-axis accelerometer standard deviation of the samples (stillness), m/s².
     pub accel_std_mps2: f64,
 }
@@ -101,6 +103,53 @@ impl RestErrors {
         }
         missed
     }
+
+    /// The quantities (`|a| error`, `gyro rate`) in which these errors are worse than
+    /// `other`'s and beyond what the set measured claims, one sentence each. Worse: by more than
+    /// three standard errors of the difference, so the noise of two short measurements does
+    /// not decide. Beyond the claim: above three times `stated` (the set's own one-sigma error
+    /// of `|a|` in mg and of the rate in °/s) combined with the measurement's noise, since a
+    /// set can be worse at one orientation and better over all of them (a base bias measured
+    /// where the board lies now). The magnetometer is not compared (both sets share it).
+    pub fn worse_than(&self, other: &RestErrors, stated: [f64; 2]) -> Vec<String> {
+        let mut worse = Vec::new();
+        for ((what, mine, my_noise, theirs, their_noise, unit), claim) in [
+            (
+                "|a| error",
+                self.accel_error_mg,
+                self.accel_noise_mg,
+                other.accel_error_mg,
+                other.accel_noise_mg,
+                "mg",
+            ),
+            (
+                "gyro rate",
+                self.gyro_rate_dps,
+                self.gyro_noise_dps,
+                other.gyro_rate_dps,
+                other.gyro_noise_dps,
+                "°/s",
+            ),
+        ]
+        .into_iter()
+        .zip(stated)
+        {
+            let noise = my_noise.max(0.0).hypot(their_noise.max(0.0));
+            let claimed = if claim.is_finite() {
+                claim.max(0.0)
+            } else {
+                0.0
+            };
+            let beyond_claim = mine > 3.0 * claimed.hypot(my_noise.max(0.0));
+            if mine - theirs > 3.0 * noise && beyond_claim {
+                worse.push(format!(
+                    "{what} {mine:.4} {unit} against {theirs:.4} {unit} (± {noise:.4} {unit}; \
+                     its stated σ {claimed:.4} {unit})"
+                ));
+            }
+        }
+        worse
+    }
 }
 
 fn mean_and_std(values: impl Iterator<Item = Vec3> + Clone) -> (Vec3, Vec3) {
@@ -130,7 +179,7 @@ pub fn rest_errors(samples: &[UnitSample], gravity_mps2: f64, field_ut: f64) -> 
     let n = samples.len();
     let (accel, accel_std) = mean_and_std(samples.iter().map(|s| Vec3::from(s.accel)));
     let (mag, mag_std) = mean_and_std(samples.iter().map(|s| Vec3::from(s.mag)));
-    let (gyro, _) = mean_and_std(samples.iter().map(|s| Vec3::from(s.gyro)));
+    let (gyro, gyro_std) = mean_and_std(samples.iter().map(|s| Vec3::from(s.gyro)));
     let mg = 1000.0 / STANDARD_GRAVITY;
     let pct = 100.0 / field_ut;
     Some(RestErrors {
@@ -141,6 +190,7 @@ pub fn rest_errors(samples: &[UnitSample], gravity_mps2: f64, field_ut: f64) -> 
         mag_error_pct: (mag.norm() - field_ut).abs() * pct,
         mag_noise_pct: norm_standard_error(&mag, &mag_std, n) * pct,
         gyro_rate_dps: gyro.norm().to_degrees(),
+        gyro_noise_dps: norm_standard_error(&gyro, &gyro_std, n).to_degrees(),
         accel_std_mps2: accel_std.max(),
     })
 }
@@ -148,6 +198,30 @@ pub fn rest_errors(samples: &[UnitSample], gravity_mps2: f64, field_ut: f64) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_set_is_worse_at_rest_only_beyond_the_noise_of_both_checks_and_its_own_uncertainty() {
+        let check = |gyro_dps: f64| RestErrors {
+            samples: 200,
+            duration_s: 2.0,
+            accel_error_mg: 0.1,
+            accel_noise_mg: 0.03,
+            mag_error_pct: 0.1,
+            mag_noise_pct: 0.01,
+            gyro_rate_dps: gyro_dps,
+            gyro_noise_dps: 0.005,
+            accel_std_mps2: 0.0,
+        };
+        let base = check(0.015);
+        // 0.15 °/s against 0.015: worse beyond the noise (± 0.007 °/s) ...
+        let worse = check(0.15).worse_than(&base, [0.0, 0.0]);
+        assert_eq!(worse.len(), 1, "{worse:?}");
+        assert!(worse[0].starts_with("gyro rate 0.1500 °/s"), "{worse:?}");
+        // ... but within three times a stated σ of 0.054 °/s: not beyond the set's claim.
+        assert!(check(0.15).worse_than(&base, [0.2, 0.054]).is_empty());
+        // Within the noise of the two checks: not worse.
+        assert!(check(0.030).worse_than(&base, [0.0, 0.0]).is_empty());
+    }
 
     #[test]
     fn a_target_is_missed_only_beyond_three_standard_errors_of_its_measurement() {
@@ -163,6 +237,7 @@ mod tests {
             mag_error_pct: mag_pct,
             mag_noise_pct: 0.01,
             gyro_rate_dps: 0.0,
+            gyro_noise_dps: 0.0,
             accel_std_mps2: 0.0,
         };
         assert!(errors(0.3, 0.05, 0.1).missed_targets(budgets).is_empty());

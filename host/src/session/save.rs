@@ -84,8 +84,12 @@ pub struct SessionSummary {
     pub field_source: FieldSource,
     /// Local gravity used, m/s².
     pub gravity_mps2: f64,
-    /// One-sigma uncertainties of the fit.
+    /// One-sigma uncertainties of the set in `params` (with `--analyze`'s extended set, its
+    /// replaced sensors' figures come from the analysis's final model).
     pub uncertainties: Uncertainties,
+    /// The base set's uncertainties when `--analyze` replaced it with the extended set;
+    /// `null` otherwise.
+    pub base_uncertainties: Option<Uncertainties>,
     /// The verdict.
     pub verdict: Verdict,
     /// Findings that do not change the verdict (positions left out of the magnetometer's
@@ -141,6 +145,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         field_source: outcome.fit.field_source,
         gravity_mps2: outcome.fit.gravity_mps2,
         uncertainties: outcome.fit.uncertainties,
+        base_uncertainties: None,
         gyro_scale: outcome.gyro_scale.clone(),
         verdict: outcome.fit.verdict.clone(),
         notes: outcome.fit.notes.clone(),

@@ -183,12 +183,16 @@ pub fn mag_of(stats: &PoseStats) -> ([f32; 3], [f32; 3]) {
     (stats.mag_mean, stats.mag_var)
 }
 
-/// Gradient of `|A(x − b)|` with respect to the fit's parameters (named `Aij`, `bj` in
-/// `param_names`; entries not fitted are fixed), at the raw reading that maps to `reference·û`:
-/// `∂/∂Aᵢⱼ = ûᵢ·uⱼ` and `∂/∂b = −Aᵀû` with `u = x − b`.
-fn norm_gradient(fit: &Fit, direction: &Vec3) -> Option<DVector<f64>> {
-    let cal = &fit.cal;
-    let u = cal.a.try_inverse()? * (direction * fit.reference);
+/// Gradient of `|A(x − b)|` with respect to the parameters `names` (`Aij`, `bj`; entries not
+/// named are fixed), at the raw reading that maps to `reference·û`: `∂/∂Aᵢⱼ = ûᵢ·uⱼ` and
+/// `∂/∂b = −Aᵀû` with `u = x − b`.
+fn norm_gradient(
+    cal: &Calibration,
+    reference: f64,
+    names: &[String],
+    direction: &Vec3,
+) -> Option<DVector<f64>> {
+    let u = cal.a.try_inverse()? * (direction * reference);
     let back = cal.a.transpose() * direction;
     let entry = |name: &str| -> Option<f64> {
         let digits: Vec<usize> = name
@@ -202,8 +206,7 @@ fn norm_gradient(fit: &Fit, direction: &Vec3) -> Option<DVector<f64>> {
             _ => None,
         }
     };
-    let values = fit
-        .param_names
+    let values = names
         .iter()
         .map(|n| entry(n))
         .collect::<Option<Vec<f64>>>()?;
@@ -211,22 +214,46 @@ fn norm_gradient(fit: &Fit, direction: &Vec3) -> Option<DVector<f64>> {
 }
 
 /// One-sigma error of `|A(x − b)|` along the output direction `direction` (unit), in output
-/// units; `None` without a covariance over named `A`/`b` entries.
-pub fn norm_sigma_at(fit: &Fit, direction: &Vec3) -> Option<f64> {
-    let cov: &DMatrix<f64> = fit.covariance.as_ref()?;
-    let g = norm_gradient(fit, direction)?;
+/// units, for the covariance `cov` of the parameters `names` of `cal`; `None` when a name is
+/// not an `A`/`b` entry or the sizes differ.
+pub fn norm_sigma_of(
+    cal: &Calibration,
+    reference: f64,
+    names: &[String],
+    cov: &DMatrix<f64>,
+    direction: &Vec3,
+) -> Option<f64> {
+    let g = norm_gradient(cal, reference, names, direction)?;
     if cov.shape() != (g.len(), g.len()) {
         return None;
     }
     Some((g.transpose() * cov * &g)[(0, 0)].max(0.0).sqrt())
 }
 
+/// One-sigma error of `|A(x − b)|` along the output direction `direction` (unit), in output
+/// units; `None` without a covariance over named `A`/`b` entries.
+pub fn norm_sigma_at(fit: &Fit, direction: &Vec3) -> Option<f64> {
+    let cov: &DMatrix<f64> = fit.covariance.as_ref()?;
+    norm_sigma_of(&fit.cal, fit.reference, &fit.param_names, cov, direction)
+}
+
 /// Largest one-sigma error of `|A(x − b)|` over the 26 cube directions, in output units;
 /// `None` without a covariance.
 pub fn max_norm_sigma(fit: &Fit) -> Option<f64> {
+    let cov: &DMatrix<f64> = fit.covariance.as_ref()?;
+    max_norm_sigma_of(&fit.cal, fit.reference, &fit.param_names, cov)
+}
+
+/// [`max_norm_sigma`] for a calibration and the covariance of its parameters `names`.
+pub fn max_norm_sigma_of(
+    cal: &Calibration,
+    reference: f64,
+    names: &[String],
+    cov: &DMatrix<f64>,
+) -> Option<f64> {
     region_directions()
         .iter()
-        .filter_map(|d| norm_sigma_at(fit, d))
+        .filter_map(|d| norm_sigma_of(cal, reference, names, cov, d))
         .reduce(f64::max)
 }
 
