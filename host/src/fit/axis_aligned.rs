@@ -212,7 +212,7 @@ fn solve(points: &[Vec3], reference: f64) -> Result<(Calibration, f64), FitError
     let ls = least_squares(&d.x, &d.y, "axis-aligned ellipsoid")?;
     let v = &ls.solution;
     let cal = calibration_from_coefficients(&[v[0], v[1], v[2], v[3], v[4], v[5]], &d, reference)?;
-    Ok((cal, ls.condition_number))
+    Ok((cal, ls.equilibrated_condition))
 }
 
 /// The calibration from the coefficients `a b c d e f` of the normalised problem.

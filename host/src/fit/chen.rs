@@ -23,7 +23,8 @@ use nalgebra::{DMatrix, DVector};
 use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
 use super::li::li_start;
 use super::linalg::{
-    condition_number, inverse_spd, least_squares, rms, std_from_covariance, upper_triangular_gauge,
+    equilibrated_condition_number, inverse_spd, least_squares, rms, std_from_covariance,
+    upper_triangular_gauge,
 };
 use super::loo::leave_one_out_rms;
 use super::six_position::six_position_calibration;
@@ -244,7 +245,7 @@ pub fn refine_norm_model(
 
     let jac = norm_jacobian_gauge(poses, &cal, reference);
     let jw = DMatrix::from_fn(jac.nrows(), 9, |i, j| jac[(i, j)] * weight(i));
-    let condition_number = condition_number(&jw);
+    let condition_number = equilibrated_condition_number(&jw);
     let normal = jw.transpose() * &jw;
     // One policy (`uncertainty`): χ² of the weighted residual, Birge-inflated with known noise.
     let chi_square = cost(&cal);

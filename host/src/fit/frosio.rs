@@ -14,7 +14,7 @@ use nalgebra::{DMatrix, DVector};
 use super::covariance::normal_covariance;
 use super::coverage::{guard_fit, CoverageHint, EllipsoidModel};
 use super::li::li_start;
-use super::linalg::{condition_number, rms};
+use super::linalg::{equilibrated_condition_number, rms};
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::{Calibration, CalibrationStd, Fit, FitError, Mat3, Method, Vec3};
 
@@ -202,7 +202,7 @@ fn fit_frosio_unchecked(
         covariance,
         param_names: NAMES.iter().map(|s| s.to_string()).collect(),
         std,
-        condition_number: condition_number(&j),
+        condition_number: equilibrated_condition_number(&j),
         iterations,
         termination: None,
         coverage_factor,

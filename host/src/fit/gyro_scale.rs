@@ -18,7 +18,7 @@
 use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion};
 
 use super::covariance::{calibration_std, normal_covariance, param_names, FULL_MATRIX_LAYOUT};
-use super::linalg::{condition_from_normal_matrix, rms};
+use super::linalg::{equilibrated_condition_from_normal_matrix, rms};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::uncertainty::{scaled_covariance, NoiseLevel, Z_95};
 use super::{Calibration, Fit, FitError, Mat3, Method, Vec3};
@@ -305,7 +305,7 @@ pub(super) fn gyro_matrix_fit(
         covariance,
         param_names: param_names(&FULL_MATRIX_LAYOUT),
         std,
-        condition_number: condition_from_normal_matrix(&sol.jtj),
+        condition_number: equilibrated_condition_from_normal_matrix(&sol.jtj),
         iterations: sol.iterations,
         termination: Some(sol.termination),
         coverage_factor,

@@ -18,6 +18,8 @@ pub struct LeastSquares {
     pub singular_values: Vec<f64>,
     /// `σ_max / σ_min` of `X`.
     pub condition_number: f64,
+    /// `σ_max / σ_min` of `X` with unit-length columns ([`equilibrated_condition_number`]).
+    pub equilibrated_condition: f64,
 }
 
 /// Solve `X·β ≈ Y` in the least-squares sense by SVD.
@@ -52,10 +54,19 @@ pub fn least_squares(
     let solution = svd
         .solve(y, 0.0)
         .map_err(|e| FitError::Underdetermined(format!("{what}: {e}")))?;
+    // XᵀX = V·Σ²·Vᵀ from the decomposition already made, not from another pass over X.
+    let equilibrated_condition = match &svd.v_t {
+        Some(vt) => {
+            let s2 = DMatrix::from_diagonal(&svd.singular_values.map(|v| v * v));
+            equilibrated_condition_from_normal_matrix(&(vt.transpose() * s2 * vt))
+        }
+        None => f64::INFINITY,
+    };
     Ok(LeastSquares {
         solution,
         singular_values: sv,
         condition_number: cond,
+        equilibrated_condition,
     })
 }
 
@@ -84,6 +95,36 @@ pub fn condition_from_normal_matrix(jtj: &DMatrix<f64>) -> f64 {
     } else {
         f64::INFINITY
     }
+}
+
+/// [`condition_number`] of `m` with each column scaled to unit length: the conditioning of the
+/// parameters' estimation whatever units each is in (column scaling is within `√n` of the best
+/// diagonal scaling, van der Sluis 1969), so fits that solve in raw counts and fits that solve
+/// in scaled data report comparable figures. Infinite with a zero column.
+pub fn equilibrated_condition_number(m: &DMatrix<f64>) -> f64 {
+    let mut scaled = m.clone();
+    for mut column in scaled.column_iter_mut() {
+        let norm = column.norm();
+        if norm.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return f64::INFINITY;
+        }
+        column /= norm;
+    }
+    condition_number(&scaled)
+}
+
+/// [`equilibrated_condition_number`] of `J` from its normal matrix `JᵀJ`: the condition of
+/// `D⁻¹·JᵀJ·D⁻¹` with `D = √diag(JᵀJ)`, square-rooted.
+pub fn equilibrated_condition_from_normal_matrix(jtj: &DMatrix<f64>) -> f64 {
+    let d: Vec<f64> = jtj.diagonal().iter().map(|v| v.sqrt()).collect();
+    if d.iter()
+        .any(|v| v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater))
+    {
+        return f64::INFINITY;
+    }
+    condition_from_normal_matrix(&DMatrix::from_fn(jtj.nrows(), jtj.ncols(), |r, c| {
+        jtj[(r, c)] / (d[r] * d[c])
+    }))
 }
 
 fn condition_from(sv: &[f64]) -> f64 {
@@ -167,4 +208,38 @@ pub fn std_from_covariance(cov: &DMatrix<f64>) -> DVector<f64> {
         cov.nrows(),
         (0..cov.nrows()).map(|i| cov[(i, i)].max(0.0).sqrt()),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_equilibrated_condition_does_not_depend_on_the_parameters_units() {
+        let j = DMatrix::from_row_slice(
+            4,
+            3,
+            &[1.0, 0.2, 0.1, 0.3, 1.0, 0.0, 0.1, 0.4, 1.0, 0.5, 0.5, 0.5],
+        );
+        // The second parameter in units a thousand times smaller (raw counts, say).
+        let mut rescaled = j.clone();
+        rescaled.column_mut(1).scale_mut(1000.0);
+        let (a, b) = (
+            equilibrated_condition_number(&j),
+            equilibrated_condition_number(&rescaled),
+        );
+        assert!((a - b).abs() < 1e-9 * a, "{a} against {b}");
+        assert!(condition_number(&rescaled) > 100.0 * condition_number(&j));
+        // The normal-matrix form and the least-squares solve give the same figure.
+        let from_normal =
+            equilibrated_condition_from_normal_matrix(&(rescaled.transpose() * &rescaled));
+        assert!(
+            (from_normal - a).abs() < 1e-6 * a,
+            "{from_normal} against {a}"
+        );
+        let ls =
+            least_squares(&rescaled, &DMatrix::from_element(4, 1, 1.0), "test").expect("solves");
+        assert!((ls.equilibrated_condition - a).abs() < 1e-6 * a);
+        assert!(equilibrated_condition_number(&DMatrix::zeros(3, 2)).is_infinite());
+    }
 }

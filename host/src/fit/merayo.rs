@@ -174,7 +174,7 @@ fn fit_merayo_unchecked(
         covariance,
         param_names: param_names(&UPPER_TRIANGULAR_LAYOUT),
         std,
-        condition_number: ls.condition_number,
+        condition_number: ls.equilibrated_condition,
         iterations: 0,
         termination: None,
         coverage_factor,

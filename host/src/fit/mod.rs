@@ -130,7 +130,9 @@ pub struct Fit {
     pub param_names: Vec<String>,
     /// One-sigma uncertainties mapped back onto `A` and `b`.
     pub std: Option<CalibrationStd>,
-    /// Condition number of the (weighted) Jacobian or design matrix at the solution.
+    /// Condition number of the (weighted) Jacobian or design matrix at the solution, with its
+    /// columns scaled to unit length so that it does not depend on the parameters' units (Li's
+    /// algebraic fit: of its own design, see `fit::li`).
     pub condition_number: f64,
     /// Iterations used (0 for closed-form methods).
     pub iterations: usize,

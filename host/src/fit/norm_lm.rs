@@ -44,7 +44,7 @@ use super::covariance::{
 use super::coverage::{guard_fit, sphere_start, CoverageHint, EllipsoidModel};
 use super::li::li_start;
 use super::li::{fit_li_start, LiOptions};
-use super::linalg::{condition_from_normal_matrix, upper_triangular_gauge};
+use super::linalg::{equilibrated_condition_from_normal_matrix, upper_triangular_gauge};
 use super::lm::{levenberg_marquardt, LeastSquaresProblem, LmOptions, LmSolution};
 use super::loo::{held_out_rms, leave_one_out_rms, UPDATED_FOLDS_MIN_POSES};
 use super::norm_jacobian::{
@@ -694,7 +694,7 @@ pub fn refine_lm_detailed(
         covariance,
         param_names: param_names(&UPPER_TRIANGULAR_LAYOUT),
         std,
-        condition_number: condition_from_normal_matrix(&jtj),
+        condition_number: equilibrated_condition_from_normal_matrix(&jtj),
         iterations,
         termination: Some(termination),
         coverage_factor,

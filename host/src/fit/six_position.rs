@@ -212,7 +212,7 @@ fn solve(poses: &[Pose], dirs: &[Vec3], reference: f64) -> Result<Solved, FitErr
         },
         design,
         column_scale,
-        condition_number: ls.condition_number,
+        condition_number: ls.equilibrated_condition,
     })
 }
 

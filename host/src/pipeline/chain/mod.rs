@@ -90,12 +90,16 @@ pub const CANDIDATES: [Method; 4] = [
 /// their held-out errors finds one better (the only candidates with equally many unknowns).
 pub const TIED_PAIR: [Method; 2] = [Method::MinMax, Method::AxisAligned];
 
-/// Number of unknowns of a candidate model (or of the mean of [`TIED_PAIR`]).
+/// Number of unknowns of an accelerometer model (or of the mean of [`TIED_PAIR`]): what the
+/// norm residual's χ² test subtracts from the poses for its degrees of freedom.
 pub fn unknowns(method: Method) -> usize {
     match method {
         Method::MinMax | Method::AxisAligned | Method::MinMaxAxisAlignedMean => 6,
-        Method::Lm => 9,
-        _ => 12,
+        // A general ellipsoid (A up to a rotation, the norm model's gauge) and its centre.
+        Method::Lm | Method::Chen | Method::Li | Method::Frosio | Method::Merayo => 9,
+        Method::GyroBias => 3,
+        // The whole matrix: the poses' expected directions fix the rotation too.
+        Method::SixPosition | Method::GyroScale => 12,
     }
 }
 

@@ -488,3 +488,35 @@ fn a_pose_of_high_leverage_is_refitted_and_the_others_updated() {
         "{updated_folds} folds updated"
     );
 }
+
+#[test]
+fn each_accelerometer_model_counts_as_many_unknowns_as_it_estimates() {
+    // Twenty-six cube directions: every model here fits them.
+    let dirs: Vec<Vec3> = crate::session::coverage::region_directions();
+    let poses = poses(&diagonal_gain(), &offset(), &dirs, 1e-3);
+    for method in [
+        Method::MinMax,
+        Method::AxisAligned,
+        Method::Lm,
+        Method::Chen,
+        Method::Li,
+        Method::Frosio,
+        Method::Merayo,
+    ] {
+        let fit = crate::pipeline::methods::fit_accel(method, &poses, 9.81)
+            .unwrap_or_else(|e| panic!("{}: {e}", method.name()));
+        // Li's algebraic fit names no parameters (it has no covariance): a symmetric matrix
+        // and a centre, nine, as the norm model's gauge.
+        if fit.param_names.is_empty() {
+            assert_eq!((method, unknowns(method)), (Method::Li, 9));
+            continue;
+        }
+        assert_eq!(
+            unknowns(method),
+            fit.param_names.len(),
+            "{}: {:?}",
+            method.name(),
+            fit.param_names
+        );
+    }
+}
