@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 
 use super::observations::{MAG_WINDOW_SAMPLES, MAX_MAG_WINDOWS};
-use crate::fit::{Fit, Method, Vec3};
+use crate::fit::{Fit, Method, Pose, Vec3};
 use crate::geomag::{local_field_today, LocalField, Location, RadiusCheck};
 use crate::recording::{Recording, Sensor, Units};
 use crate::still::StillReport;
@@ -20,7 +20,7 @@ use super::calibration::{
 use super::chain::{default_accel_chain, unknowns};
 use super::gyro::{fit_gyroscope, gyro_unit_scale, moot_gyro_scale};
 use super::input::{check_input_then, CheckedInput, InputOptions};
-use super::methods::{fit_accel, fit_mag};
+use super::methods::{fit_accel, fit_mag, leave_one_out_where_refittable};
 use super::references::References;
 use super::PipelineError;
 use crate::device::params_json::Provenance;
@@ -248,7 +248,12 @@ impl SensorContext<'_> {
         let fit = if sensor == Sensor::Accel {
             outcome.output_unit = "m/s²".to_string();
             let fit = match self.method {
-                Some(m) => fit_accel(m, &poses, gravity),
+                Some(m) => fit_accel(m, &poses, gravity).map(|mut f| {
+                    if f.loo_rms.is_none() {
+                        held_out_where_refittable(&mut f, &poses, gravity, &mut outcome.notes);
+                    }
+                    f
+                }),
                 None => default_accel_chain(&poses, gravity).map(|choice| {
                     outcome.notes.push(choice.reason.clone());
                     let fit = choice.fit.clone();
@@ -283,6 +288,30 @@ impl SensorContext<'_> {
         };
         outcome.fit = fit.map_err(|e| e.to_string());
         outcome
+    }
+}
+
+/// Give `fit` (a model the user chose) the held-out error over the poses it can be refit
+/// without ([`leave_one_out_where_refittable`]), saying which poses are not in it.
+fn held_out_where_refittable(fit: &mut Fit, poses: &[Pose], gravity: f64, notes: &mut Vec<String>) {
+    let Some((rms, kept)) = leave_one_out_where_refittable(fit.method, poses, gravity) else {
+        return;
+    };
+    fit.loo_rms = Some(rms);
+    if kept.len() < poses.len() {
+        let left: Vec<String> = (0..poses.len())
+            .filter(|i| !kept.contains(i))
+            .map(|i| format!("#{}", i + 1))
+            .collect();
+        notes.push(format!(
+            "{}: leave-one-out RMS over {} of {} poses; without {} the model is refused, so \
+             {} not held out (poses numbered from 1 in the order fitted)",
+            fit.method.name(),
+            kept.len(),
+            poses.len(),
+            left.join(", "),
+            if left.len() == 1 { "it is" } else { "they are" }
+        ));
     }
 }
 

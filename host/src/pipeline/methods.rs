@@ -139,6 +139,30 @@ pub fn fit_accel(method: Method, poses: &[Pose], reference: f64) -> Result<Fit, 
     }
 }
 
+/// The held-out error of an accelerometer model the user chose whose fit gives none (every
+/// pose's refit must succeed for it): each pose predicted by `method` refit on the others, over
+/// the poses it can be refit without, as the default chain scores its candidates. Returns the
+/// RMS and the poses it is over; `None` with fewer than two such poses.
+pub fn leave_one_out_where_refittable(
+    method: Method,
+    poses: &[Pose],
+    reference: f64,
+) -> Option<(f64, Vec<usize>)> {
+    let errors = fit::loo::held_out_errors_threaded(poses, reference, |i| {
+        fit_accel(method, &fit::loo::without(poses, i), reference).map(|f| f.cal)
+    })?;
+    let (kept, values): (Vec<usize>, Vec<f64>) = errors
+        .iter()
+        .enumerate()
+        .filter_map(|(i, e)| e.map(|e| (i, e)))
+        .unzip();
+    if values.len() < 2 {
+        return None;
+    }
+    let rms = (values.iter().map(|e| e * e).sum::<f64>() / values.len() as f64).sqrt();
+    Some((rms, kept))
+}
+
 /// Fit the magnetometer from samples over many orientations to the field magnitude `reference`.
 pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, FitError> {
     match method {
@@ -390,6 +414,36 @@ mod tests {
         assert!(!why.contains(" up"), "accelerometer wording: {why}");
         // The full sphere fits.
         assert!(fit_mag(Method::MinMax, &hard_and_soft_iron_cloud(400, 3), 50.0).is_ok());
+    }
+
+    #[test]
+    fn a_chosen_model_is_held_out_over_the_poses_it_can_be_refit_without() {
+        // Each face once, +X twice: min/max can be refit without a +X pose only.
+        let mut dirs: Vec<Vec3> = crate::fit::validate::face_directions().to_vec();
+        dirs.push(Vec3::new(1.0, 0.02, 0.0));
+        let mut noise = normals(11);
+        let poses: Vec<Pose> = dirs
+            .iter()
+            .map(|d| {
+                let raw = d.normalize() * 9.81 * 1.01
+                    + Vec3::new(0.1, -0.05, 0.02)
+                    + Vec3::new(noise(), noise(), noise()) * 1e-3;
+                Pose {
+                    mean: raw,
+                    var: Vec3::repeat(1e-6),
+                    n: 100,
+                    label: None,
+                }
+            })
+            .collect();
+        assert!(fit_accel(Method::MinMax, &poses, 9.81)
+            .expect("six faces fit")
+            .loo_rms
+            .is_none());
+        let (rms, kept) =
+            leave_one_out_where_refittable(Method::MinMax, &poses, 9.81).expect("two poses");
+        assert_eq!(kept, vec![0, 6]);
+        assert!(rms.is_finite() && rms > 0.0 && rms < 1e-2, "{rms}");
     }
 
     #[test]
