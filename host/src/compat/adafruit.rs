@@ -204,9 +204,10 @@ impl AdafruitLimitations {
             text.push_str("The Adafruit library can apply every term of this calibration.\n");
         } else if self.unapplied.is_empty() {
             text.push_str(&format!(
-                "The Adafruit library can apply every term of this calibration but the \
-                 magnetometer's turn into the accelerometer frame ({:.2}°): it holds a symmetric \
-                 soft iron, so its headings are off by up to that angle.\n",
+                "The Adafruit library can apply every term of this calibration but the rotation \
+                 in the magnetometer's matrix ({:.2}°): it holds a symmetric soft iron, so its \
+                 headings differ from imucal's by up to that angle (imucal's are in the \
+                 accelerometer's frame when the fit aligned the two).\n",
                 self.mag_rotation_deg
             ));
         } else {
@@ -216,10 +217,13 @@ impl AdafruitLimitations {
             }
         }
         if self.poses == 0 {
-            text.push_str(&format!(
-                "Magnetometer frame turned by {:.2}° (symmetric soft iron).\n",
-                self.mag_rotation_deg
-            ));
+            // Said above already when it is the only term left out.
+            if turned && !self.unapplied.is_empty() {
+                text.push_str(&format!(
+                    "Magnetometer frame turned by {:.2}° (symmetric soft iron).\n",
+                    self.mag_rotation_deg
+                ));
+            }
             return text;
         }
         text.push_str(&format!(
@@ -349,8 +353,16 @@ mod tests {
             poses: 0,
         };
         let text = limits.describe();
-        assert!(text.contains("but the magnetometer's turn"), "{text}");
-        assert!(text.contains("3.10°"), "{text}");
+        assert!(
+            text.contains("but the rotation in the magnetometer's matrix"),
+            "{text}"
+        );
+        // Said once, and not as a turn into the accelerometer's frame the fit may not have made.
+        assert_eq!(text.matches("3.10°").count(), 1, "{text}");
+        assert!(
+            !text.contains("turn into the accelerometer frame"),
+            "{text}"
+        );
         limits.mag_rotation_deg = 0.0;
         assert!(limits
             .describe()
