@@ -299,3 +299,52 @@ fn a_file_without_a_magnetometer_keeps_the_boards_field_and_the_history_records_
     );
     assert!(!recorded.params.not_fitted.contains_key("mag"));
 }
+
+#[test]
+fn a_sensor_the_file_leaves_out_and_the_board_never_calibrated_is_recorded_as_not_calibrated() {
+    // A board fresh from the factory holds the identity set: keeping its magnetometer keeps
+    // no calibration, so the history must not give the fleet its zero offset as a value.
+    let fake = FakeDevice::start(FakeConfig::default());
+    let mut update = CalibrationSet::identity();
+    update.accel.b = [0.5, 0.5, 0.5];
+    update.residuals.accel_rms = 0.01;
+    let mut file = ParamsFile::from(&update);
+    file.not_fitted
+        .insert("mag".into(), "no --field-ut was given".into());
+    let path = temp_file("never-calibrated-mag.json");
+    std::fs::write(&path, file.to_json()).expect("temp dir writable");
+    let db = temp_file("never-calibrated-mag.sqlite");
+    let _ = std::fs::remove_file(&db);
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .arg("flash")
+        .arg(&path)
+        .args(["--port", &fake.path, "--db"])
+        .arg(&db)
+        .output()
+        .expect("the imucal binary runs");
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(fake.state().active.mag, SensorCalibration::identity());
+
+    let records =
+        imucal::history::HistoryStore::open(&imucal::history::DbLocation::Sqlite(db.clone()))
+            .and_then(|mut store| store.records(None))
+            .expect("the history reads back");
+    let _ = std::fs::remove_file(&db);
+    let recorded = &records.last().expect("the flash is recorded").record;
+    assert!(
+        recorded
+            .params
+            .not_fitted
+            .get("mag")
+            .is_some_and(|why| why.contains("held no mag calibration")),
+        "{:?}",
+        recorded.params.not_fitted
+    );
+    let parameters = recorded.parameters();
+    assert!(
+        parameters.keys().all(|name| !name.starts_with("mag.")),
+        "{parameters:?}"
+    );
+    assert!(parameters.contains_key("accel.b.x"));
+}
