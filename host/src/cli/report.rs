@@ -8,7 +8,7 @@ use imucal::fit::Vec3;
 use imucal::geomag::{local_field_today, LocalField, RadiusCheck};
 use imucal::pipeline::{calibrate, check_input, FitOptions};
 use imucal::report::recording::from_calibration;
-use imucal::report::{from_session_dir, write_report, ReportData, REPORT_FILE};
+use imucal::report::{from_session_dir, write_report_file, ReportData, REPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::ReportArgs;
@@ -97,6 +97,21 @@ fn default_out(path: &Path, is_session: bool) -> PathBuf {
     path.with_file_name(format!("{stem}_report"))
 }
 
+/// The report file `-o` names: `out` itself when it names a file (its name ends in `.html` or
+/// `.htm`, or it exists and is no directory, e.g. `/dev/stdout`), else `report.html` in the
+/// directory `out`.
+fn report_file(out: &Path) -> PathBuf {
+    let html_name = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("html") || e.eq_ignore_ascii_case("htm"));
+    let other_than_dir = std::fs::metadata(out).is_ok_and(|m| !m.is_dir());
+    if (html_name && !out.is_dir()) || other_than_dir {
+        out.to_path_buf()
+    } else {
+        out.join(REPORT_FILE)
+    }
+}
+
 /// Why the directory `path` cannot be reported: what it lacks, and for a session `calibrate`
 /// stopped before its fit, how to finish it.
 fn not_a_session(path: &Path) -> anyhow::Error {
@@ -142,12 +157,14 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     if path.is_dir() && !is_session && super::directory_recording(path).is_none() {
         return Err(not_a_session(path));
     }
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| default_out(path, is_session));
+    let out = report_file(
+        &args
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out(path, is_session)),
+    );
     check_outputs(
-        &[Output::FileInNewDir(&out.join(REPORT_FILE))],
+        &[Output::FileInNewDir(&out)],
         &super::input_paths(&args.input),
         args.force,
     )?;
@@ -185,10 +202,10 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         }
     }
     bar.set_message("drawing the plots");
-    let written = write_report(&data, &out)?;
+    write_report_file(&data, &out)?;
     bar.inc(1);
     bar.finish_and_clear();
-    println!("report written to {}", written.display());
+    println!("report written to {}", out.display());
     anyhow::ensure!(
         refused.is_empty(),
         "the report leaves out what was refused: {}",
