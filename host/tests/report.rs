@@ -768,3 +768,34 @@ fn an_output_path_ending_in_html_is_the_report_file_and_any_other_a_directory() 
     );
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_report_it() {
+    // `calibrate --sim-boards N -o b1` writes one session directory per device id in b1.
+    let batch = scratch("batch");
+    let boards = [
+        "0000000000000000000000000000000a",
+        "0000000000000000000000000000000b",
+    ];
+    for board in boards {
+        let session = batch.join(board);
+        std::fs::create_dir_all(&session).unwrap();
+        write_session(&session);
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", batch.join("no-history.sqlite"))
+        .arg("report")
+        .arg(&batch)
+        .output()
+        .expect("run imucal");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("directory of a batch"), "{stderr}");
+    assert!(!stderr.contains("  "), "one sentence: {stderr}");
+    for board in boards {
+        let command = format!("`imucal report {}`", batch.join(board).display());
+        assert!(stderr.contains(&command), "{command}: {stderr}");
+    }
+    assert!(!batch.join("report.html").exists(), "nothing was written");
+    let _ = std::fs::remove_dir_all(batch);
+}
