@@ -163,6 +163,14 @@ fn a_file_that_names_no_board_is_written_with_a_note() {
     let stderr = text(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("names no board"), "{stderr}");
+    assert!(
+        stderr.contains("fits the board's sensors and ranges"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("recording"),
+        "the file does not say where it came from: {stderr}"
+    );
     assert_eq!(fake.state().active, calibrated_set());
 }
 
@@ -298,4 +306,85 @@ fn a_file_without_a_magnetometer_keeps_the_boards_field_and_the_history_records_
         "the history holds the set whose CRC it records"
     );
     assert!(!recorded.params.not_fitted.contains_key("mag"));
+}
+
+#[test]
+fn a_sensor_the_file_leaves_out_and_the_board_never_calibrated_is_recorded_as_not_calibrated() {
+    // A board fresh from the factory holds the identity set: keeping its magnetometer keeps
+    // no calibration, so the history must not give the fleet its zero offset as a value.
+    let fake = FakeDevice::start(FakeConfig::default());
+    let mut update = CalibrationSet::identity();
+    update.accel.b = [0.5, 0.5, 0.5];
+    update.residuals.accel_rms = 0.01;
+    let mut file = ParamsFile::from(&update);
+    file.not_fitted
+        .insert("mag".into(), "no --field-ut was given".into());
+    let path = temp_file("never-calibrated-mag.json");
+    std::fs::write(&path, file.to_json()).expect("temp dir writable");
+    let db = temp_file("never-calibrated-mag.sqlite");
+    let _ = std::fs::remove_file(&db);
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .arg("flash")
+        .arg(&path)
+        .args(["--port", &fake.path, "--db"])
+        .arg(&db)
+        .output()
+        .expect("the imucal binary runs");
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(fake.state().active.mag, SensorCalibration::identity());
+
+    let records =
+        imucal::history::HistoryStore::open(&imucal::history::DbLocation::Sqlite(db.clone()))
+            .and_then(|mut store| store.records(None))
+            .expect("the history reads back");
+    let _ = std::fs::remove_file(&db);
+    let recorded = &records.last().expect("the flash is recorded").record;
+    assert!(
+        recorded
+            .params
+            .not_fitted
+            .get("mag")
+            .is_some_and(|why| why.contains("held no mag calibration")),
+        "{:?}",
+        recorded.params.not_fitted
+    );
+    let parameters = recorded.parameters();
+    assert!(
+        parameters.keys().all(|name| !name.starts_with("mag.")),
+        "{parameters:?}"
+    );
+    assert!(parameters.contains_key("accel.b.x"));
+}
+
+#[test]
+fn a_file_without_its_device_block_is_still_checked_against_the_boards_ranges() {
+    // A BMM150's hard iron of 380 µT, measured under its ±1300 µT range, with the file's
+    // `device` block removed: within the ±400 µT of this board's magnetometer, so the set is
+    // one the board accepts, but with the 48 µT field on top no reading of this part could
+    // have shown it.
+    let fake = FakeDevice::start(FakeConfig::default());
+    let mut set = calibrated_set();
+    set.mag.b = [380.0, -20.0, 35.0];
+    set.reference.field_ut = 48.0;
+    let path = temp_file("no-device-block.json");
+    std::fs::write(&path, ParamsFile::from(&set).to_json()).expect("temp dir writable");
+    let out = flash(&path, &fake.path, &[]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("is not for this board"), "{stderr}");
+    assert!(
+        stderr.contains("magnetometer offset") && stderr.contains("±400 µT range"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("recording"),
+        "where the file came from is not known: {stderr}"
+    );
+    assert_eq!(fake.state().commits, 0, "nothing written");
+
+    let out = flash(&path, &fake.path, &["--force-other-device"]);
+    let _ = std::fs::remove_file(&path);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(fake.state().active.mag.b, set.mag.b);
 }

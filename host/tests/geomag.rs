@@ -125,7 +125,44 @@ fn calibrate_location_writes_the_modelled_field_as_the_reference() {
         "wrote {written} µT, model {field} µT"
     );
     assert_eq!(json["verified"], true);
+    assert_eq!(json["field_source"], "given");
     // The fit's description names the field as the reference it was given, not as the user's.
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("µT (reference)"), "{stderr}");
+}
+
+/// Without `--field-ut` or `--location` a simulated session stands the simulated site's field in
+/// for the one a user would look up; its summary says so rather than that a field was given.
+#[test]
+fn a_simulated_session_without_a_given_field_records_the_simulated_site_as_its_source() {
+    let dir = std::env::temp_dir().join(format!("imucal-sim-site-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args([
+            "calibrate",
+            "--sim",
+            "--yes",
+            "--json",
+            "--speed",
+            "60",
+            "--no-history",
+            "-o",
+        ])
+        .arg(&dir)
+        .output()
+        .expect("run imucal");
+    let saved = std::fs::read_to_string(dir.join("summary.json"));
+    let _ = std::fs::remove_dir_all(&dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "calibrate failed: {stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("summary JSON");
+    assert_eq!(
+        json["field_source"], "simulated_site",
+        "{}",
+        json["field_source"]
+    );
+    let saved: serde_json::Value =
+        serde_json::from_str(&saved.expect("summary.json")).expect("summary.json is JSON");
+    assert_eq!(saved["field_source"], "simulated_site");
+    assert!(stderr.contains("µT (the simulated site's)"), "{stderr}");
 }

@@ -569,3 +569,33 @@ fn a_recording_fitted_without_a_board_is_tested_against_the_fleet_but_not_counte
         "{result:?}"
     );
 }
+
+#[test]
+fn residuals_too_few_boards_have_are_named_in_full_with_the_boards_their_own_spread_needs() {
+    // Nine boards: enough for the offsets with their axes pooled (7), too few for a residual,
+    // which has no axes to pool and needs its own spread of 20.
+    let location = &databases("untested_residuals")[0];
+    let mut store = HistoryStore::open(location).expect("store");
+    for b in 0..9 {
+        store.record(&board_record(5000 + b)).expect("recorded");
+    }
+    let report = fleet_report(&mut store, &FleetOptions::default()).expect("a report");
+    let residual = report
+        .untested
+        .iter()
+        .find(|u| u.parameter == "accel.residual")
+        .expect("the residual is untested");
+    assert_eq!((residual.boards, residual.needed), (9, 20));
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["fleet", "--db", &url(location)])
+        .output()
+        .expect("imucal runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("accel.residual (on 9 of the 20 boards needed)")
+            && stdout.contains("mag.residual (on 9 of the 20 boards needed)"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("accel (on"), "{stdout}");
+}

@@ -731,3 +731,71 @@ fn poses_of_a_raw_count_recording_are_named_by_the_side_that_is_up_not_by_the_of
     );
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn an_output_path_ending_in_html_is_the_report_file_and_any_other_a_directory() {
+    let dir = scratch("out-file");
+    let session = dir.join("session");
+    std::fs::create_dir_all(&session).unwrap();
+    write_session(&session);
+    let report = |out: &std::path::Path| {
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .env("IMUCAL_DB", dir.join("no-history.sqlite"))
+            .arg("report")
+            .arg(&session)
+            .arg("-o")
+            .arg(out)
+            .output()
+            .expect("run imucal");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let file = dir.join("rep.html");
+    let stdout = report(&file);
+    assert!(file.is_file(), "`-o rep.html` is the report itself");
+    assert!(stdout.contains(&file.display().to_string()), "{stdout}");
+    assert!(std::fs::read_to_string(&file).unwrap().contains("<svg"));
+
+    let reports = dir.join("reports");
+    report(&reports);
+    assert!(
+        reports.join("report.html").is_file(),
+        "a directory stays one"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_report_it() {
+    // `calibrate --sim-boards N -o b1` writes one session directory per device id in b1.
+    let batch = scratch("batch");
+    let boards = [
+        "0000000000000000000000000000000a",
+        "0000000000000000000000000000000b",
+    ];
+    for board in boards {
+        let session = batch.join(board);
+        std::fs::create_dir_all(&session).unwrap();
+        write_session(&session);
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", batch.join("no-history.sqlite"))
+        .arg("report")
+        .arg(&batch)
+        .output()
+        .expect("run imucal");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("directory of a batch"), "{stderr}");
+    assert!(!stderr.contains("  "), "one sentence: {stderr}");
+    for board in boards {
+        let command = format!("`imucal report {}`", batch.join(board).display());
+        assert!(stderr.contains(&command), "{command}: {stderr}");
+    }
+    assert!(!batch.join("report.html").exists(), "nothing was written");
+    let _ = std::fs::remove_dir_all(batch);
+}

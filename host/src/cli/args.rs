@@ -413,7 +413,7 @@ pub struct FitArgs {
 pub const REPORT_EXAMPLES: &str = "Examples:\n  \
     imucal report session-2025-11-21/                      (a directory written by `imucal calibrate -o`)\n  \
     imucal report data/real/sf_mpu6050_hmc5883l_full_sphere.csv --accel-unit g --gyro-unit dps --mag-unit gauss --location 48.14,11.58 -o report/\n  \
-    imucal report motioncal_log.txt --format motioncal --rate 100 -o report/";
+    imucal report motioncal_log.txt --format motioncal --rate 100 -o sketch.html     (the report file itself)";
 
 /// Arguments of `imucal report`.
 #[derive(Debug, Args)]
@@ -424,11 +424,13 @@ pub struct ReportArgs {
     /// Reference values.
     #[command(flatten)]
     pub reference: ReferenceArgs,
-    /// Directory for `report.html` (default: the session directory, or `<recording>_report`;
-    /// `recording_report` for a recording read from standard input).
-    #[arg(long, short = 'o')]
+    /// Where to write the report: a path ending in `.html` (or an existing file) is the report
+    /// file itself; any other path is a directory that gets `report.html`, created if missing
+    /// (default: the session directory, or `<recording>_report`; `recording_report` for a
+    /// recording read from standard input).
+    #[arg(long, short = 'o', value_name = "FILE.html|DIR")]
     pub out: Option<PathBuf>,
-    /// Replace a `report.html` already in the output directory.
+    /// Replace a report file already there.
     #[arg(long)]
     pub force: bool,
     /// History database whose records of the session's board are plotted over time

@@ -21,8 +21,8 @@ use imucal::device::{DeviceClient, ParamsFile, UnitSample};
 use imucal::pipeline::References;
 use imucal::session::{
     load_mag_samples, load_moves, load_poses, load_progress, run_session_with, save_session,
-    summary, CapturedPose, MagSample, SessionControl, SessionEvent, SessionOptions, Tapped,
-    MOVES_FILE,
+    summary, CapturedPose, FieldSource, MagSample, SessionControl, SessionEvent, SessionOptions,
+    Tapped, MOVES_FILE,
 };
 use imucal_protocol::Welcome;
 
@@ -261,6 +261,20 @@ pub(super) fn field_reference(args: &CalibrateArgs) -> anyhow::Result<Option<f64
     Ok(args.field_ut.or(modelled.as_ref().map(|m| m.total_ut)))
 }
 
+/// The session's reference field and where it came from: the one given (`--field-ut`, or the
+/// model at `--location`), else a simulated board's site field, else none (the fit keeps the
+/// sensor's mean radius).
+pub(super) fn session_field(
+    given: Option<f64>,
+    simulated_site: Option<f64>,
+) -> (Option<f64>, FieldSource) {
+    match (given, simulated_site) {
+        (Some(field), _) => (Some(field), FieldSource::Given),
+        (None, Some(site)) => (Some(site), FieldSource::SimulatedSite),
+        (None, None) => (None, FieldSource::Given),
+    }
+}
+
 /// `--gravity` and `--field-ut` checked as `fit`, `analyze` and `report` check them (gravity on
 /// the Earth's surface, fields a magnetometer can measure).
 fn checked_references(args: &CalibrateArgs) -> anyhow::Result<References> {
@@ -271,12 +285,13 @@ fn checked_references(args: &CalibrateArgs) -> anyhow::Result<References> {
 /// The session's options from the command line.
 pub(super) fn session_options(
     args: &CalibrateArgs,
-    field_ut: Option<f64>,
+    (field_ut, field_source): (Option<f64>, FieldSource),
 ) -> anyhow::Result<SessionOptions> {
     checked_references(args)?;
     Ok(SessionOptions {
         gravity_mps2: args.gravity,
         field_ut,
+        field_source,
         hold: duration_arg("--hold", args.hold)?,
         pose_timeout: duration_arg("--pose-timeout", args.pose_timeout)?,
         mag_timeout: duration_arg("--mag-timeout", args.mag_timeout)?,
@@ -354,23 +369,22 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         Some(sim) => sim.port(),
         None => given_or_only_board(args.port.first().map(String::as_str))?,
     };
-    let field_ut = given_field.or(simulated.as_ref().map(Simulated::field_ut));
+    let field = session_field(given_field, simulated.as_ref().map(Simulated::field_ut));
     if simulated.is_some() {
-        let field_given = args.field_ut.is_some() || args.location.is_some();
         say!(
             "Simulated board (seed {}, {}× real time) on {port}; field {:.2} µT{}",
             args.sim_seed,
             args.speed,
-            field_ut.unwrap_or_default(),
-            if field_given {
-                " (given)"
-            } else {
+            field.0.unwrap_or_default(),
+            if field.1 == FieldSource::SimulatedSite {
                 " (the simulated site's, as if looked up for the location)"
+            } else {
+                " (given)"
             }
         );
     }
 
-    let options = session_options(args, field_ut)?;
+    let options = session_options(args, field)?;
     let mut client = DeviceClient::open(&port)?;
     let welcome = *client.welcome();
     say!(

@@ -15,7 +15,7 @@ use imucal::session::SessionEvent;
 use serde::Serialize;
 
 use super::args::CalibrateArgs;
-use super::calibrate::{field_reference, interrupt_flag, session_options, unix_now};
+use super::calibrate::{field_reference, interrupt_flag, session_field, session_options, unix_now};
 use super::calibrate_sim::Simulated;
 use super::write_policy::{check_outputs, Output};
 
@@ -58,7 +58,7 @@ struct BatchJson<'a> {
 /// Run a batch.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     // Checked before a simulator starts or a board is opened.
-    session_options(args, None)?;
+    session_options(args, session_field(None, None))?;
     anyhow::ensure!(
         !args.analyze,
         "--analyze works on one board; calibrate the batch first, then run \
@@ -100,9 +100,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         args.port.clone()
     };
-    let field_ut = field_reference(args)?.or(simulated.first().map(Simulated::field_ut));
+    let field = session_field(
+        field_reference(args)?,
+        simulated.first().map(Simulated::field_ut),
+    );
     let options = BatchOptions {
-        session: session_options(args, field_ut)?,
+        session: session_options(args, field)?,
         accept_outlier: args.accept_outlier,
         accept_poor: args.accept_poor,
         gate: GateOptions {

@@ -16,7 +16,9 @@ use imucal::session::motioncal::{
 
 use super::args::CalibrateArgs;
 use super::board::given_or_only_board;
-use super::calibrate::{checked_session_dir, field_reference, interrupt_flag, session_options};
+use super::calibrate::{
+    checked_session_dir, field_reference, interrupt_flag, session_field, session_options,
+};
 use super::calibrate_view::Terminal;
 use super::write_policy::{not_asked, WriteDecision, WritePolicy};
 
@@ -38,7 +40,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let dir = checked_session_dir(args)?;
     let given_field = field_reference(args)?;
     // Checked before a simulated board starts.
-    session_options(args, given_field)?;
+    session_options(args, session_field(given_field, None))?;
     let simulated = if args.sim {
         Some(SimulatedSketch::start(args)?)
     } else {
@@ -50,13 +52,16 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     };
     // As with imucal's firmware: without a given field the simulated site's stands for the one
     // a user would look up for the location.
-    let field_ut = given_field.or(simulated.as_ref().map(SimulatedSketch::site_field_ut));
+    let field = session_field(
+        given_field,
+        simulated.as_ref().map(SimulatedSketch::site_field_ut),
+    );
     if simulated.is_some() {
         say!(
             "Simulated MotionCal sketch board (seed {}, {}× real time) on {port}; field {:.2} µT{}",
             args.sim_seed,
             args.speed,
-            field_ut.unwrap_or_default(),
+            field.0.unwrap_or_default(),
             if given_field.is_some() {
                 " (given)"
             } else {
@@ -65,7 +70,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     let options = MotionCalOptions {
-        session: session_options(args, field_ut)?,
+        session: session_options(args, field)?,
         sample_rate_hz: args.sketch_rate_hz(),
         accept_poor: args.accept_poor,
         echo_timeout: ECHO_TIMEOUT,

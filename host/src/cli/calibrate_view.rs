@@ -245,6 +245,7 @@ pub(super) fn describe_fit(fit: &SessionFit) -> Vec<String> {
     let mag_b = [0, 1, 2].map(|i| fit.mag.cal.b[i]);
     let source = match fit.field_source {
         imucal::session::FieldSource::Given => "reference",
+        imucal::session::FieldSource::SimulatedSite => "the simulated site's",
         imucal::session::FieldSource::MeanRadius => "the sensor's mean radius",
     };
     let mut lines = vec![

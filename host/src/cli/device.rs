@@ -268,13 +268,20 @@ fn check_binding(
             }
             device.mismatches(welcome)
         }
-        None => Vec::new(),
+        // No ranges to compare: the set itself must still be one this board's parts can have.
+        None => file.beyond_the_board(welcome),
     };
     match file.device_id() {
-        None => say!(
-            "imucal: note: `{shown}` names no board (it was fitted from a recording without \
-             --device); writing it to device {board}"
+        // Where the file came from is not known (a `device` block may have been removed), so
+        // only its provenance, when it has one, is quoted.
+        None if mismatches.is_empty() => say!(
+            "imucal: note: `{shown}` names no board (no `device` block, no device id{}); its \
+             set fits the board's sensors and ranges, writing it to device {board}",
+            file.provenance
+                .as_ref()
+                .map_or(String::new(), |p| format!("; fitted from {}", p.source))
         ),
+        None => {}
         Some(id) if file.device.is_none() && id != board => mismatches.push(format!(
             "it was fitted for device {id}, but the board is device {board}"
         )),

@@ -83,14 +83,18 @@ pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
         );
     }
     if !report.untested.is_empty() {
-        // One line per sensor and kind: `mag.b on 6 boards`.
+        // One entry per sensor and kind of axis parameters (`mag.b` for `mag.b.x`, `.y`, `.z`);
+        // a parameter without axes (`accel.residual`) under its own name.
         let mut groups: Vec<(String, usize, usize)> = Vec::new();
         for u in &report.untested {
-            let group: String = u
-                .parameter
-                .rsplit_once('.')
-                .map_or(u.parameter.clone(), |(g, _)| g.into());
-            match groups.iter_mut().find(|(g, _, _)| *g == group) {
+            let group = match u.parameter.rsplit_once('.') {
+                Some((group, _)) if group.contains('.') => group.to_string(),
+                _ => u.parameter.clone(),
+            };
+            match groups
+                .iter_mut()
+                .find(|(g, _, needed)| *g == group && *needed == u.needed)
+            {
                 Some(entry) => entry.1 = entry.1.max(u.boards),
                 None => groups.push((group, u.boards, u.needed)),
             }

@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 use anyhow::bail;
 use imucal::fit::Vec3;
 use imucal::geomag::{local_field_today, LocalField, RadiusCheck};
+use imucal::history::fleet::count_boards;
 use imucal::pipeline::{calibrate, check_input, FitOptions};
 use imucal::report::recording::from_calibration;
-use imucal::report::{from_session_dir, write_report, ReportData, REPORT_FILE};
+use imucal::report::{from_session_dir, write_report_file, ReportData, REPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::ReportArgs;
@@ -97,9 +98,60 @@ fn default_out(path: &Path, is_session: bool) -> PathBuf {
     path.with_file_name(format!("{stem}_report"))
 }
 
-/// Why the directory `path` cannot be reported: what it lacks, and for a session `calibrate`
-/// stopped before its fit, how to finish it.
+/// The report file `-o` names: `out` itself when it names a file (its name ends in `.html` or
+/// `.htm`, or it exists and is no directory, e.g. `/dev/stdout`), else `report.html` in the
+/// directory `out`.
+fn report_file(out: &Path) -> PathBuf {
+    let html_name = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("html") || e.eq_ignore_ascii_case("htm"));
+    let other_than_dir = std::fs::metadata(out).is_ok_and(|m| !m.is_dir());
+    if (html_name && !out.is_dir()) || other_than_dir {
+        out.to_path_buf()
+    } else {
+        out.join(REPORT_FILE)
+    }
+}
+
+/// Whether `dir` holds what a session's report is made from.
+fn is_session_dir(dir: &Path) -> bool {
+    dir.is_dir() && dir.join("params.json").is_file() && dir.join("poses.json").is_file()
+}
+
+/// The session directories directly inside `dir`, by name: the boards of a batch
+/// (`calibrate --sim-boards N` or several ports writes one per device id).
+fn batch_sessions(dir: &Path) -> Vec<PathBuf> {
+    let mut sessions: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| is_session_dir(p))
+                .collect()
+        })
+        .unwrap_or_default();
+    sessions.sort();
+    sessions
+}
+
+/// Why the directory `path` cannot be reported: what it lacks, for a batch which of its boards'
+/// sessions to report instead, and for a session `calibrate` stopped before its fit, how to
+/// finish it.
 fn not_a_session(path: &Path) -> anyhow::Error {
+    let sessions = batch_sessions(path);
+    if !sessions.is_empty() {
+        // One report is of one board, as `calibrate --resume` resumes one board of a batch.
+        let commands: Vec<String> = sessions
+            .iter()
+            .map(|s| format!("`imucal report {}`", s.display()))
+            .collect();
+        return anyhow::anyhow!(
+            "`{}` is the directory of a batch of `imucal calibrate`, with the sessions of {}; a \
+             report is of one board's session, so report each: {}",
+            path.display(),
+            count_boards(sessions.len()),
+            commands.join(", ")
+        );
+    }
     let missing: Vec<&str> = ["params.json", "poses.json"]
         .into_iter()
         .filter(|name| !path.join(name).is_file())
@@ -137,17 +189,18 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let path = &args.input.recording;
     // A session directory with its parameters and poses is reported from them; one with only
     // its recording (as `fit` and `analyze` read it), from the recording.
-    let is_session =
-        path.is_dir() && path.join("params.json").is_file() && path.join("poses.json").is_file();
+    let is_session = is_session_dir(path);
     if path.is_dir() && !is_session && super::directory_recording(path).is_none() {
         return Err(not_a_session(path));
     }
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| default_out(path, is_session));
+    let out = report_file(
+        &args
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out(path, is_session)),
+    );
     check_outputs(
-        &[Output::FileInNewDir(&out.join(REPORT_FILE))],
+        &[Output::FileInNewDir(&out)],
         &super::input_paths(&args.input),
         args.force,
     )?;
@@ -185,10 +238,10 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         }
     }
     bar.set_message("drawing the plots");
-    let written = write_report(&data, &out)?;
+    write_report_file(&data, &out)?;
     bar.inc(1);
     bar.finish_and_clear();
-    println!("report written to {}", written.display());
+    println!("report written to {}", out.display());
     anyhow::ensure!(
         refused.is_empty(),
         "the report leaves out what was refused: {}",

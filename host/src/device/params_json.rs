@@ -637,13 +637,19 @@ impl ParamsFile {
     /// The file as `flash` wrote it to a board (`written`, the set it committed): each sensor
     /// the file left out takes what was written for it, with its residual and reference
     /// magnitude (gravity for the accelerometer, the field for the magnetometer). Those in
-    /// `kept` kept the board's own calibration and are no longer listed as not fitted; the
-    /// others were set to identity and stay listed. What a history records of a flash, so that
-    /// its parameters are the ones the board's CRC is of.
+    /// `kept` kept the board's own calibration and are no longer listed as not fitted, unless
+    /// the board held none (its identity); the others were set to identity and stay listed.
+    /// What a history records of a flash, so that its parameters are the ones the board's CRC
+    /// is of, and a sensor the board holds no calibration of is no measurement of it.
     pub fn as_written(&self, written: &CalibrationSet, kept: &[&str]) -> Self {
         let mut out = self.clone();
         let whole = Self::from(written);
         for (sensor, why) in self.left_out() {
+            let on_board = match sensor {
+                "accel" => &written.accel,
+                "gyro" => &written.gyro,
+                _ => &written.mag,
+            };
             match sensor {
                 "accel" => {
                     out.accel = whole.accel.clone();
@@ -662,13 +668,19 @@ impl ParamsFile {
                 }
             }
             out.absent_sensors.retain(|a| a != sensor);
-            if kept.contains(&sensor) {
-                out.not_fitted.remove(sensor);
-            } else {
+            if !kept.contains(&sensor) {
                 out.not_fitted.insert(
                     sensor.to_string(),
                     format!("set to identity by flash --reset ({why})"),
                 );
+            } else if *on_board == SensorCalibration::identity() {
+                // The board's identity is its "uncalibrated": keeping it calibrates nothing.
+                out.not_fitted.insert(
+                    sensor.to_string(),
+                    format!("the board held no {sensor} calibration to keep ({why})"),
+                );
+            } else {
+                out.not_fitted.remove(sensor);
             }
         }
         out

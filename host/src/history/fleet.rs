@@ -284,7 +284,8 @@ pub struct Untested {
     pub parameter: String,
     /// Boards that have it.
     pub boards: usize,
-    /// Boards it needs (with its sensor's other axes pooled).
+    /// Boards it needs: with its sensor's other axes pooled, or for a parameter without axes
+    /// (a residual) [`FleetOptions::min_spread_values`], one value per board.
     pub needed: usize,
 }
 
@@ -326,10 +327,16 @@ impl FleetModel {
             } else if own >= min_pooled_boards && family.len() >= options.min_spread_values {
                 (family, family.len())
             } else {
+                // A parameter without axes (a residual) has no pool: it needs its own spread.
+                let poolable = axis_family(&column.name) != column.name;
                 untested.push(Untested {
                     parameter: column.name,
                     boards: own,
-                    needed: min_pooled_boards,
+                    needed: if poolable {
+                        min_pooled_boards
+                    } else {
+                        options.min_spread_values
+                    },
                 });
                 continue;
             };

@@ -228,15 +228,22 @@ pub const REPORT_FILE: &str = "report.html";
 
 /// Writes [`REPORT_FILE`] into `dir` (created if missing) and returns its path.
 pub fn write_report(data: &ReportData, dir: &Path) -> Result<PathBuf, ReportError> {
-    let html = render_html(data)?;
-    std::fs::create_dir_all(dir).map_err(|cause| ReportError::Write {
-        path: dir.display().to_string(),
-        cause,
-    })?;
     let path = dir.join(REPORT_FILE);
-    std::fs::write(&path, html).map_err(|cause| ReportError::Write {
+    write_report_file(data, &path)?;
+    Ok(path)
+}
+
+/// Writes the report to the file `path`, creating its directory if missing.
+pub fn write_report_file(data: &ReportData, path: &Path) -> Result<(), ReportError> {
+    let html = render_html(data)?;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|cause| ReportError::Write {
+            path: dir.display().to_string(),
+            cause,
+        })?;
+    }
+    std::fs::write(path, html).map_err(|cause| ReportError::Write {
         path: path.display().to_string(),
         cause,
-    })?;
-    Ok(path)
+    })
 }

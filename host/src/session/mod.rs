@@ -276,6 +276,7 @@ fn run_phases<L: Read + Write>(
         options.budgets,
         unix_now(),
     )?;
+    fit.name_field_source(options.field_source);
     let no_samples = || SessionError::NoSamples {
         port: runner.client.port_name().to_string(),
         waited_s: options.read_timeout.as_secs_f64(),

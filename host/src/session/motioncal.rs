@@ -456,6 +456,7 @@ pub fn run_motioncal_session<L: Read + Write>(
         session.budgets,
         unix_now(),
     )?;
+    fit.name_field_source(session.field_source);
     let conversion = AdafruitCalibration::from_set(&fit.set)?;
     let pose_means: Vec<UnitSample> = collector
         .poses

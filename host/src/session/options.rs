@@ -6,7 +6,7 @@ use imucal_protocol::StillThresholds;
 
 use super::error::SessionError;
 use super::gyro_fit::GyroBudgets;
-use super::solve::{self, Budgets};
+use super::solve::{self, Budgets, FieldSource};
 
 /// Settings of a guided session. Durations marked "board time" are measured on the board's
 /// clock; the others are wall-clock limits of the host.
@@ -16,6 +16,8 @@ pub struct SessionOptions {
     pub gravity_mps2: f64,
     /// Local field magnitude, µT; `None` keeps the sensor's mean radius (see [`FieldSource`]).
     pub field_ut: Option<f64>,
+    /// Where `field_ut` came from, as the session records it (unused without one).
+    pub field_source: FieldSource,
     /// What counts as still, for the prompt and for the board's pose capture.
     pub thresholds: StillThresholds,
     /// Longest still time averaged per pose (board time); each hold ends sooner once its mean
@@ -84,6 +86,7 @@ impl Default for SessionOptions {
         Self {
             gravity_mps2: solve::STANDARD_GRAVITY,
             field_ut: None,
+            field_source: FieldSource::Given,
             thresholds: StillThresholds {
                 accel_std_mps2: 0.1,
                 gyro_std_rads: 0.02,

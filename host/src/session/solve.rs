@@ -25,7 +25,7 @@ use imucal_protocol::{
     PARAMS_FORMAT_VERSION,
 };
 use nalgebra::{DMatrix, DVector};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::coverage::region_directions;
 use super::mag_alignment::{align_session_mag, SessionAlignment};
@@ -52,13 +52,18 @@ pub struct CapturedPose {
     pub t_s: f64,
 }
 
-/// Where the magnetometer's reference magnitude came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+/// Where the magnetometer's reference magnitude came from (`field_source` in `summary.json`;
+/// readers of older summaries meet `given` for a simulated site's field too).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FieldSource {
-    /// A reference magnitude was given to the session (`--field-ut`, the field model of
-    /// `--location`, or the simulated site's field).
+    /// A reference magnitude was given to the session: `--field-ut`, or the field model at
+    /// `--location`.
+    #[default]
     Given,
+    /// A simulated board's site field, standing in for the one a user would look up for the
+    /// location (`calibrate --sim` without `--field-ut` or `--location`).
+    SimulatedSite,
     /// The geometric mean radius of the raw readings: keeps the sensor's mean sensitivity, since
     /// without a reference the field's magnitude is not observable.
     MeanRadius,
@@ -155,6 +160,17 @@ pub struct SessionFit {
     pub verdict: Verdict,
     /// The budgets the verdict and the check at rest are held to.
     pub budgets: Budgets,
+}
+
+impl SessionFit {
+    /// Names who gave the field the fit was given (`source`, from the session's options): the
+    /// fit itself knows only that one was given. A fit that kept the sensor's mean radius
+    /// keeps saying so.
+    pub fn name_field_source(&mut self, source: FieldSource) {
+        if self.field_source == FieldSource::Given {
+            self.field_source = source;
+        }
+    }
 }
 
 /// A pose of one sensor from the board's statistics.
