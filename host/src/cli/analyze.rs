@@ -122,7 +122,7 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
         recording: super::recording_file(&args.input.recording)?,
         ..args.input.clone()
     };
-    let recording = super::load(&input, args.reference.gyro_scale)?;
+    let recording = super::load(&input, args.reference.gyro_scale, None)?;
     let sensors = recording.sensors();
     // The pipeline `imucal fit` runs, with the same options: the base fits printed here are
     // its result, and the analysis builds on them.

@@ -84,7 +84,7 @@ fn checked_still(
 
 /// Run the command.
 pub fn run(args: &StillArgs) -> anyhow::Result<()> {
-    let recording = super::load(&args.input, None)?;
+    let recording = super::load(&args.input, None, None)?;
     let options = InputOptions {
         still: super::still_options(&args.input),
         ..InputOptions::default()
