@@ -164,6 +164,26 @@ fn a_pose_column_gives_one_hold_per_label_without_detection() {
 }
 
 #[test]
+fn a_pose_column_without_time_or_rate_asks_for_the_rate_as_detection_does() {
+    let (mut rec, truth) = six_face_recording(5, 3.0);
+    let per_row = rec
+        .time
+        .iter()
+        .map(|t| truth.iter().position(|(a, b, _)| t >= a && t < b))
+        .collect();
+    rec.labels = Some(Labels {
+        kind: LabelKind::Pose,
+        names: (0..6).map(|i| i.to_string()).collect(),
+        per_row,
+    });
+    rec.time = (0..rec.len()).map(|i| i as f64).collect();
+    rec.time_is_index = true;
+    let error = find_still(&rec, &StillOptions::default()).expect_err("row numbers are no seconds");
+    assert!(matches!(error, StillError::NoRate(_)));
+    assert!(error.to_string().contains("--rate"), "{error}");
+}
+
+#[test]
 fn detection_without_a_rate_asks_for_one() {
     let (mut rec, _) = six_face_recording(1, 3.0);
     rec.time_is_index = true;

@@ -102,10 +102,8 @@ pub(super) fn detect(
         options.merge_gap_s >= 0.0,
         ">= 0 s",
     )?;
+    // (Row numbers for times are refused by `find_still`, for a pose column alike.)
     let source = recording.source.display().to_string();
-    if recording.time_is_index {
-        return Err(StillError::NoRate(source));
-    }
     // Stillness is judged on the row-synchronous inertial sensors; a magnetometer on the same
     // rows is used only when there is nothing else.
     let mut streams: Vec<(Sensor, &[Vec3])> = [Sensor::Accel, Sensor::Gyro]
