@@ -265,6 +265,16 @@ pub enum LabelKind {
     Segment,
 }
 
+impl LabelKind {
+    /// The name of the column that carries labels of this kind (`pose` or `segment`).
+    pub fn column(self) -> &'static str {
+        match self {
+            LabelKind::Pose => "pose",
+            LabelKind::Segment => "segment",
+        }
+    }
+}
+
 /// A label column (`pose` or `segment`). Empty fields and `-` mean "no label".
 #[derive(Debug, Clone, PartialEq)]
 pub struct Labels {

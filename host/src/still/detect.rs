@@ -293,7 +293,7 @@ pub(super) fn detect(
         .into_iter()
         .filter(|&(a, b)| recording.time[b - 1] - recording.time[a] >= options.min_hold_s)
         .map(|(a, b)| {
-            let label = labels.and_then(|l| majority_label(&l.per_row[a..b]).map(|i| l.value(i)));
+            let label = labels.and_then(|l| majority_label(&l.per_row[a..b]));
             let rows: Vec<usize> = (a..b).collect();
             interval(recording, &rows, a, b, label)
         })

@@ -16,6 +16,22 @@ pub struct TempStats {
     pub max: f64,
 }
 
+/// The label a hold carries, as the recording's label column writes it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HoldLabel {
+    /// Which column it comes from (`pose` or `segment`).
+    pub kind: LabelKind,
+    /// The label's text, e.g. `P12` or `z_p`.
+    pub text: String,
+}
+
+/// As a message names the hold's label: the column, then the text (`pose P12`, `segment z_p`).
+impl std::fmt::Display for HoldLabel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} {}", self.kind.column(), self.text)
+    }
+}
+
 /// One static hold.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StillInterval {
@@ -27,8 +43,12 @@ pub struct StillInterval {
     pub t_start: f64,
     /// Time of the last row, s.
     pub t_end: f64,
-    /// Label from a `pose` or `segment` column, if any.
+    /// Label from a `pose` or `segment` column, if any, as a number: the label itself when it
+    /// is an integer, else its index in order of first appearance (see
+    /// [`crate::recording::Labels::value`]); [`StillInterval::label_name`] is its text.
     pub label: Option<i64>,
+    /// The label's text and column, as tables and messages show it.
+    pub label_name: Option<HoldLabel>,
     /// Accelerometer statistics, if the recording has one.
     pub accel: Option<Pose>,
     /// Gyroscope statistics, if the recording has one.
@@ -85,7 +105,7 @@ impl StillInterval {
         if self.dropped.is_empty() {
             return None;
         }
-        let name = self.label.map_or(String::new(), |l| format!(" (pose {l})"));
+        let name = self.label_phrase();
         let what: Vec<String> = self.dropped.iter().map(DroppedSamples::phrase).collect();
         // The screen's bound is set so that a pose's own noise crosses it with small
         // probability over all its samples; a spike or a knock is a few samples. When most
@@ -104,6 +124,14 @@ impl StillInterval {
             self.t_end,
             what.join(", ")
         ))
+    }
+
+    /// The hold's label in parentheses after a space, as messages name the hold (` (pose P12)`),
+    /// or nothing for a hold without one.
+    pub fn label_phrase(&self) -> String {
+        self.label_name
+            .as_ref()
+            .map_or(String::new(), |l| format!(" ({l})"))
     }
 
     /// Duration in seconds.

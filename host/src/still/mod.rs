@@ -41,7 +41,7 @@ use crate::recording::{LabelKind, Recording};
 use detect::detect;
 pub use detect::{BREAK_S, MAX_STILL_GYRO_STD_DPS};
 use holds::from_pose_column;
-pub use intervals::{NoiseFloor, StillInterval, StillReport, TempStats};
+pub use intervals::{HoldLabel, NoiseFloor, StillInterval, StillReport, TempStats};
 pub use options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
 pub use samples::{hold_samples, DroppedSamples, HoldSamples};
 
