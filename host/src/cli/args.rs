@@ -133,7 +133,10 @@ pub enum FormatArg {
     Csv,
     /// IMU-TK text (`timestamp x y z` per line; the recording is the accelerometer file).
     Imutk,
-    /// MotionCal serial log (`Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines; detected by `auto` too).
+    /// MotionCal serial log (`Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines; detected by `auto` too),
+    /// its counts scaled as Adafruit's calibration sketch writes them and as a live sketch
+    /// board is read: accelerometer 8192 per 9.8 m/s², gyroscope 16 per °/s, magnetometer 10
+    /// per µT.
     Motioncal,
 }
 
