@@ -172,7 +172,7 @@ pub struct InputArgs {
     #[arg(long, value_enum)]
     pub mag_unit: Option<MagUnitArg>,
     /// Sample rate in Hz for files without a `t_s` column.
-    #[arg(long)]
+    #[arg(long, value_parser = positive)]
     pub rate: Option<f64>,
     /// Magnetometer file with its own clock (default: `<name>_mag.csv` next to the recording, if present).
     #[arg(long)]
