@@ -120,7 +120,7 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             .collect();
         let directions: Vec<_> = report.directions.iter().map(triple).collect();
         // The window in the unit `--window` takes, and in rows as the detector used it.
-        let window_s = recording.rate_hz().map(|rate| report.window as f64 / rate);
+        let window_s = report.window_s(&recording);
         let out = json!({
             "intervals": intervals, "directions": directions, "noise": noise,
             "units": units, "window_s": window_s, "window_samples": report.window,

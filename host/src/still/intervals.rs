@@ -188,6 +188,16 @@ pub struct StillReport {
 }
 
 impl StillReport {
+    /// The window in seconds: its samples times the sample period of `recording` (from its
+    /// median rate), to the microsecond. The rate comes from time stamps, whose rounding would
+    /// otherwise print as float noise (0.49999999999998934 s for 50 samples at 100 Hz); a
+    /// microsecond is far finer than any sample period. `None` without a window (holds from a
+    /// `pose` column) or a rate.
+    pub fn window_s(&self, recording: &Recording) -> Option<f64> {
+        let rate = recording.rate_hz().filter(|_| self.window > 0)?;
+        Some((self.window as f64 / rate * 1e6).round() / 1e6)
+    }
+
     /// One-line human summary.
     pub fn summary(&self) -> String {
         // Start from +0 so that an empty report prints "0.0 s", not "-0.0 s".
