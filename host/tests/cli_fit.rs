@@ -512,6 +512,23 @@ fn a_still_detection_flag_out_of_range_is_a_usage_error_naming_the_flag() {
 }
 
 #[test]
+fn a_rate_that_is_not_positive_is_a_usage_error_with_exit_status_2() {
+    let nilspod = real("imucal_nilspod_ferraris.csv");
+    for command in ["fit", "still", "analyze"] {
+        for rate in ["0", "-100", "inf"] {
+            let given = format!("--rate={rate}");
+            let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+                .args([command, &nilspod, "--gyro-unit", "dps", &given])
+                .output()
+                .expect("binary runs");
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{command} {given}: {stderr}");
+            assert!(stderr.contains("for '--rate "), "{stderr}");
+        }
+    }
+}
+
+#[test]
 fn still_says_what_fit_refuses_a_sensor_for_and_lists_the_holds_all_the_same() {
     let dir = scratch("still-one-pose");
     let path = dir.join("one_pose.csv");

@@ -632,6 +632,27 @@ fn analyze_write_params_keeps_the_sessions_board_binding_and_provenance() {
     }
 }
 
+#[test]
+fn analyze_write_params_of_a_recording_is_a_usage_error_with_exit_status_2() {
+    // A recording has no parameter set to extend: only a session directory has one.
+    let written = temp_file("not-written.json");
+    let out = imucal(&[
+        "analyze",
+        &real("imucal_nilspod_ferraris.csv"),
+        "--gyro-unit",
+        "dps",
+        "--write-params",
+        &written,
+    ]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--write-params needs a session directory"),
+        "{stderr}"
+    );
+    assert!(!std::path::Path::new(&written).exists());
+}
+
 /// The lines of the block that starts with `start` and runs to the next empty line.
 fn block<'a>(stdout: &'a str, start: &str) -> Vec<&'a str> {
     stdout

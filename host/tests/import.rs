@@ -2,9 +2,10 @@
 
 use std::path::Path;
 
+use imucal::compat::motioncal::{RawAccelScaling, SketchReading};
 use imucal::recording::mapping::{self, ColumnMapping};
 use imucal::recording::motioncal;
-use imucal::recording::{AccelUnit, GyroUnit, MagUnit, Units};
+use imucal::recording::{AccelUnit, GyroUnit, MagUnit, Sensor, Units};
 
 /// A log as the Adafruit/PJRC calibration sketch prints it, with MotionCal's other lines mixed in.
 const MOTIONCAL_LOG: &str = "\
@@ -17,30 +18,53 @@ Raw:1,2,3,4,5,6,7,8,9
 ";
 
 #[test]
-fn motioncal_raw_lines_convert_with_motioncal_scales_and_skip_other_lines() {
+fn motioncal_raw_lines_convert_with_the_sketch_scales_and_skip_other_lines() {
     let recording = motioncal::parse(MOTIONCAL_LOG, Path::new("log.txt"), Some(50.0)).unwrap();
     assert_eq!(recording.len(), 3);
     let accel = recording.accel.as_ref().unwrap();
     let gyro = recording.gyro.as_ref().unwrap();
     let mag = &recording.mag.as_ref().unwrap().samples;
-    // 8192 counts = 1 g; 16 counts = 1 °/s; 10 counts = 1 µT. Exact in binary floating point
-    // for these values except the magnetometer's /10, hence the 1e-12 bound.
-    assert_eq!(accel[0].z, 1.0);
-    assert_eq!(accel[1].x, -0.5);
-    assert_eq!(gyro[0].y, -2.0);
-    assert_eq!(gyro[1].z, 10.0);
+    // Adafruit's sketch: 8192 counts = 9.8 m/s² (not standard gravity); 16 counts = 1 °/s;
+    // 10 counts = 1 µT. The accelerometer's are exact (8192 is a power of two).
+    assert_eq!(accel[0].z, 9.8);
+    assert_eq!(accel[1].x, -4.9);
+    assert!((gyro[0].y - (-2.0_f64).to_radians()).abs() < 1e-15);
+    assert!((gyro[1].z - 10.0_f64.to_radians()).abs() < 1e-15);
     assert!((mag[0].x - 25.0).abs() < 1e-12 && (mag[1].z - 40.1).abs() < 1e-12);
     assert_eq!(
         recording.units,
         Units {
-            accel: AccelUnit::G,
-            gyro: GyroUnit::Dps,
+            accel: AccelUnit::Mps2,
+            gyro: GyroUnit::Rads,
             mag: MagUnit::Ut
         }
     );
     assert_eq!(recording.time, vec![0.0, 0.02, 0.04]);
     assert!(!recording.time_is_index);
     assert!(motioncal::looks_like_motioncal(MOTIONCAL_LOG));
+}
+
+#[test]
+fn a_saved_motioncal_log_reads_the_values_a_live_sketch_board_gives() {
+    let counts = [-4096, 8192, 123, 16, -32, 160, -250, 120, 401];
+    let line = format!("Raw:{}\n", counts.map(|c| c.to_string()).join(","));
+    let recording = motioncal::parse(&line, Path::new("log.txt"), Some(50.0)).unwrap();
+    // What `imucal record`/`stream` make of the same line from a board running the sketch.
+    let live = SketchReading::from_raw(counts, RawAccelScaling::AdafruitSketch);
+    let si = |v: &imucal::fit::Vec3| [v.x, v.y, v.z];
+    assert_eq!(si(&recording.accel.as_ref().unwrap()[0]), live.accel);
+    assert_eq!(si(&recording.gyro.as_ref().unwrap()[0]), live.gyro);
+    assert_eq!(si(&recording.mag.as_ref().unwrap().samples[0]), live.mag);
+    let units = recording.units;
+    assert_eq!(
+        [
+            units.to_si(Sensor::Accel),
+            units.to_si(Sensor::Gyro),
+            units.to_si(Sensor::Mag)
+        ],
+        [Some(1.0); 3],
+        "the live readings are in SI units"
+    );
 }
 
 #[test]

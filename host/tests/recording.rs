@@ -345,3 +345,89 @@ fn rows_that_repeat_the_row_before_exactly_are_read_once_and_counted() {
     assert_eq!(recording.mag.as_ref().map(|m| m.samples.len()), Some(5));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn units_written_after_column_names_are_the_columns_units() {
+    let dir = scratch("header-units");
+    let path = write(
+        &dir,
+        "r.csv",
+        "t_s [s],ax [g],ay [g],az [g],gx (deg/s),gy (deg/s),gz (deg/s),mx [uT],my [uT],mz [uT],temp_c [°C]\n\
+         0.00,0.01,0.02,1.0,0.5,-0.5,0.1,20,-3,40,25\n\
+         0.01,0.01,0.02,1.0,0.5,-0.5,0.1,20,-3,40,25\n",
+    );
+    let rec = Recording::load(&path, &LoadOptions::default()).expect("a unit in a name is read");
+    assert_eq!(
+        rec.units,
+        Units {
+            accel: AccelUnit::G,
+            gyro: GyroUnit::Dps,
+            mag: MagUnit::Ut
+        }
+    );
+    assert!(rec.ignored_columns.is_empty(), "{:?}", rec.ignored_columns);
+    assert_eq!(rec.accel.expect("accel read")[0].z, 1.0);
+    assert_eq!(rec.temp_c, Some(vec![25.0, 25.0]));
+    // A unit option that says the same is no conflict.
+    let agreeing = LoadOptions {
+        units: Units {
+            accel: AccelUnit::G,
+            ..Units::default()
+        },
+        units_stated: vec![Sensor::Accel],
+        ..LoadOptions::default()
+    };
+    assert!(Recording::load(&path, &agreeing).is_ok());
+}
+
+#[test]
+fn a_unit_option_that_contradicts_the_header_is_refused_naming_both() {
+    let dir = scratch("header-units-conflict");
+    let path = write(
+        &dir,
+        "r.csv",
+        "t_s,ax [m/s2],ay [m/s2],az [m/s2]\n0,0,0,9.8\n0.01,0,0,9.8\n",
+    );
+    let options = LoadOptions {
+        units: Units {
+            accel: AccelUnit::G,
+            ..Units::default()
+        },
+        units_stated: vec![Sensor::Accel],
+        ..LoadOptions::default()
+    };
+    let text = match Recording::load(&path, &options) {
+        Ok(_) => panic!("a header in m/s² read as g"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        text.contains("`ax [m/s2]`")
+            && text.contains("m/s²")
+            && text.contains("--accel-unit says g"),
+        "{text}"
+    );
+    // Left at its default, the option gives way to the header.
+    let defaulted = LoadOptions {
+        units_stated: Vec::new(),
+        ..options
+    };
+    let rec = Recording::load(&path, &defaulted).expect("the header's unit is used");
+    assert_eq!(rec.units.accel, AccelUnit::Mps2);
+}
+
+#[test]
+fn a_unit_imucal_does_not_read_is_refused_naming_the_column_and_the_units_it_reads() {
+    let dir = scratch("header-units-unknown");
+    let path = write(&dir, "r.csv", "t_s,ax [mg],ay [mg],az [mg]\n0,0,0,1000\n");
+    let text = load_err(&path).to_string();
+    assert!(
+        text.contains("`ax [mg]`")
+            && text.contains("`mg`")
+            && text.contains("m/s2")
+            && text.contains("counts"),
+        "{text}"
+    );
+    let mixed = write(&dir, "m.csv", "t_s,ax [g],ay [m/s2],az [g]\n0,0,0,1\n");
+    let text = load_err(&mixed).to_string();
+    assert!(text.contains("`ax [g]` and `ay [m/s2]`"), "{text}");
+}

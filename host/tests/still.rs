@@ -163,6 +163,77 @@ fn a_pose_column_gives_one_hold_per_label_without_detection() {
     assert_eq!(report.intervals[2].accel.as_ref().map(|p| p.n), Some(rows));
 }
 
+/// A spike in the accelerometer inside the third hold, and every row labelled by the hold it
+/// is in, with text labels (`P12`, `P11`, …) of `kind`.
+fn labelled_with_a_spike(kind: LabelKind) -> Recording {
+    let (mut rec, truth) = six_face_recording(7, 3.0);
+    let per_row: Vec<Option<usize>> = rec
+        .time
+        .iter()
+        .map(|t| truth.iter().position(|(a, b, _)| t >= a && t < b))
+        .collect();
+    let (a, b, _) = truth[2];
+    let middle = rec
+        .time
+        .iter()
+        .position(|t| *t >= (a + b) / 2.0)
+        .expect("a row mid-hold");
+    if let Some(accel) = rec.accel.as_mut() {
+        // Ten times the noise: screened out, yet too small to split the detected hold.
+        accel[middle] += Vec3::new(10.0 * SIGMA_A, 0.0, 0.0);
+    }
+    rec.labels = Some(Labels {
+        kind,
+        names: (0..6).map(|i| format!("P{}", 12 - i)).collect(),
+        per_row,
+    });
+    rec
+}
+
+#[test]
+fn a_hold_warning_names_the_label_text_and_column_the_table_shows() {
+    for (kind, phrase) in [
+        (LabelKind::Pose, "(pose P10)"),
+        (LabelKind::Segment, "(segment P10)"),
+    ] {
+        let rec = labelled_with_a_spike(kind);
+        let report = find_still(&rec, &StillOptions::default()).expect("holds");
+        let sentences: Vec<String> = report
+            .intervals
+            .iter()
+            .filter_map(|i| i.dropped_sentence())
+            .collect();
+        assert!(
+            sentences.iter().any(|s| s.contains(phrase)),
+            "{kind:?}: {sentences:?}"
+        );
+        assert!(
+            sentences.iter().all(|s| !s.contains("(pose 2)")),
+            "{sentences:?}"
+        );
+    }
+}
+
+#[test]
+fn a_pose_column_without_time_or_rate_asks_for_the_rate_as_detection_does() {
+    let (mut rec, truth) = six_face_recording(5, 3.0);
+    let per_row = rec
+        .time
+        .iter()
+        .map(|t| truth.iter().position(|(a, b, _)| t >= a && t < b))
+        .collect();
+    rec.labels = Some(Labels {
+        kind: LabelKind::Pose,
+        names: (0..6).map(|i| i.to_string()).collect(),
+        per_row,
+    });
+    rec.time = (0..rec.len()).map(|i| i as f64).collect();
+    rec.time_is_index = true;
+    let error = find_still(&rec, &StillOptions::default()).expect_err("row numbers are no seconds");
+    assert!(matches!(error, StillError::NoRate(_)));
+    assert!(error.to_string().contains("--rate"), "{error}");
+}
+
 #[test]
 fn detection_without_a_rate_asks_for_one() {
     let (mut rec, _) = six_face_recording(1, 3.0);

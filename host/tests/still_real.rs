@@ -201,3 +201,17 @@ fn fitting_the_hand_turned_recording_refuses_accelerometer_and_gyroscope_with_a_
     assert!(stderr.contains("hold it still"), "{stderr}");
     assert!(!stdout.contains("gyro — method"), "{stdout}");
 }
+
+#[test]
+fn the_window_in_seconds_is_its_samples_times_the_period_without_float_noise() {
+    // 100 Hz time stamps whose median step is 0.01 s give or take the last bits.
+    let rec = load("tsi_mpu6050_multipos.csv", counts());
+    let report = still(&rec, 10.0);
+    assert_eq!(report.window, 50, "the window keeps its samples");
+    assert_eq!(report.window_s(&rec), Some(0.5));
+    assert_eq!(
+        serde_json::json!(report.window_s(&rec)).to_string(),
+        "0.5",
+        "printed as the JSON shows it"
+    );
+}

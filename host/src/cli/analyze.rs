@@ -18,6 +18,7 @@ use serde_json::Value;
 
 use super::args::{AnalyzeArgs, InputArgs};
 use super::write_policy::{check_outputs, Output};
+use super::UsageError;
 
 /// Analyse a session directory from its poses; optionally write the extended set.
 fn run_session_dir(args: &AnalyzeArgs, dir: &std::path::Path) -> anyhow::Result<()> {
@@ -106,23 +107,27 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<()> {
     .into_iter()
     .flatten()
     .collect();
-    check_outputs(&outputs, &super::input_paths(&args.input), args.force)?;
-    let references = super::references(&args.reference)?;
-    if is_pose_session(&args.input.recording) {
-        return run_session_dir(args, &args.input.recording);
-    }
-    if args.write_params.is_some() {
-        bail!(
+    let session = is_pose_session(&args.input.recording);
+    // An option the input cannot take is a usage error, told before anything is read or
+    // written.
+    if args.write_params.is_some() && !session {
+        return Err(UsageError(format!(
             "--write-params needs a session directory of `imucal calibrate` (with poses.json and \
              params.json); `{}` is not one",
             args.input.recording.display()
-        );
+        ))
+        .into());
+    }
+    check_outputs(&outputs, &super::input_paths(&args.input), args.force)?;
+    let references = super::references(&args.reference)?;
+    if session {
+        return run_session_dir(args, &args.input.recording);
     }
     let input = InputArgs {
         recording: super::recording_file(&args.input.recording)?,
         ..args.input.clone()
     };
-    let recording = super::load(&input, args.reference.gyro_scale)?;
+    let recording = super::load(&input, args.reference.gyro_scale, None)?;
     let sensors = recording.sensors();
     // The pipeline `imucal fit` runs, with the same options: the base fits printed here are
     // its result, and the analysis builds on them.

@@ -128,11 +128,15 @@ pub enum FormatArg {
     /// Decide from the first line.
     Auto,
     /// CSV with a header of column names: `t_s`, `ax ay az`, `gx gy gz`, `mx my mz`, `temp_c`,
-    /// and `pose` or `segment` labels (any subset; other columns are not read).
+    /// and `pose` or `segment` labels (any subset; other columns are not read); a unit may
+    /// follow a name in brackets or parentheses, e.g. `ax [m/s2]`, `gx (dps)`.
     Csv,
     /// IMU-TK text (`timestamp x y z` per line; the recording is the accelerometer file).
     Imutk,
-    /// MotionCal serial log (`Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines; detected by `auto` too).
+    /// MotionCal serial log (`Raw:ax,ay,az,gx,gy,gz,mx,my,mz` lines; detected by `auto` too),
+    /// its counts scaled as Adafruit's calibration sketch writes them and as a live sketch
+    /// board is read: accelerometer 8192 per 9.8 m/s², gyroscope 16 per °/s, magnetometer 10
+    /// per µT.
     Motioncal,
 }
 
@@ -155,17 +159,20 @@ pub struct InputArgs {
     /// Recording file (CSV with a header, or IMU-TK accelerometer text file); `-` reads standard
     /// input, and a FIFO or `<(command)` is read once as a stream.
     pub recording: PathBuf,
-    /// Unit of the accelerometer columns (default: mps2).
+    /// Unit of the accelerometer columns (default: the unit a CSV header writes after the column
+    /// name, e.g. `ax [g]`, else mps2).
     #[arg(long, value_enum)]
     pub accel_unit: Option<AccelUnitArg>,
-    /// Unit of the gyroscope columns (default: rads).
+    /// Unit of the gyroscope columns (default: the unit a CSV header writes after the column
+    /// name, e.g. `gx [dps]`, else rads).
     #[arg(long, value_enum)]
     pub gyro_unit: Option<GyroUnitArg>,
-    /// Unit of the magnetometer columns (default: ut).
+    /// Unit of the magnetometer columns (default: the unit a CSV header writes after the column
+    /// name, e.g. `mx [uT]`, else ut).
     #[arg(long, value_enum)]
     pub mag_unit: Option<MagUnitArg>,
     /// Sample rate in Hz for files without a `t_s` column.
-    #[arg(long)]
+    #[arg(long, value_parser = positive)]
     pub rate: Option<f64>,
     /// Magnetometer file with its own clock (default: `<name>_mag.csv` next to the recording, if present).
     #[arg(long)]

@@ -524,7 +524,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if let (Some(name), Some(sensor)) = (&args.method, chosen_sensor(args.sensor)) {
         methods_for(name, &[sensor], false)?;
     }
-    let recording = super::load(&args.input, args.reference.gyro_scale)?;
+    let recording = super::load(
+        &args.input,
+        args.reference.gyro_scale,
+        chosen_sensor(args.sensor),
+    )?;
     let sensors = requested(args, &recording)?;
     // A wrong --method is an argument error: report it before anything about the data.
     let methods: Vec<(Sensor, Method)> = match &args.method {

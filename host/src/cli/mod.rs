@@ -83,8 +83,13 @@ pub fn directory_recording(dir: &Path) -> Option<PathBuf> {
 }
 
 /// Read the recording named on the command line (a file, or a session directory's);
-/// `gyro_scale` is `--gyro-scale` for the commands that take it, said to be moot when it is.
-pub fn load(input: &InputArgs, gyro_scale: Option<f64>) -> anyhow::Result<Recording> {
+/// `gyro_scale` is `--gyro-scale` for the commands that take it, said to be moot when it is;
+/// `only` the one sensor the command uses, `None` for every sensor the recording has.
+pub fn load(
+    input: &InputArgs,
+    gyro_scale: Option<f64>,
+    only: Option<Sensor>,
+) -> anyhow::Result<Recording> {
     let units = Units {
         accel: match input.accel_unit.unwrap_or(AccelUnitArg::Mps2) {
             AccelUnitArg::Mps2 => AccelUnit::Mps2,
@@ -102,18 +107,27 @@ pub fn load(input: &InputArgs, gyro_scale: Option<f64>) -> anyhow::Result<Record
             MagUnitArg::Counts => MagUnit::Counts,
         },
     };
-    let recording = read(input, units)?;
+    let recording = read(input, units, only)?;
     warn_moot_options(input, &recording, units, gyro_scale);
     Ok(recording)
 }
 
-/// The recording as the input options read it.
-fn read(input: &InputArgs, units: Units) -> anyhow::Result<Recording> {
+/// The recording as the input options read it; `only` as for [`load`].
+fn read(input: &InputArgs, units: Units, only: Option<Sensor>) -> anyhow::Result<Recording> {
     if let Some(recording) = import::load(input, units)? {
         return Ok(recording);
     }
+    let units_stated = [
+        (Sensor::Accel, input.accel_unit.is_some()),
+        (Sensor::Gyro, input.gyro_unit.is_some()),
+        (Sensor::Mag, input.mag_unit.is_some()),
+    ]
+    .into_iter()
+    .filter_map(|(sensor, stated)| stated.then_some(sensor))
+    .collect();
     let options = LoadOptions {
         units,
+        units_stated,
         rate_hz: input.rate,
         mag_file: input.mag_file.clone(),
         no_mag_sibling: input.no_mag_sibling,
@@ -138,6 +152,7 @@ fn read(input: &InputArgs, units: Units) -> anyhow::Result<Recording> {
     if input.rate.is_some() && recording.time_from_file {
         say!("imucal: warning: --rate is ignored: the recording has its own time stamps");
     }
+    refuse_unread_sensor(input, &recording, only)?;
     if !recording.ignored_columns.is_empty() {
         // A trailing delimiter leaves a column without a name: say so rather than nothing.
         let named: Vec<String> = recording
@@ -156,6 +171,54 @@ fn read(input: &InputArgs, units: Units) -> anyhow::Result<Recording> {
         );
     }
     Ok(recording)
+}
+
+/// Refuses a recording that lacks a sensor the command uses while columns that look like that
+/// sensor's axes (`AccX`, `acc_x`) were left unread: run on, the command would succeed on the
+/// other sensors and the lost one would show only as its absence, which is easily taken for a
+/// board without that sensor. An error names the columns and the two ways to read them.
+fn refuse_unread_sensor(
+    input: &InputArgs,
+    recording: &Recording,
+    only: Option<Sensor>,
+) -> anyhow::Result<()> {
+    for sensor in Sensor::ALL {
+        if recording.has(sensor) || only.is_some_and(|s| s != sensor) {
+            continue;
+        }
+        let unread: Vec<&String> = recording
+            .ignored_columns
+            .iter()
+            .filter(|name| imucal::recording::column_names::looks_like_axis(name) == Some(sensor))
+            .collect();
+        if unread.is_empty() {
+            continue;
+        }
+        let shown: Vec<String> = unread.iter().map(|n| format!("`{n}`")).collect();
+        let [x, y, z] = sensor.columns();
+        let mapping = match unread.as_slice() {
+            [a, b, c] => format!("`--columns {x}={a},{y}={b},{z}={c},...`"),
+            _ => format!("`--columns {x}=...,{y}=...,{z}=...`"),
+        };
+        anyhow::bail!(
+            "`{}` has no {sensor} data that imucal reads, but its column{} {} look{} like \
+             {sensor} axes and {} not read: imucal reads the {sensor} from columns named \
+             `{x} {y} {z}` (a unit may follow in brackets, e.g. `{x} [{}]`); rename the columns \
+             so, or read the file through a column mapping that names every column to read, \
+             e.g. {mapping}",
+            input.recording.display(),
+            if unread.len() == 1 { "" } else { "s" },
+            shown.join(", "),
+            if unread.len() == 1 { "s" } else { "" },
+            if unread.len() == 1 { "was" } else { "were" },
+            match sensor {
+                Sensor::Accel => "m/s2",
+                Sensor::Gyro => "dps",
+                Sensor::Mag => "uT",
+            },
+        );
+    }
+    Ok(())
 }
 
 /// Says which options given for the input the recording makes moot (a unit of a sensor it

@@ -49,7 +49,7 @@ fn from_recording(
     bar: &ProgressBar,
 ) -> anyhow::Result<(ReportData, Vec<String>)> {
     let references = super::references(&args.reference)?;
-    let recording = super::load(&args.input, args.reference.gyro_scale)?;
+    let recording = super::load(&args.input, args.reference.gyro_scale, None)?;
     bar.inc(1);
     bar.set_message("checking the recording and finding still intervals");
     let sensors = recording.sensors();

@@ -13,17 +13,6 @@ fn triple(v: &Vec3) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
 
-/// The text of the `pose` or `segment` label whose value is `value`.
-fn label_name(recording: &Recording, value: i64) -> Option<String> {
-    let labels = recording.labels.as_ref()?;
-    labels
-        .names
-        .iter()
-        .enumerate()
-        .find(|(i, _)| labels.value(*i) == value)
-        .map(|(_, name)| name.clone())
-}
-
 /// `why` as the command's error, once `warnings` are printed: they may be why nothing was found.
 fn said_then(warnings: &[String], why: String) -> anyhow::Error {
     for warning in warnings {
@@ -84,7 +73,7 @@ fn checked_still(
 
 /// Run the command.
 pub fn run(args: &StillArgs) -> anyhow::Result<()> {
-    let recording = super::load(&args.input, None)?;
+    let recording = super::load(&args.input, None, None)?;
     let options = InputOptions {
         still: super::still_options(&args.input),
         ..InputOptions::default()
@@ -100,7 +89,7 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             .map(|i| {
                 json!({
                     "t_start": i.t_start, "t_end": i.t_end, "label": i.label,
-                    "label_name": i.label.and_then(|l| label_name(&recording, l)),
+                    "label_name": i.label_name.as_ref().map(|l| l.text.clone()),
                     "direction": i.direction,
                     "accel_mean": i.accel.as_ref().map(|p| triple(&p.mean)),
                     "gyro_mean": i.gyro.as_ref().map(|p| triple(&p.mean)),
@@ -131,7 +120,7 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             .collect();
         let directions: Vec<_> = report.directions.iter().map(triple).collect();
         // The window in the unit `--window` takes, and in rows as the detector used it.
-        let window_s = recording.rate_hz().map(|rate| report.window as f64 / rate);
+        let window_s = report.window_s(&recording);
         let out = json!({
             "intervals": intervals, "directions": directions, "noise": noise,
             "units": units, "window_s": window_s, "window_samples": report.window,
@@ -168,9 +157,10 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
         recording.units.symbol(shown)
     );
     for (k, i) in report.intervals.iter().enumerate() {
-        let label = i.label.map_or("-".to_string(), |l| {
-            label_name(&recording, l).unwrap_or_else(|| l.to_string())
-        });
+        let label = i
+            .label_name
+            .as_ref()
+            .map_or("-".to_string(), |l| l.text.clone());
         let dir = i.direction.map_or("-".to_string(), |d| d.to_string());
         let pose = match shown {
             Sensor::Accel => i.accel.as_ref(),

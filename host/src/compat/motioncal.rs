@@ -183,9 +183,15 @@ pub struct SketchReading {
 impl SketchReading {
     /// A `Raw:` line's counts in SI units with MotionCal's scales and `scaling` for the accel.
     pub fn from_raw(counts: [i32; 9], scaling: RawAccelScaling) -> Self {
+        Self::from_counts(counts.map(f64::from), scaling)
+    }
+
+    /// [`SketchReading::from_raw`] of counts read as numbers (a saved log's `Raw:` lines): the
+    /// one conversion live readings and saved logs share.
+    pub fn from_counts(counts: [f64; 9], scaling: RawAccelScaling) -> Self {
         let accel = scaling.mps2_per_count();
         let gyro = DPS_PER_COUNT.to_radians();
-        let at = |i: usize, k: f64| f64::from(counts[i]) * k;
+        let at = |i: usize, k: f64| counts[i] * k;
         Self {
             accel: [at(0, accel), at(1, accel), at(2, accel)],
             gyro: [at(3, gyro), at(4, gyro), at(5, gyro)],

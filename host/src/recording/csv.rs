@@ -1,6 +1,7 @@
 //! Reader for the CSV recording format (`ARCHITECTURE.md`, "Recording format"): a header line
 //! of named columns in any order (`t_s`, `ax ay az`, `gx gy gz`, `mx my mz`, `temp_c`, and an
-//! optional `pose` or `segment` label), then one row per sample. Lines starting with `#` are
+//! optional `pose` or `segment` label; a name may carry its unit in brackets or parentheses,
+//! `ax [m/s2]`, see [`super::column_names`]), then one row per sample. Lines starting with `#` are
 //! comments. The file is read once, line by line (see [`super::lines`]): memory holds the
 //! numbers kept, not the text.
 
@@ -12,8 +13,10 @@ use super::rows::{
     content, parse_block, rows_without_a_number, Block, Columns, LabelInterner, Layout, Part, Role,
     ONE_ROW_ADVICE,
 };
+use super::units::MagUnit;
 use super::{
-    display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError, Sensor,
+    column_names, display, LabelKind, Labels, LoadOptions, MagStream, Recording, RecordingError,
+    Sensor, Units,
 };
 use crate::fit::Vec3;
 
@@ -24,7 +27,19 @@ struct Header {
     temp: Option<usize>,
     label: Option<(usize, LabelKind)>,
     sensors: Vec<(Sensor, [usize; 3])>,
+    /// Per sensor, the column whose name gives its unit (`ax [g]`), already checked to be a unit
+    /// imucal reads and the one the sensor's other columns give, if they give one.
+    unit_columns: Vec<(Sensor, usize)>,
     ignored: Vec<String>,
+}
+
+/// The units a header may write after the names of the columns that are not sensor readings.
+fn other_units(base: &str) -> Option<(&'static [&'static str], &'static str)> {
+    match base {
+        "t_s" => Some((&["s"], "s")),
+        "temp_c" => Some((&["°c", "ºc", "c", "degc", "celsius"], "°C")),
+        _ => None,
+    }
 }
 
 fn parse_header(path: &Path, line: &str) -> Result<Header, RecordingError> {
@@ -32,21 +47,62 @@ fn parse_header(path: &Path, line: &str) -> Result<Header, RecordingError> {
         .split(',')
         .map(|s| s.trim().trim_matches('"').to_ascii_lowercase())
         .collect();
+    // Each column's name without the unit written after it (`ax [m/s2]` is column `ax`).
+    let split: Vec<(&str, Option<&str>)> =
+        names.iter().map(|n| column_names::split_unit(n)).collect();
+    let known = |n: &str| {
+        matches!(n, "t_s" | "temp_c" | "pose" | "segment")
+            || Sensor::ALL.iter().any(|s| s.columns().contains(&n))
+    };
     for (i, name) in names.iter().enumerate() {
-        if names[..i].contains(name) {
+        let base = split[i].0;
+        let same = |j: usize| names[j] == *name || (known(base) && split[j].0 == base);
+        if let Some(j) = (0..i).find(|&j| same(j)) {
             return Err(RecordingError::DuplicateColumn {
                 path: display(path),
-                column: name.clone(),
+                column: if names[j] == *name {
+                    name.clone()
+                } else {
+                    format!("{base}` (as `{}` and `{name}`)", names[j])
+                },
             });
         }
     }
-    let find = |n: &str| names.iter().position(|c| c == n);
+    let find = |n: &str| split.iter().position(|(base, _)| *base == n);
+    let unknown_unit = |i: usize, accepted: &'static str| RecordingError::UnknownUnit {
+        path: display(path),
+        column: names[i].clone(),
+        unit: split[i].1.unwrap_or("").to_string(),
+        accepted,
+    };
     let mut sensors = Vec::new();
+    let mut unit_columns = Vec::new();
     for sensor in Sensor::ALL {
         let cols = sensor.columns();
         let idx = cols.map(find);
         match idx {
-            [Some(x), Some(y), Some(z)] => sensors.push((sensor, [x, y, z])),
+            [Some(x), Some(y), Some(z)] => {
+                sensors.push((sensor, [x, y, z]));
+                let mut first: Option<(usize, Units)> = None;
+                for i in [x, y, z] {
+                    let Some(unit) = split[i].1 else { continue };
+                    let read = Units::default()
+                        .with_symbol(sensor, unit)
+                        .ok_or_else(|| unknown_unit(i, Units::spellings(sensor)))?;
+                    match first {
+                        None => first = Some((i, read)),
+                        Some((j, other)) if other.symbol(sensor) != read.symbol(sensor) => {
+                            return Err(RecordingError::MixedUnits {
+                                path: display(path),
+                                first: names[j].clone(),
+                                second: names[i].clone(),
+                            });
+                        }
+                        Some(_) => {}
+                    }
+                }
+                unit_columns.extend(first.map(|(i, _)| (sensor, i)));
+            }
             [None, None, None] => {}
             _ => {
                 let present = cols
@@ -67,22 +123,75 @@ fn parse_header(path: &Path, line: &str) -> Result<Header, RecordingError> {
             }
         }
     }
+    // The other columns read may carry their own unit, which must be the one the name says.
+    for (i, (base, unit)) in split.iter().enumerate() {
+        let Some(unit) = unit else { continue };
+        if Sensor::ALL.iter().any(|s| s.columns().contains(base)) {
+            continue;
+        }
+        let written = unit.to_lowercase().replace(' ', "");
+        match other_units(base) {
+            Some((spellings, accepted)) if !spellings.contains(&written.as_str()) => {
+                return Err(unknown_unit(i, accepted));
+            }
+            None if known(base) => return Err(unknown_unit(i, "none: it holds labels")),
+            _ => {}
+        }
+    }
     let label = find("pose")
         .map(|i| (i, LabelKind::Pose))
         .or_else(|| find("segment").map(|i| (i, LabelKind::Segment)));
-    let known = |n: &str| {
-        matches!(n, "t_s" | "temp_c" | "pose" | "segment")
-            || Sensor::ALL.iter().any(|s| s.columns().contains(&n))
-    };
-    let ignored = names.iter().filter(|n| !known(n)).cloned().collect();
+    let ignored = names
+        .iter()
+        .zip(&split)
+        .filter(|(_, (base, _))| !known(base))
+        .map(|(name, _)| name.clone())
+        .collect();
     Ok(Header {
         time: find("t_s"),
         temp: find("temp_c"),
         label,
         sensors,
+        unit_columns,
         ignored,
         names,
     })
+}
+
+/// The units of a file with `header`: those `options` give, each sensor's replaced by the one
+/// its column names write unless the user stated another, which is refused.
+fn resolve_units(
+    path: &Path,
+    header: &Header,
+    options: &LoadOptions,
+) -> Result<Units, RecordingError> {
+    let mut units = options.units;
+    for &(sensor, column) in &header.unit_columns {
+        let name = &header.names[column];
+        let (_, Some(text)) = column_names::split_unit(name) else {
+            continue;
+        };
+        let Some(written) = options.units.with_symbol(sensor, text) else {
+            continue;
+        };
+        let stated = options.units_stated.contains(&sensor);
+        if stated && written.symbol(sensor) != options.units.symbol(sensor) {
+            return Err(RecordingError::UnitDisagrees {
+                path: display(path),
+                column: name.clone(),
+                sensor,
+                header_unit: written.symbol(sensor),
+                flag: match sensor {
+                    Sensor::Accel => "--accel-unit",
+                    Sensor::Gyro => "--gyro-unit",
+                    Sensor::Mag => "--mag-unit",
+                },
+                given: options.units.symbol(sensor),
+            });
+        }
+        units = units.with_symbol(sensor, text).unwrap_or(units);
+    }
+    Ok(units)
 }
 
 /// Rows of a CSV file as columns of numbers (labels interned as they are read).
@@ -332,6 +441,7 @@ pub(super) fn load(
     options: &LoadOptions,
 ) -> Result<Recording, RecordingError> {
     let table = read_table(path, lines, header_line)?;
+    let units = resolve_units(path, &table.header, options)?;
     let time_from_file = table.time.is_some();
     let (time, time_is_index) = row_times(table.time, table.rows, options.rate_hz);
     let mut recording = Recording {
@@ -344,7 +454,7 @@ pub(super) fn load(
         mag: None,
         labels: table.labels,
         ignored_columns: table.header.ignored,
-        units: options.units,
+        units,
         time,
         read_as_imutk: false,
         repeated_rows: 0,
@@ -366,12 +476,14 @@ pub(super) fn load(
     Ok(recording)
 }
 
-/// Read a magnetometer file with its own clock (`t_s, mx, my, mz`, other columns ignored).
+/// Read a magnetometer file with its own clock (`t_s, mx, my, mz`, other columns ignored), with
+/// the unit of its samples (a unit its header writes, or the one `options` give).
 pub(super) fn load_mag_stream(
     path: &Path,
     options: &LoadOptions,
-) -> Result<MagStream, RecordingError> {
+) -> Result<(MagStream, MagUnit), RecordingError> {
     let table = read_table(path, &mut LineReader::open(path)?, None)?;
+    let unit = resolve_units(path, &table.header, options)?.mag;
     let samples = table
         .sensors
         .into_iter()
@@ -385,10 +497,11 @@ pub(super) fn load_mag_stream(
             ),
         })?;
     let (time, _) = row_times(table.time, table.rows, options.rate_hz);
-    Ok(MagStream {
+    let stream = MagStream {
         source: path.to_path_buf(),
         time,
         samples,
         temp_c: table.temp,
-    })
+    };
+    Ok((stream, unit))
 }

@@ -5,6 +5,7 @@
 //! rescales. The magnetometer may run on its own clock (a sibling `<name>_mag.csv` file), so it
 //! is held as a separate [`MagStream`] with its own time stamps.
 
+pub mod column_names;
 mod csv;
 mod decimal;
 mod imutk;
@@ -86,6 +87,44 @@ pub enum RecordingError {
         path: String,
         /// The repeated column name.
         column: String,
+    },
+    /// A column name carries a unit imucal does not read for that column.
+    #[error("`{path}`, header: column `{column}` gives its unit as `{unit}`, which imucal does not read for that column; write one it reads in the brackets, or leave the unit out of the name and give it with the unit option (the units read there: {accepted})")]
+    UnknownUnit {
+        /// File concerned.
+        path: String,
+        /// The column name as written.
+        column: String,
+        /// The unit as written.
+        unit: String,
+        /// The units accepted for that column.
+        accepted: &'static str,
+    },
+    /// The columns of one sensor name different units.
+    #[error("`{path}`, header: columns `{first}` and `{second}` give different units, but a sensor's three columns share one; correct the header")]
+    MixedUnits {
+        /// File concerned.
+        path: String,
+        /// One column name as written.
+        first: String,
+        /// A column of the same sensor naming another unit.
+        second: String,
+    },
+    /// A unit option disagrees with the unit the header writes for that sensor.
+    #[error("`{path}`, header: column `{column}` says the {sensor} data are in {header_unit}, but {flag} says {given}; correct the header if it is wrong, or leave {flag} out and the header's unit is used")]
+    UnitDisagrees {
+        /// File concerned.
+        path: String,
+        /// The column whose name gives the unit.
+        column: String,
+        /// The sensor.
+        sensor: Sensor,
+        /// The header's unit.
+        header_unit: &'static str,
+        /// The option that gave the other unit.
+        flag: &'static str,
+        /// The option's unit.
+        given: &'static str,
     },
     /// A header names no sensor column at all.
     #[error("`{path}`, header: no sensor columns found (expected some of `ax ay az`, `gx gy gz`, `mx my mz`); header was `{header}`; name the columns in the first line, e.g. `t_s,ax,ay,az,gx,gy,gz`, or read the file as it is with --columns (any delimiter, e.g. `--columns t_ms=Time,ax=AccX,ay=AccY,az=AccZ`)")]
@@ -226,6 +265,16 @@ pub enum LabelKind {
     Segment,
 }
 
+impl LabelKind {
+    /// The name of the column that carries labels of this kind (`pose` or `segment`).
+    pub fn column(self) -> &'static str {
+        match self {
+            LabelKind::Pose => "pose",
+            LabelKind::Segment => "segment",
+        }
+    }
+}
+
 /// A label column (`pose` or `segment`). Empty fields and `-` mean "no label".
 #[derive(Debug, Clone, PartialEq)]
 pub struct Labels {
@@ -315,6 +364,10 @@ pub enum Format {
 pub struct LoadOptions {
     /// Units of the sensor columns.
     pub units: Units,
+    /// Sensors whose unit in `units` the user stated (rather than left at the default). For the
+    /// others, a unit the header writes after a column name (`ax [g]`) is used; a stated unit
+    /// the header contradicts is refused rather than either being guessed right.
+    pub units_stated: Vec<Sensor>,
     /// Sample rate for files without a `t_s` column (ignored when `t_s` exists).
     pub rate_hz: Option<f64>,
     /// Magnetometer file with its own clock. When `None`, a sibling `<stem>_mag.csv` is used
@@ -376,20 +429,22 @@ impl Recording {
                     .flatten()
             };
             if let Some(mag_path) = &options.mag_file {
-                recording.mag = Some(csv::load_mag_stream(mag_path, options)?);
+                let (stream, unit) = csv::load_mag_stream(mag_path, options)?;
+                (recording.mag, recording.units.mag) = (Some(stream), unit);
             } else if let Some(mag_path) = sibling() {
-                let stream = csv::load_mag_stream(&mag_path, options).map_err(|cause| {
+                let (stream, unit) = csv::load_mag_stream(&mag_path, options).map_err(|cause| {
                     RecordingError::SiblingMag {
                         path: display(&mag_path),
                         cause: Box::new(cause),
                     }
                 })?;
-                recording.mag = Some(stream);
+                (recording.mag, recording.units.mag) = (Some(stream), unit);
             }
         } else if let Some(mag_path) = &options.mag_file {
             // An explicit file replaces magnetometer columns of the main file; they are then
             // columns not read, and said to be.
-            recording.mag = Some(csv::load_mag_stream(mag_path, options)?);
+            let (stream, unit) = csv::load_mag_stream(mag_path, options)?;
+            (recording.mag, recording.units.mag) = (Some(stream), unit);
             recording.ignored_columns.push(format!(
                 "the magnetometer columns (replaced by --mag-file {})",
                 display(mag_path)

@@ -1,9 +1,11 @@
 //! Reader for MotionCal-style serial logs: the lines `Raw:ax,ay,az,gx,gy,gz,mx,my,mz` that the
 //! PJRC/Adafruit calibration sketches print for MotionCal, nine integers per line.
 //!
-//! Scales are MotionCal's (its `imuread.h`, matched by the Adafruit AHRS `calibration` sketch):
-//! accelerometer 8192 counts per g, gyroscope 16 counts per °/s, magnetometer 10 counts per µT
-//! (0.1 µT per count). The reader converts with them, so the recording is in g, °/s and µT.
+//! The counts are converted as a board is read live (`imucal record`/`stream` of a sketch
+//! board), by the one conversion both share, [`SketchReading::from_counts`] with Adafruit's
+//! scaling (its calibration sketch writes `int(a·8192/9.8)` for `a` in m/s², rad/s·(180/π)·16
+//! and µT·10): accelerometer 8192 counts per 9.8 m/s², gyroscope 16 counts per °/s,
+//! magnetometer 10 counts per µT. The recording is in m/s², rad/s and µT.
 //! Other lines of such a log (`Uni:`, `Ori:`, `Cal1:`, `Cal2:`, text) are skipped. The log has
 //! no time stamps: rows are timed by `--rate`, or counted when no rate is given.
 
@@ -13,14 +15,11 @@ use std::path::Path;
 use super::lines::LineReader;
 use super::mapping::ImportError;
 use super::{AccelUnit, GyroUnit, MagStream, MagUnit, Recording, Units};
+use crate::compat::motioncal::{RawAccelScaling, SketchReading};
 use crate::fit::Vec3;
 
-/// Accelerometer counts per g in MotionCal's `Raw:` lines.
-pub const ACCEL_COUNTS_PER_G: f64 = 8192.0;
-/// Gyroscope counts per °/s in MotionCal's `Raw:` lines.
-pub const GYRO_COUNTS_PER_DPS: f64 = 16.0;
-/// Magnetometer counts per µT in MotionCal's `Raw:` lines.
-pub const MAG_COUNTS_PER_UT: f64 = 10.0;
+/// How the counts of a saved log are scaled: as live readings of a sketch board are.
+const SCALING: RawAccelScaling = RawAccelScaling::AdafruitSketch;
 
 /// The prefix of a raw-data line.
 const RAW_PREFIX: &str = "Raw:";
@@ -105,9 +104,10 @@ fn parse_lines(
             found,
             field,
         })?;
-        accel.push(Vec3::new(v[0], v[1], v[2]) / ACCEL_COUNTS_PER_G);
-        gyro.push(Vec3::new(v[3], v[4], v[5]) / GYRO_COUNTS_PER_DPS);
-        mag.push(Vec3::new(v[6], v[7], v[8]) / MAG_COUNTS_PER_UT);
+        let reading = SketchReading::from_counts(v, SCALING);
+        accel.push(Vec3::from(reading.accel));
+        gyro.push(Vec3::from(reading.gyro));
+        mag.push(Vec3::from(reading.mag));
     }
     if accel.is_empty() {
         return Err(ImportError::NoRawLines { path: shown });
@@ -132,8 +132,8 @@ fn parse_lines(
         labels: None,
         ignored_columns: Vec::new(),
         units: Units {
-            accel: AccelUnit::G,
-            gyro: GyroUnit::Dps,
+            accel: AccelUnit::Mps2,
+            gyro: GyroUnit::Rads,
             mag: MagUnit::Ut,
         },
         read_as_imutk: false,

@@ -104,6 +104,22 @@ impl AccelUnit {
         }
     }
 
+    /// The unit a header writes after a column name (`ax [m/s2]`), in any case and spacing;
+    /// `None` when imucal does not read it. The spellings are [`AccelUnit::SPELLINGS`].
+    pub fn from_symbol(text: &str) -> Option<Self> {
+        match squashed(text).as_str() {
+            "m/s2" | "m/s^2" | "m/s²" | "ms-2" | "ms^-2" | "m·s-2" | "m·s^-2" | "mps2" => {
+                Some(AccelUnit::Mps2)
+            }
+            "g" => Some(AccelUnit::G),
+            "counts" | "count" | "lsb" => Some(AccelUnit::Counts),
+            _ => None,
+        }
+    }
+
+    /// The units [`AccelUnit::from_symbol`] reads, for messages.
+    pub const SPELLINGS: &'static str = "m/s2 (or m/s^2, m/s², mps2), g, counts (or lsb)";
+
     /// Short symbol for reports.
     pub fn symbol(self) -> &'static str {
         match self {
@@ -134,6 +150,22 @@ impl GyroUnit {
         }
     }
 
+    /// The unit a header writes after a column name (`gx [dps]`), in any case and spacing;
+    /// `None` when imucal does not read it. The spellings are [`GyroUnit::SPELLINGS`].
+    pub fn from_symbol(text: &str) -> Option<Self> {
+        match squashed(text).as_str() {
+            "rad/s" | "rads" | "rads-1" | "rads^-1" | "rad·s-1" | "rad·s^-1" => {
+                Some(GyroUnit::Rads)
+            }
+            "dps" | "deg/s" | "°/s" | "º/s" | "degrees/s" | "degs-1" => Some(GyroUnit::Dps),
+            "counts" | "count" | "lsb" => Some(GyroUnit::Counts),
+            _ => None,
+        }
+    }
+
+    /// The units [`GyroUnit::from_symbol`] reads, for messages.
+    pub const SPELLINGS: &'static str = "rad/s (or rads), dps (or deg/s, °/s), counts (or lsb)";
+
     /// Short symbol for reports.
     pub fn symbol(self) -> &'static str {
         match self {
@@ -163,6 +195,21 @@ impl MagUnit {
             _ => None,
         }
     }
+
+    /// The unit a header writes after a column name (`mx [uT]`), in any case and spacing;
+    /// `None` when imucal does not read it. The spellings are [`MagUnit::SPELLINGS`].
+    pub fn from_symbol(text: &str) -> Option<Self> {
+        match squashed(text).as_str() {
+            // The micro sign (U+00B5) and the Greek mu (U+03BC) both occur.
+            "ut" | "µt" | "μt" | "microtesla" => Some(MagUnit::Ut),
+            "gauss" | "ga" => Some(MagUnit::Gauss),
+            "counts" | "count" | "lsb" => Some(MagUnit::Counts),
+            _ => None,
+        }
+    }
+
+    /// The units [`MagUnit::from_symbol`] reads, for messages.
+    pub const SPELLINGS: &'static str = "uT (or µT), gauss (or Ga), counts (or lsb)";
 
     /// Short symbol for reports.
     pub fn symbol(self) -> &'static str {
@@ -204,10 +251,39 @@ impl Units {
         }
     }
 
+    /// These units with `sensor`'s set to the one a header writes as `text` (see
+    /// [`AccelUnit::from_symbol`] and its siblings); `None` when imucal does not read it.
+    pub fn with_symbol(self, sensor: Sensor, text: &str) -> Option<Self> {
+        let mut units = self;
+        match sensor {
+            Sensor::Accel => units.accel = AccelUnit::from_symbol(text)?,
+            Sensor::Gyro => units.gyro = GyroUnit::from_symbol(text)?,
+            Sensor::Mag => units.mag = MagUnit::from_symbol(text)?,
+        }
+        Some(units)
+    }
+
+    /// The units a header may write for `sensor`'s columns, for messages.
+    pub fn spellings(sensor: Sensor) -> &'static str {
+        match sensor {
+            Sensor::Accel => AccelUnit::SPELLINGS,
+            Sensor::Gyro => GyroUnit::SPELLINGS,
+            Sensor::Mag => MagUnit::SPELLINGS,
+        }
+    }
+
     /// Whether `sensor` is in raw counts (no known offset or scale).
     pub fn is_counts(&self, sensor: Sensor) -> bool {
         self.to_si(sensor).is_none()
     }
+}
+
+/// A unit as written, lower-case and without blanks (`M/S 2` and `m/s2` are one unit).
+fn squashed(text: &str) -> String {
+    text.chars()
+        .filter(|c| !c.is_whitespace())
+        .flat_map(char::to_lowercase)
+        .collect()
 }
 
 #[cfg(test)]
@@ -220,5 +296,28 @@ mod tests {
         assert!((GyroUnit::Dps.to_si().unwrap_or(0.0) - 0.017453292519943295).abs() < 1e-18);
         assert_eq!(MagUnit::Gauss.to_si(), Some(100.0));
         assert_eq!(MagUnit::Counts.to_si(), None);
+    }
+
+    #[test]
+    fn units_written_in_a_header_are_read_in_their_usual_spellings() {
+        for text in ["m/s2", "m/s^2", "M/S²", "m s^-2", "mps2"] {
+            assert_eq!(
+                AccelUnit::from_symbol(text),
+                Some(AccelUnit::Mps2),
+                "{text}"
+            );
+        }
+        assert_eq!(AccelUnit::from_symbol("G"), Some(AccelUnit::G));
+        assert_eq!(GyroUnit::from_symbol("deg/s"), Some(GyroUnit::Dps));
+        assert_eq!(GyroUnit::from_symbol("°/s"), Some(GyroUnit::Dps));
+        assert_eq!(GyroUnit::from_symbol("rad/s"), Some(GyroUnit::Rads));
+        assert_eq!(MagUnit::from_symbol("uT"), Some(MagUnit::Ut));
+        assert_eq!(MagUnit::from_symbol("µT"), Some(MagUnit::Ut));
+        assert_eq!(MagUnit::from_symbol("Gauss"), Some(MagUnit::Gauss));
+        for text in ["mg", "ft/s2", "rpm", "nT", ""] {
+            assert_eq!(AccelUnit::from_symbol(text), None, "{text}");
+            assert_eq!(GyroUnit::from_symbol(text), None, "{text}");
+            assert_eq!(MagUnit::from_symbol(text), None, "{text}");
+        }
     }
 }

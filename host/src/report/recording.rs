@@ -150,10 +150,7 @@ fn pose_labels(input: &CheckedInput, sensor: Sensor, accel: Option<&Calibration>
             let side = i.accel.as_ref().map_or("pose".to_string(), |a| {
                 up_label(&accel.map_or(a.mean, |cal| cal.apply(&a.mean)))
             });
-            match i.label {
-                Some(label) => format!("{side} (pose {label})"),
-                None => side,
-            }
+            format!("{side}{}", i.label_phrase())
         })
         .collect();
     numbered(labels)

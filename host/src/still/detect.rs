@@ -102,10 +102,8 @@ pub(super) fn detect(
         options.merge_gap_s >= 0.0,
         ">= 0 s",
     )?;
+    // (Row numbers for times are refused by `find_still`, for a pose column alike.)
     let source = recording.source.display().to_string();
-    if recording.time_is_index {
-        return Err(StillError::NoRate(source));
-    }
     // Stillness is judged on the row-synchronous inertial sensors; a magnetometer on the same
     // rows is used only when there is nothing else.
     let mut streams: Vec<(Sensor, &[Vec3])> = [Sensor::Accel, Sensor::Gyro]
@@ -295,7 +293,7 @@ pub(super) fn detect(
         .into_iter()
         .filter(|&(a, b)| recording.time[b - 1] - recording.time[a] >= options.min_hold_s)
         .map(|(a, b)| {
-            let label = labels.and_then(|l| majority_label(&l.per_row[a..b]).map(|i| l.value(i)));
+            let label = labels.and_then(|l| majority_label(&l.per_row[a..b]));
             let rows: Vec<usize> = (a..b).collect();
             interval(recording, &rows, a, b, label)
         })

@@ -2,7 +2,7 @@
 //! of the mean (corrected for correlated samples) of each sensor's screened samples ([`super::samples`]), the magnetometer samples inside the hold's time span,
 //! and the die temperature.
 
-use super::intervals::{sensor_index, StillInterval, StillReport, TempStats};
+use super::intervals::{sensor_index, HoldLabel, StillInterval, StillReport, TempStats};
 use super::samples::hold_samples;
 use crate::fit::Pose;
 use crate::recording::{Recording, Sensor};
@@ -22,13 +22,7 @@ pub(super) fn from_pose_column(recording: &Recording) -> StillReport {
                 .map(|(i, _)| i)
                 .collect();
             if let (Some(&first), Some(&last)) = (rows.first(), rows.last()) {
-                intervals.push(interval(
-                    recording,
-                    &rows,
-                    first,
-                    last + 1,
-                    Some(labels.value(index)),
-                ));
+                intervals.push(interval(recording, &rows, first, last + 1, Some(index)));
             }
         }
     }
@@ -43,14 +37,24 @@ pub(super) fn from_pose_column(recording: &Recording) -> StillReport {
     }
 }
 
-/// The hold of rows `start..end` (statistics over `rows`), before direction clustering.
+/// The hold of rows `start..end` (statistics over `rows`), before direction clustering;
+/// `label` is the index of its label in the recording's labels.
 pub(super) fn interval(
     recording: &Recording,
     rows: &[usize],
     start: usize,
     end: usize,
-    label: Option<i64>,
+    label: Option<usize>,
 ) -> StillInterval {
+    let labels = recording.labels.as_ref();
+    let label_name = label.and_then(|index| {
+        let labels = labels?;
+        Some(HoldLabel {
+            kind: labels.kind,
+            text: labels.names.get(index)?.clone(),
+        })
+    });
+    let label = label.and_then(|index| Some(labels?.value(index)));
     let t_start = recording.time[start];
     let t_end = recording.time[end - 1];
     let mut dropped = Vec::new();
@@ -83,6 +87,7 @@ pub(super) fn interval(
         t_start,
         t_end,
         label,
+        label_name,
         accel,
         gyro,
         mag,

@@ -16,6 +16,22 @@ pub struct TempStats {
     pub max: f64,
 }
 
+/// The label a hold carries, as the recording's label column writes it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HoldLabel {
+    /// Which column it comes from (`pose` or `segment`).
+    pub kind: LabelKind,
+    /// The label's text, e.g. `P12` or `z_p`.
+    pub text: String,
+}
+
+/// As a message names the hold's label: the column, then the text (`pose P12`, `segment z_p`).
+impl std::fmt::Display for HoldLabel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} {}", self.kind.column(), self.text)
+    }
+}
+
 /// One static hold.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StillInterval {
@@ -27,8 +43,12 @@ pub struct StillInterval {
     pub t_start: f64,
     /// Time of the last row, s.
     pub t_end: f64,
-    /// Label from a `pose` or `segment` column, if any.
+    /// Label from a `pose` or `segment` column, if any, as a number: the label itself when it
+    /// is an integer, else its index in order of first appearance (see
+    /// [`crate::recording::Labels::value`]); [`StillInterval::label_name`] is its text.
     pub label: Option<i64>,
+    /// The label's text and column, as tables and messages show it.
+    pub label_name: Option<HoldLabel>,
     /// Accelerometer statistics, if the recording has one.
     pub accel: Option<Pose>,
     /// Gyroscope statistics, if the recording has one.
@@ -85,7 +105,7 @@ impl StillInterval {
         if self.dropped.is_empty() {
             return None;
         }
-        let name = self.label.map_or(String::new(), |l| format!(" (pose {l})"));
+        let name = self.label_phrase();
         let what: Vec<String> = self.dropped.iter().map(DroppedSamples::phrase).collect();
         // The screen's bound is set so that a pose's own noise crosses it with small
         // probability over all its samples; a spike or a knock is a few samples. When most
@@ -104,6 +124,14 @@ impl StillInterval {
             self.t_end,
             what.join(", ")
         ))
+    }
+
+    /// The hold's label in parentheses after a space, as messages name the hold (` (pose P12)`),
+    /// or nothing for a hold without one.
+    pub fn label_phrase(&self) -> String {
+        self.label_name
+            .as_ref()
+            .map_or(String::new(), |l| format!(" ({l})"))
     }
 
     /// Duration in seconds.
@@ -160,6 +188,16 @@ pub struct StillReport {
 }
 
 impl StillReport {
+    /// The window in seconds: its samples times the sample period of `recording` (from its
+    /// median rate), to the microsecond. The rate comes from time stamps, whose rounding would
+    /// otherwise print as float noise (0.49999999999998934 s for 50 samples at 100 Hz); a
+    /// microsecond is far finer than any sample period. `None` without a window (holds from a
+    /// `pose` column) or a rate.
+    pub fn window_s(&self, recording: &Recording) -> Option<f64> {
+        let rate = recording.rate_hz().filter(|_| self.window > 0)?;
+        Some((self.window as f64 / rate * 1e6).round() / 1e6)
+    }
+
     /// One-line human summary.
     pub fn summary(&self) -> String {
         // Start from +0 so that an empty report prints "0.0 s", not "-0.0 s".

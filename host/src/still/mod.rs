@@ -41,7 +41,7 @@ use crate::recording::{LabelKind, Recording};
 use detect::detect;
 pub use detect::{BREAK_S, MAX_STILL_GYRO_STD_DPS};
 use holds::from_pose_column;
-pub use intervals::{NoiseFloor, StillInterval, StillReport, TempStats};
+pub use intervals::{HoldLabel, NoiseFloor, StillInterval, StillReport, TempStats};
 pub use options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
 pub use samples::{hold_samples, DroppedSamples, HoldSamples};
 
@@ -51,6 +51,11 @@ pub fn find_still(
     recording: &Recording,
     options: &StillOptions,
 ) -> Result<StillReport, StillError> {
+    // A `pose` column needs no window, but its holds are still reported in seconds and their
+    // magnetometer samples taken by time: row numbers would pass for both.
+    if recording.time_is_index {
+        return Err(StillError::NoRate(recording.source.display().to_string()));
+    }
     let mut report = match &recording.labels {
         Some(labels) if labels.kind == LabelKind::Pose => from_pose_column(recording),
         _ => detect(recording, options)?,

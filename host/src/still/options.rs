@@ -48,8 +48,8 @@ pub enum StillError {
     /// same rows) to detect stillness with.
     #[error("`{0}` has no accelerometer or gyroscope columns to detect still intervals with")]
     NoSensor(String),
-    /// Times are row numbers, so windows in seconds cannot be formed.
-    #[error("`{0}` has no `t_s` column and no sample rate was given; still detection works in seconds, so pass the rate (e.g. `--rate 100`)")]
+    /// Times are row numbers, so windows in seconds cannot be formed nor holds timed.
+    #[error("`{0}` has no `t_s` column and no sample rate was given; still intervals are found and timed in seconds, so pass the rate (e.g. `--rate 100`) or add a `t_s` column")]
     NoRate(String),
     /// The relative test found still stretches, but in every one the gyroscope varies by more
     /// than a board at rest can ([`super::MAX_STILL_GYRO_STD_DPS`]).

@@ -1,0 +1,121 @@
+//! Names in a header as loggers and spreadsheets write them: an imucal column name followed by
+//! its unit in brackets or parentheses (`ax [m/s2]`, `gx (dps)`, `mx [uT]`), and names that
+//! look like a sensor axis without being one of imucal's (`AccX`, `gyro_y`, `ax_raw`), which a
+//! reader leaves unread and a command must not then pass over in silence.
+
+use super::Sensor;
+
+/// A header name split into its column name and the unit written after it: `ax [m/s2]` gives
+/// `("ax", Some("m/s2"))`, `ax` gives `("ax", None)`. Only a unit that closes the name counts,
+/// and the name before it must not be empty (`[ms]` alone is a name, not a unit).
+pub fn split_unit(name: &str) -> (&str, Option<&str>) {
+    let name = name.trim();
+    for (open, close) in [('[', ']'), ('(', ')')] {
+        let Some(inner) = name.strip_suffix(close) else {
+            continue;
+        };
+        let Some(at) = inner.rfind(open) else {
+            continue;
+        };
+        let (base, unit) = (inner[..at].trim(), inner[at + open.len_utf8()..].trim());
+        if !base.is_empty() {
+            return (base, Some(unit));
+        }
+    }
+    (name, None)
+}
+
+/// How loggers name a sensor before its axis letter (`acc` in `AccX`, `gyro` in `gyro_y`).
+fn prefixes(sensor: Sensor) -> &'static [&'static str] {
+    match sensor {
+        Sensor::Accel => &[
+            "a",
+            "acc",
+            "accel",
+            "accl",
+            "accelerometer",
+            "acceleration",
+            "linacc",
+        ],
+        Sensor::Gyro => &[
+            "g",
+            "gyr",
+            "gyro",
+            "gyroscope",
+            "w",
+            "omega",
+            "angvel",
+            "rate",
+        ],
+        Sensor::Mag => &["m", "mag", "magn", "magneto", "magnetometer", "compass"],
+    }
+}
+
+/// The sensor whose axis a header name looks like (`AccX`, `acc_x`, `Gyro.Y [dps]`, `ax_raw`),
+/// `None` for any other name. The name's alphanumeric words, read from the start, must spell a
+/// sensor prefix and an axis letter; whatever follows (`_raw`, `_mps2`) does not matter.
+pub fn looks_like_axis(name: &str) -> Option<Sensor> {
+    let (base, _) = split_unit(name);
+    let lowered = base.to_lowercase();
+    let words: Vec<&str> = lowered
+        .split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| !w.is_empty())
+        .collect();
+    let mut spelled = String::new();
+    for word in words {
+        spelled.push_str(word);
+        let Some(stem) = spelled.strip_suffix(['x', 'y', 'z']) else {
+            continue;
+        };
+        if let Some(sensor) = Sensor::ALL
+            .into_iter()
+            .find(|s| prefixes(*s).contains(&stem))
+        {
+            return Some(sensor);
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_unit_in_brackets_or_parentheses_is_split_from_the_name() {
+        assert_eq!(split_unit("ax [m/s2]"), ("ax", Some("m/s2")));
+        assert_eq!(split_unit(" ax (m/s^2) "), ("ax", Some("m/s^2")));
+        assert_eq!(split_unit("gx[dps]"), ("gx", Some("dps")));
+        assert_eq!(split_unit("mx [uT]"), ("mx", Some("uT")));
+        assert_eq!(split_unit("ax"), ("ax", None));
+        assert_eq!(split_unit("[ms]"), ("[ms]", None));
+        assert_eq!(split_unit("ax [m/s2] raw"), ("ax [m/s2] raw", None));
+    }
+
+    #[test]
+    fn logger_names_of_sensor_axes_are_told_from_other_columns() {
+        for (name, sensor) in [
+            ("accx", Sensor::Accel),
+            ("acc_y", Sensor::Accel),
+            ("accel.z [g]", Sensor::Accel),
+            ("ax_raw", Sensor::Accel),
+            ("gyro_x", Sensor::Gyro),
+            ("gyrz", Sensor::Gyro),
+            ("magx", Sensor::Mag),
+            ("mag_y_ut", Sensor::Mag),
+        ] {
+            assert_eq!(looks_like_axis(name), Some(sensor), "{name}");
+        }
+        for name in [
+            "timestamp",
+            "max",
+            "temperature",
+            "note",
+            "extra",
+            "pose",
+            "xyz",
+        ] {
+            assert_eq!(looks_like_axis(name), None, "{name}");
+        }
+    }
+}
