@@ -29,6 +29,10 @@ const MAX_GYRO_OFFSET_RADS: f64 = 0.35;
 pub const MOTION_RATIO: f64 = 10.0;
 /// A hold is saturated on an axis when at least this fraction of its samples sit exactly at the
 /// recording's extreme value on that axis (noise spreads a real hold over several values).
+/// The premise is tested per axis: when the median hold repeats its previous sample in at least
+/// `SATURATED_FRACTION²` of its pairs, as independent draws with that fraction on one value
+/// would, the readings are quantised coarser than their noise and a pile on one value is no
+/// sign of a rail (a logger writing g to two decimals).
 pub const SATURATED_FRACTION: f64 = 0.5;
 /// Distinct gravity directions an accelerometer fit needs: the six faces of the board.
 pub const MIN_DIRECTIONS: usize = 6;
@@ -679,6 +683,20 @@ pub fn require_still(
     })
 }
 
+/// Per axis, the fraction of the consecutive sample pairs of `rows` that are equal; `None` for
+/// fewer than two samples.
+fn repeat_fractions(rows: &[usize], samples: &[Vec3]) -> Option<Vec3> {
+    let values: Vec<&Vec3> = rows.iter().filter_map(|&r| samples.get(r)).collect();
+    let pairs = values.len().checked_sub(1).filter(|&p| p > 0)?;
+    let mut equal = Vec3::zeros();
+    for w in values.windows(2) {
+        for k in 0..3 {
+            equal[k] += f64::from(u8::from(w[0][k] == w[1][k]));
+        }
+    }
+    Some(equal / pairs as f64)
+}
+
 /// Leave out holds that are saturated (an axis pinned at the recording's extreme value in at
 /// least [`SATURATED_FRACTION`] of the hold's samples, on an axis that shows noise in the
 /// median hold) or, for holds from a `pose` column, moving (variance [`MOTION_RATIO`] times
@@ -711,6 +729,19 @@ pub fn screen_holds(
                 )
             })
             .collect();
+        // Per axis: whether holds spread over several values, so a pile can mean a rail.
+        let repeats: Vec<Vec3> = still
+            .intervals
+            .iter()
+            .filter_map(|i| repeat_fractions(&i.rows(recording), samples))
+            .collect();
+        let noise_resolved: Vec<bool> = (0..3)
+            .map(|k| {
+                !repeats.is_empty()
+                    && median(repeats.iter().map(|r| r[k]).collect())
+                        < SATURATED_FRACTION * SATURATED_FRACTION
+            })
+            .collect();
         for (interval, reason) in still.intervals.iter().zip(reasons.iter_mut()) {
             if reason.is_some() {
                 continue;
@@ -728,7 +759,7 @@ pub fn screen_holds(
                 }
             }
             for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
-                if !(hi[k] > lo[k] && typical_var[k] > 0.0) {
+                if !(hi[k] > lo[k] && typical_var[k] > 0.0 && noise_resolved[k]) {
                     continue;
                 }
                 for ((rail, which), at_rail) in [(hi[k], "largest"), (lo[k], "smallest")]
@@ -736,7 +767,8 @@ pub fn screen_holds(
                     .zip(at_rails[k])
                 {
                     let fraction = at_rail as f64 / rows.len() as f64;
-                    if reason.is_none() && fraction >= SATURATED_FRACTION {
+                    // Pinned means repeated: one sample at the extreme is only the extreme.
+                    if reason.is_none() && at_rail >= 2 && fraction >= SATURATED_FRACTION {
                         *reason = Some(format!(
                             "the {sensor} {axis} axis sits at {rail} (the {which} value in the recording) in {:.0} % of its samples, so it is saturated at the end of its range; set the sensor to a larger full-scale range and hold that orientation again",
                             100.0 * fraction

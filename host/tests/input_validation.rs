@@ -85,6 +85,8 @@ struct Synthetic {
     shaking_hold: Option<usize>,
     /// Clip each accelerometer axis to ± this many g (the sensor's full-scale range per axis).
     clip_g: Option<Vec3>,
+    /// Decimals the accelerometer is written with (6 unless set).
+    accel_decimals: Option<usize>,
 }
 
 impl Synthetic {
@@ -98,6 +100,7 @@ impl Synthetic {
             pose_column: false,
             shaking_hold: None,
             clip_g: None,
+            accel_decimals: None,
         }
     }
 
@@ -122,8 +125,9 @@ impl Synthetic {
             let a = a * self.accel_per_g;
             let w = (rate + bias + Vec3::from_fn(|_, _| gyro_noise.sample(&mut rng)))
                 * self.gyro_per_rads;
+            let d = self.accel_decimals.unwrap_or(6);
             out.push_str(&format!(
-                "{t:.3},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+                "{t:.3},{:.d$},{:.d$},{:.d$},{:.6},{:.6},{:.6}",
                 a.x, a.y, a.z, w.x, w.y, w.z
             ));
             if self.pose_column {
@@ -392,6 +396,29 @@ fn a_saturated_hold_is_left_out_and_all_saturated_holds_are_refused() {
         &outcome,
         &["every hold", "all saturated", "within the sensor's range"],
     );
+}
+
+#[test]
+fn readings_quantised_coarser_than_their_noise_are_not_taken_for_a_saturated_axis() {
+    // g to one decimal: the noise (ACCEL_SIGMA_G) is far below the 0.1 g step, so a face-down
+    // hold reads −1.0 in every sample, the recording's smallest value, with no rail near.
+    let mut synthetic = Synthetic::new(twelve_directions());
+    synthetic.accel_per_g = 1.0;
+    synthetic.accel_decimals = Some(1);
+    let path = synthetic.write("one_decimal.csv");
+    let outcome = imucal(&[
+        "fit",
+        &path,
+        "--sensor",
+        "accel",
+        "--accel-unit",
+        "g",
+        "--json",
+    ]);
+    assert!(outcome.success, "{}", outcome.stderr);
+    assert!(!outcome.stderr.contains("saturated"), "{}", outcome.stderr);
+    let json: serde_json::Value = serde_json::from_str(&outcome.stdout).expect("JSON output");
+    assert_eq!(json["accel"]["n_poses"], 12, "{json}");
 }
 
 #[test]
