@@ -274,13 +274,7 @@ fn a_file_without_a_magnetometer_keeps_the_boards_field_and_the_history_records_
     std::fs::write(&path, file.to_json()).expect("temp dir writable");
     let db = temp_file("kept-mag.sqlite");
     let _ = std::fs::remove_file(&db);
-    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
-        .arg("flash")
-        .arg(&path)
-        .args(["--port", &fake.path, "--db"])
-        .arg(&db)
-        .output()
-        .expect("the imucal binary runs");
+    let out = flash_recording_in(&path, &fake.path, &db);
     let _ = std::fs::remove_file(&path);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let active = fake.state().active;
@@ -323,13 +317,7 @@ fn a_sensor_the_file_leaves_out_and_the_board_never_calibrated_is_recorded_as_no
     std::fs::write(&path, file.to_json()).expect("temp dir writable");
     let db = temp_file("never-calibrated-mag.sqlite");
     let _ = std::fs::remove_file(&db);
-    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
-        .arg("flash")
-        .arg(&path)
-        .args(["--port", &fake.path, "--db"])
-        .arg(&db)
-        .output()
-        .expect("the imucal binary runs");
+    let out = flash_recording_in(&path, &fake.path, &db);
     let _ = std::fs::remove_file(&path);
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(fake.state().active.mag, SensorCalibration::identity());
@@ -387,4 +375,19 @@ fn a_file_without_its_device_block_is_still_checked_against_the_boards_ranges() 
     let _ = std::fs::remove_file(&path);
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(fake.state().active.mag.b, set.mag.b);
+}
+
+/// `imucal flash PATH --port PORT --db DB`.
+fn flash_recording_in(
+    path: &std::path::Path,
+    port: &str,
+    db: &std::path::Path,
+) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .arg("flash")
+        .arg(path)
+        .args(["--port", port, "--db"])
+        .arg(db)
+        .output()
+        .expect("the imucal binary runs")
 }

@@ -167,6 +167,19 @@ impl Synthetic {
     }
 }
 
+/// `imucal fit PATH --sensor accel --accel-unit g --json`.
+fn fit_accel_in_g_as_json(path: &str) -> Outcome {
+    imucal(&[
+        "fit",
+        path,
+        "--sensor",
+        "accel",
+        "--accel-unit",
+        "g",
+        "--json",
+    ])
+}
+
 /// Twelve well-spread gravity directions: the six faces and six diagonals.
 fn twelve_directions() -> Vec<Vec3> {
     vec![
@@ -362,15 +375,7 @@ fn a_saturated_hold_is_left_out_and_all_saturated_holds_are_refused() {
     synthetic.clip_g = Some(Vec3::new(2.0, 2.0, 0.99));
     synthetic.accel_per_g = 1.0;
     let path = synthetic.write("clipped.csv");
-    let outcome = imucal(&[
-        "fit",
-        &path,
-        "--sensor",
-        "accel",
-        "--accel-unit",
-        "g",
-        "--json",
-    ]);
+    let outcome = fit_accel_in_g_as_json(&path);
     assert!(outcome.success, "{}", outcome.stderr);
     assert_eq!(
         outcome.stderr.matches("is left out").count(),
@@ -406,15 +411,7 @@ fn readings_quantised_coarser_than_their_noise_are_not_taken_for_a_saturated_axi
     synthetic.accel_per_g = 1.0;
     synthetic.accel_decimals = Some(1);
     let path = synthetic.write("one_decimal.csv");
-    let outcome = imucal(&[
-        "fit",
-        &path,
-        "--sensor",
-        "accel",
-        "--accel-unit",
-        "g",
-        "--json",
-    ]);
+    let outcome = fit_accel_in_g_as_json(&path);
     assert!(outcome.success, "{}", outcome.stderr);
     assert!(!outcome.stderr.contains("saturated"), "{}", outcome.stderr);
     let json: serde_json::Value = serde_json::from_str(&outcome.stdout).expect("JSON output");

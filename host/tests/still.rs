@@ -141,8 +141,10 @@ fn holds_shorter_than_the_minimum_are_dropped() {
     assert!(report.intervals.is_empty(), "{}", report.summary());
 }
 
-#[test]
-fn a_pose_column_gives_one_hold_per_label_without_detection() {
+/// The six-face recording of seed 5 (3 s holds) with a `pose` column naming hold `i` `name(i)`.
+fn six_faces_labelled_by_pose(
+    name: impl Fn(usize) -> String,
+) -> (Recording, Vec<(f64, f64, Vec3)>) {
     let (mut rec, truth) = six_face_recording(5, 3.0);
     let per_row = rec
         .time
@@ -151,9 +153,15 @@ fn a_pose_column_gives_one_hold_per_label_without_detection() {
         .collect();
     rec.labels = Some(Labels {
         kind: LabelKind::Pose,
-        names: (0..6).map(|i| (10 + i).to_string()).collect(),
+        names: (0..6).map(name).collect(),
         per_row,
     });
+    (rec, truth)
+}
+
+#[test]
+fn a_pose_column_gives_one_hold_per_label_without_detection() {
+    let (rec, truth) = six_faces_labelled_by_pose(|i| (10 + i).to_string());
     let report = find_still(&rec, &StillOptions::default()).expect("labels are used");
     assert!(report.from_pose_column);
     assert_eq!(report.intervals.len(), 6);
@@ -216,17 +224,7 @@ fn a_hold_warning_names_the_label_text_and_column_the_table_shows() {
 
 #[test]
 fn a_pose_column_without_time_or_rate_asks_for_the_rate_as_detection_does() {
-    let (mut rec, truth) = six_face_recording(5, 3.0);
-    let per_row = rec
-        .time
-        .iter()
-        .map(|t| truth.iter().position(|(a, b, _)| t >= a && t < b))
-        .collect();
-    rec.labels = Some(Labels {
-        kind: LabelKind::Pose,
-        names: (0..6).map(|i| i.to_string()).collect(),
-        per_row,
-    });
+    let (mut rec, _) = six_faces_labelled_by_pose(|i| i.to_string());
     rec.time = (0..rec.len()).map(|i| i as f64).collect();
     rec.time_is_index = true;
     let error = find_still(&rec, &StillOptions::default()).expect_err("row numbers are no seconds");
