@@ -8,6 +8,7 @@
 //! [`DeviceClient::capture_pose`], [`DeviceClient::collect_samples`],
 //! [`DeviceClient::write_params_verified`] and friends drive the board.
 
+mod board_identity;
 mod client;
 mod error;
 mod params_binding;

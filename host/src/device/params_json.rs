@@ -30,7 +30,7 @@ use imucal_protocol::{
 };
 use serde::{Deserialize, Serialize};
 
-pub use super::params_binding::{DeviceJson, RangesJson};
+pub use super::board_identity::{DeviceJson, RangesJson};
 
 /// Format version of the parameter file written by this tool.
 pub const PARAMS_FILE_FORMAT: u16 = 2;
