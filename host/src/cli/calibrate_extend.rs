@@ -10,6 +10,7 @@ use imucal::device::DeviceClient;
 use imucal::device::ParamsFile;
 use imucal::recording::Sensor;
 use imucal::session::extend::extended_uncertainties;
+use imucal::session::rest::WorseAtRest;
 use imucal::session::solve::{verdict_with_terms, Uncertainties};
 use imucal::session::{
     analyse_poses, extend_set, rest_errors, stream_for, ExtendedSet, RestErrors, SessionOptions,
@@ -178,55 +179,59 @@ pub(super) fn close_the_loop(
     });
     // Terms the holds supported can still be wrong where the board lies now: a set that checks
     // worse at rest than the base set did on the same board, and worse than it claims, gives
-    // way to it.
-    if let (Ok(with_terms), Some(with_base)) = (&rest, outcome.after.as_ref()) {
-        let gyro_sigma_dps = uncertainties
-            .gyro_bias_dps
-            .iter()
-            .map(|s| s * s)
-            .sum::<f64>()
-            .sqrt();
-        let worse = with_terms.worse_than(with_base, [uncertainties.accel_norm_mg, gyro_sigma_dps]);
-        if !worse.is_empty() {
-            say!(
-                "The extended set checks worse at rest than the base set and than its own \
-                 uncertainty: {}; the base set is written back",
-                worse.join("; ")
-            );
-            let status = client.write_params_verified(&outcome.fit.set)?;
-            say!(
-                "Base set written back, committed, read back and compared: CRC {:#010x} (store \
-                 sequence {})",
-                status.active_crc,
-                status.active_seq
-            );
-            // params.json names the set on the board; the extended one is kept beside it.
-            let extended_path = dir.join("params-extended.json");
-            std::fs::rename(&params_path, &extended_path)
-                .and_then(|()| std::fs::copy(&base_path, &params_path).map(|_| ()))
-                .with_context(|| format!("could not restore {}", params_path.display()))?;
-            return Ok(Closed::RevertedAtRest {
-                worse,
-                extended_path,
-            });
-        }
-    }
-    // Worse here but within what the set claims: kept, and said.
-    let note = match (&rest, outcome.after.as_ref()) {
+    // way to it; worse within its claim, it stays and that is said.
+    let gyro_sigma_dps = uncertainties
+        .gyro_bias_dps
+        .iter()
+        .map(|s| s * s)
+        .sum::<f64>()
+        .sqrt();
+    let worse = match (&rest, outcome.after.as_ref()) {
         (Ok(with_terms), Some(with_base)) => {
-            let worse = with_terms.worse_than(with_base, [0.0, 0.0]);
-            (!worse.is_empty()).then(|| {
-                format!(
-                    "at rest the extended set reads worse than the base set where the board \
-                     lies now ({}), within its own uncertainty: the base set's offsets were \
-                     fitted with what the added terms now model, so they suit some orientations \
-                     better and others worse",
-                    worse.join("; ")
-                )
-            })
+            with_terms.worse_than(with_base, [uncertainties.accel_norm_mg, gyro_sigma_dps])
         }
-        _ => None,
+        _ => Vec::new(),
     };
+    let list = |items: &[&WorseAtRest]| {
+        items
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join("; ")
+    };
+    let condemned: Vec<&WorseAtRest> = worse.iter().filter(|w| w.beyond_claim).collect();
+    if !condemned.is_empty() {
+        let worse = list(&condemned);
+        say!(
+            "The extended set checks worse at rest than the base set and than its own \
+             uncertainty: {worse}; the base set is written back"
+        );
+        let status = client.write_params_verified(&outcome.fit.set)?;
+        say!(
+            "Base set written back, committed, read back and compared: CRC {:#010x} (store \
+             sequence {})",
+            status.active_crc,
+            status.active_seq
+        );
+        // params.json names the set on the board; the extended one is kept beside it.
+        let extended_path = dir.join("params-extended.json");
+        std::fs::rename(&params_path, &extended_path)
+            .and_then(|()| std::fs::copy(&base_path, &params_path).map(|_| ()))
+            .with_context(|| format!("could not restore {}", params_path.display()))?;
+        return Ok(Closed::RevertedAtRest {
+            worse: vec![worse],
+            extended_path,
+        });
+    }
+    let note = (!worse.is_empty()).then(|| {
+        format!(
+            "at rest the extended set reads worse than the base set where the board lies now \
+             ({}), within three times its own uncertainty: the base set's offsets were fitted \
+             with what the added terms now model, so they suit some orientations better and \
+             others worse",
+            list(&worse.iter().collect::<Vec<_>>())
+        )
+    });
     if let Some(note) = &note {
         say!("Note: {note}");
     }

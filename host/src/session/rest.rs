@@ -105,50 +105,85 @@ impl RestErrors {
     }
 
     /// The quantities (`|a| error`, `gyro rate`) in which these errors are worse than
-    /// `other`'s and beyond what the set measured claims, one sentence each. Worse: by more than
-    /// three standard errors of the difference, so the noise of two short measurements does
-    /// not decide. Beyond the claim: above three times `stated` (the set's own one-sigma error
-    /// of `|a|` in mg and of the rate in °/s) combined with the measurement's noise, since a
-    /// set can be worse at one orientation and better over all of them (a base bias measured
-    /// where the board lies now). The magnetometer is not compared (both sets share it).
-    pub fn worse_than(&self, other: &RestErrors, stated: [f64; 2]) -> Vec<String> {
+    /// `other`'s by more than three standard errors of the difference (so the noise of two
+    /// short measurements does not decide), each with whether it is also beyond what the set
+    /// measured claims: above three times `stated` (its own one-sigma error of `|a|` in mg and
+    /// of the rate in °/s) combined with the measurement's noise. A set can be worse at one
+    /// orientation and better over all of them (a base bias measured where the board lies
+    /// now), so only a difference beyond the claim condemns it. The magnetometer is not
+    /// compared (both sets share it).
+    pub fn worse_than(&self, other: &RestErrors, stated: [f64; 2]) -> Vec<WorseAtRest> {
         let mut worse = Vec::new();
-        for ((what, mine, my_noise, theirs, their_noise, unit), claim) in [
+        for ((what, unit, mine, my_noise, theirs, their_noise), claim) in [
             (
                 "|a| error",
+                "mg",
                 self.accel_error_mg,
                 self.accel_noise_mg,
                 other.accel_error_mg,
                 other.accel_noise_mg,
-                "mg",
             ),
             (
                 "gyro rate",
+                "°/s",
                 self.gyro_rate_dps,
                 self.gyro_noise_dps,
                 other.gyro_rate_dps,
                 other.gyro_noise_dps,
-                "°/s",
             ),
         ]
         .into_iter()
         .zip(stated)
         {
             let noise = my_noise.max(0.0).hypot(their_noise.max(0.0));
-            let claimed = if claim.is_finite() {
+            let stated_sigma = if claim.is_finite() {
                 claim.max(0.0)
             } else {
                 0.0
             };
-            let beyond_claim = mine > 3.0 * claimed.hypot(my_noise.max(0.0));
-            if mine - theirs > 3.0 * noise && beyond_claim {
-                worse.push(format!(
-                    "{what} {mine:.4} {unit} against {theirs:.4} {unit} (± {noise:.4} {unit}; \
-                     its stated σ {claimed:.4} {unit})"
-                ));
+            if mine - theirs > 3.0 * noise {
+                worse.push(WorseAtRest {
+                    what,
+                    unit,
+                    value: mine,
+                    other: theirs,
+                    noise,
+                    stated_sigma,
+                    beyond_claim: mine > 3.0 * stated_sigma.hypot(my_noise.max(0.0)),
+                });
             }
         }
         worse
+    }
+}
+
+/// One quantity in which a set checks worse at rest than another ([`RestErrors::worse_than`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorseAtRest {
+    /// `|a| error` or `gyro rate`.
+    pub what: &'static str,
+    /// Its unit.
+    pub unit: &'static str,
+    /// The set's value.
+    pub value: f64,
+    /// The other set's value.
+    pub other: f64,
+    /// Standard error of the difference.
+    pub noise: f64,
+    /// The set's own stated one-sigma error of the quantity.
+    pub stated_sigma: f64,
+    /// Whether the value is beyond three times the stated σ (with the measurement's noise).
+    pub beyond_claim: bool,
+}
+
+impl std::fmt::Display for WorseAtRest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let unit = self.unit;
+        write!(
+            f,
+            "{} {:.4} {unit} against {:.4} {unit} (± {:.4} {unit}; its stated σ {:.4} {unit})",
+            self.what, self.value, self.other, self.noise, self.stated_sigma
+        )
     }
 }
 
@@ -200,7 +235,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_set_is_worse_at_rest_only_beyond_the_noise_of_both_checks_and_its_own_uncertainty() {
+    fn a_set_is_worse_at_rest_beyond_the_noise_of_both_checks_and_condemned_beyond_its_claim() {
         let check = |gyro_dps: f64| RestErrors {
             samples: 200,
             duration_s: 2.0,
@@ -214,11 +249,21 @@ mod tests {
         };
         let base = check(0.015);
         // 0.15 °/s against 0.015: worse beyond the noise (± 0.007 °/s) ...
-        let worse = check(0.15).worse_than(&base, [0.0, 0.0]);
+        let worse = check(0.15).worse_than(&base, [0.2, 0.054]);
         assert_eq!(worse.len(), 1, "{worse:?}");
-        assert!(worse[0].starts_with("gyro rate 0.1500 °/s"), "{worse:?}");
-        // ... but within three times a stated σ of 0.054 °/s: not beyond the set's claim.
-        assert!(check(0.15).worse_than(&base, [0.2, 0.054]).is_empty());
+        assert!(
+            worse[0].to_string().starts_with("gyro rate 0.1500 °/s"),
+            "{}",
+            worse[0]
+        );
+        assert!(
+            worse[0].to_string().contains("its stated σ 0.0540"),
+            "{}",
+            worse[0]
+        );
+        // ... but within three times its stated σ of 0.054 °/s: not beyond its claim.
+        assert!(!worse[0].beyond_claim);
+        assert!(check(0.15).worse_than(&base, [0.2, 0.02])[0].beyond_claim);
         // Within the noise of the two checks: not worse.
         assert!(check(0.030).worse_than(&base, [0.0, 0.0]).is_empty());
     }
