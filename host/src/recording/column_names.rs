@@ -36,6 +36,7 @@ fn prefixes(sensor: Sensor) -> &'static [&'static str] {
             "accelerometer",
             "acceleration",
             "linacc",
+            "linearacceleration",
         ],
         Sensor::Gyro => &[
             "g",
@@ -45,15 +46,27 @@ fn prefixes(sensor: Sensor) -> &'static [&'static str] {
             "w",
             "omega",
             "angvel",
+            "angularvelocity",
+            "angularrate",
             "rate",
         ],
-        Sensor::Mag => &["m", "mag", "magn", "magneto", "magnetometer", "compass"],
+        Sensor::Mag => &[
+            "m",
+            "mag",
+            "magn",
+            "magneto",
+            "magnetometer",
+            "compass",
+            "magfield",
+            "magneticfield",
+        ],
     }
 }
 
-/// The sensor whose axis a header name looks like (`AccX`, `acc_x`, `Gyro.Y [dps]`, `ax_raw`),
-/// `None` for any other name. The name's alphanumeric words, read from the start, must spell a
-/// sensor prefix and an axis letter; whatever follows (`_raw`, `_mps2`) does not matter.
+/// The sensor whose axis a header name looks like (`AccX`, `acc_x`, `Gyro.Y [dps]`, `ax_raw`,
+/// `Magnetic Field x (µT)`, ROS's `field.angular_velocity.x`), `None` for any other name. Some
+/// run of the name's alphanumeric words must spell a sensor prefix and an axis letter; what
+/// comes before (`field.`) or after (`_raw`, `_mps2`) does not matter.
 pub fn looks_like_axis(name: &str) -> Option<Sensor> {
     let (base, _) = split_unit(name);
     let lowered = base.to_lowercase();
@@ -61,20 +74,16 @@ pub fn looks_like_axis(name: &str) -> Option<Sensor> {
         .split(|c: char| !c.is_ascii_alphanumeric())
         .filter(|w| !w.is_empty())
         .collect();
-    let mut spelled = String::new();
-    for word in words {
-        spelled.push_str(word);
-        let Some(stem) = spelled.strip_suffix(['x', 'y', 'z']) else {
-            continue;
-        };
-        if let Some(sensor) = Sensor::ALL
-            .into_iter()
-            .find(|s| prefixes(*s).contains(&stem))
-        {
-            return Some(sensor);
-        }
-    }
-    None
+    (0..words.len()).find_map(|start| {
+        let mut spelled = String::new();
+        words[start..].iter().find_map(|word| {
+            spelled.push_str(word);
+            let stem = spelled.strip_suffix(['x', 'y', 'z'])?;
+            Sensor::ALL
+                .into_iter()
+                .find(|s| prefixes(*s).contains(&stem))
+        })
+    })
 }
 
 #[cfg(test)]
@@ -103,6 +112,11 @@ mod tests {
             ("gyrz", Sensor::Gyro),
             ("magx", Sensor::Mag),
             ("mag_y_ut", Sensor::Mag),
+            // phyphox and ROS (`rostopic echo -p`) exports.
+            ("Magnetic Field x (µT)", Sensor::Mag),
+            ("field.angular_velocity.x", Sensor::Gyro),
+            ("linear_acceleration_y", Sensor::Accel),
+            ("field.magnetic_field.z", Sensor::Mag),
         ] {
             assert_eq!(looks_like_axis(name), Some(sensor), "{name}");
         }
@@ -114,6 +128,8 @@ mod tests {
             "extra",
             "pose",
             "xyz",
+            "field.header.stamp",
+            "orientation_covariance_0",
         ] {
             assert_eq!(looks_like_axis(name), None, "{name}");
         }
