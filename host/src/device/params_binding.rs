@@ -61,6 +61,8 @@ impl ParamsFile {
             }
             let largest = sensor.b.iter().fold(0.0_f64, |m, b| m.max(b.abs()));
             if largest + reference > range {
+                // The board sends its range as f32: printed so, without f64's tail of digits.
+                let range = range as f32;
                 found.push(format!(
                 "its {name} offset of {largest:.4} {unit} (with the reference of {reference:.4} \
                  {unit} on top) lies beyond the board's ±{range} {unit} range, so it was measured \
