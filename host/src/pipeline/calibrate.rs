@@ -295,6 +295,12 @@ impl SensorContext<'_> {
 /// without ([`leave_one_out_where_refittable`]), saying which poses are not in it.
 fn held_out_where_refittable(fit: &mut Fit, poses: &[Pose], gravity: f64, notes: &mut Vec<String>) {
     let Some((rms, kept)) = leave_one_out_where_refittable(fit.method, poses, gravity) else {
+        notes.push(format!(
+            "{}: no leave-one-out RMS: fewer than two of the {} poses can be held out (the \
+             model is refused without each of the others); record more poses",
+            fit.method.name(),
+            poses.len()
+        ));
         return;
     };
     fit.loo_rms = Some(rms);

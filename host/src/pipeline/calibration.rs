@@ -160,9 +160,14 @@ impl SensorOutcome {
         } else if let Some(floor) = self.noise_floor.filter(|f| *f > 0.0) {
             let ratio = fit.rms / floor;
             // Noise never leaves a residual a millionth of its floor: the fit has as many
-            // unknowns as equations and passes through every pose.
-            found |= !(1e-6..=3.0).contains(&ratio);
-            if ratio < 1e-6 {
+            // unknowns as equations and passes through every pose. An iterative fit stops
+            // short of exact, so the count decides where it is known.
+            let determined = self.sensor == Sensor::Accel
+                && self.n_poses > 0
+                && self.n_poses <= super::chain::unknowns(fit.method);
+            let exact = ratio < 1e-6 || determined;
+            found |= exact || ratio > 3.0;
+            if exact {
                 parts.push(
                     "the fit passes through every pose exactly (as many unknowns as poses), so \
                      its residual says nothing of its accuracy; add poses"
@@ -433,4 +438,42 @@ pub fn once_per_reason(reasons: &[(&str, String)]) -> Vec<String> {
         .into_iter()
         .map(|(names, reason)| format!("{} {reason}", names.join(" and ")))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::{Calibration, Mat3, Method, Vec3};
+
+    /// An accelerometer outcome of `method` on `poses` poses with residual `rms` over a noise
+    /// floor of 1e-4 (no χ² test: the verdict reads the floor).
+    fn outcome(method: Method, poses: usize, rms: f64) -> SensorOutcome {
+        let cal = Calibration {
+            a: Mat3::identity(),
+            b: Vec3::zeros(),
+        };
+        let mut fit = crate::fit::Fit::closed_form(method, cal, &[], 9.81, 1.0);
+        fit.rms = rms;
+        let mut out = SensorOutcome::without_fit(Sensor::Accel, "m/s²", String::new());
+        out.fit = Ok(fit);
+        out.n_poses = poses;
+        out.noise_floor = Some(1e-4);
+        out
+    }
+
+    #[test]
+    fn a_fit_with_as_many_unknowns_as_poses_is_called_exact_whatever_its_solver_left() {
+        // lm stops at its tolerance, a few percent of the floor, where Chen's closed form is
+        // exact to rounding: both pass through nine poses with nine unknowns.
+        for (method, rms) in [(Method::Lm, 9e-7), (Method::Chen, 1e-14)] {
+            let verdict = outcome(method, 9, rms).verdict().unwrap_or_default();
+            assert!(
+                verdict.contains("passes through every pose exactly"),
+                "{verdict}"
+            );
+        }
+        // With a pose more the same residual is at the floor.
+        let verdict = outcome(Method::Lm, 10, 9e-7).verdict().unwrap_or_default();
+        assert!(verdict.contains("at the noise floor"), "{verdict}");
+    }
 }
