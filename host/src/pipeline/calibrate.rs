@@ -250,7 +250,14 @@ impl SensorContext<'_> {
             let fit = match self.method {
                 Some(m) => fit_accel(m, &poses, gravity).map(|mut f| {
                     if f.loo_rms.is_none() {
-                        held_out_where_refittable(&mut f, &poses, gravity, &mut outcome.notes);
+                        let names = still.pose_names(sensor);
+                        held_out_where_refittable(
+                            &mut f,
+                            &poses,
+                            &names,
+                            gravity,
+                            &mut outcome.notes,
+                        );
                     }
                     f
                 }),
@@ -293,7 +300,13 @@ impl SensorContext<'_> {
 
 /// Give `fit` (a model the user chose) the held-out error over the poses it can be refit
 /// without ([`leave_one_out_where_refittable`]), saying which poses are not in it.
-fn held_out_where_refittable(fit: &mut Fit, poses: &[Pose], gravity: f64, notes: &mut Vec<String>) {
+fn held_out_where_refittable(
+    fit: &mut Fit,
+    poses: &[Pose],
+    names: &[String],
+    gravity: f64,
+    notes: &mut Vec<String>,
+) {
     let Some((rms, kept)) = leave_one_out_where_refittable(fit.method, poses, gravity) else {
         notes.push(format!(
             "{}: no leave-one-out RMS: fewer than two of the {} poses can be held out (the \
@@ -307,11 +320,15 @@ fn held_out_where_refittable(fit: &mut Fit, poses: &[Pose], gravity: f64, notes:
     if kept.len() < poses.len() {
         let left: Vec<String> = (0..poses.len())
             .filter(|i| !kept.contains(i))
-            .map(|i| format!("#{}", i + 1))
+            .map(|i| {
+                names
+                    .get(i)
+                    .map_or_else(|| format!("pose {i}"), |n| format!("the {n}"))
+            })
             .collect();
         notes.push(format!(
             "{}: leave-one-out RMS over {} of {} poses; without {} the model is refused, so \
-             {} not held out (poses numbered from 1 in the order fitted)",
+             {} not held out",
             fit.method.name(),
             kept.len(),
             poses.len(),

@@ -270,6 +270,23 @@ impl StillReport {
             .collect()
     }
 
+    /// Each of [`Self::poses`] named as the hold warnings name it: "hold at 12.0–16.0 s
+    /// (pose P12)".
+    pub fn pose_names(&self, sensor: Sensor) -> Vec<String> {
+        self.intervals
+            .iter()
+            .filter(|i| i.pose(sensor).is_some())
+            .map(|i| {
+                format!(
+                    "hold at {:.1}–{:.1} s{}",
+                    i.t_start,
+                    i.t_end,
+                    i.label_phrase()
+                )
+            })
+            .collect()
+    }
+
     /// The standard error of each of [`Self::poses`]' means, in the same order.
     pub fn pose_sigmas(&self, sensor: Sensor) -> Vec<Option<Vec3>> {
         self.intervals
