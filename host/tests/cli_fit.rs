@@ -512,10 +512,10 @@ fn a_still_detection_flag_out_of_range_is_a_usage_error_naming_the_flag() {
 }
 
 #[test]
-fn a_rate_that_is_not_positive_is_a_usage_error_with_exit_status_2() {
+fn a_rate_no_sensor_samples_at_is_a_usage_error_with_exit_status_2() {
     let nilspod = real("imucal_nilspod_ferraris.csv");
     for command in ["fit", "still", "analyze"] {
-        for rate in ["0", "-100", "inf"] {
+        for rate in ["0", "-100", "inf", "1e-300", "1e12"] {
             let given = format!("--rate={rate}");
             let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
                 .args([command, &nilspod, "--gyro-unit", "dps", &given])

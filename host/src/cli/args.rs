@@ -171,8 +171,8 @@ pub struct InputArgs {
     /// name, e.g. `mx [uT]`, else ut).
     #[arg(long, value_enum)]
     pub mag_unit: Option<MagUnitArg>,
-    /// Sample rate in Hz for files without a `t_s` column.
-    #[arg(long, value_parser = positive)]
+    /// Sample rate in Hz for files without a `t_s` column (0.001 Hz to 1 MHz).
+    #[arg(long, value_parser = sample_rate)]
     pub rate: Option<f64>,
     /// Magnetometer file with its own clock (default: `<name>_mag.csv` next to the recording, if present).
     #[arg(long)]
@@ -226,6 +226,16 @@ fn number_that(text: &str, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, 
 
 fn positive(text: &str) -> Result<f64, String> {
     number_that(text, |v| v > 0.0, "a positive number")
+}
+
+/// `--rate`: beyond 0.001 Hz – 1 MHz no inertial or magnetic sensor samples, so a value
+/// outside is a typo (`1e-300` would print holds of 10³⁰⁰ s).
+fn sample_rate(text: &str) -> Result<f64, String> {
+    number_that(
+        text,
+        |v| (1e-3..=1e6).contains(&v),
+        "a sample rate from 0.001 Hz to 1 MHz",
+    )
 }
 
 fn non_negative(text: &str) -> Result<f64, String> {
