@@ -74,6 +74,17 @@ fn parse_header(path: &Path, line: &str) -> Result<Header, RecordingError> {
         column: names[i].clone(),
         unit: split[i].1.unwrap_or("").to_string(),
         accepted,
+        fix: match split[i].0 {
+            "t_s" => {
+                "a time column in another unit is read through a mapping that names its unit: \
+                 `--columns t_ms=<column>,…` (or t_us, t_ns) with every other column to read"
+            }
+            "temp_c" | "pose" | "segment" => "leave the unit out of the name",
+            _ => {
+                "write one it reads in the brackets, or leave the unit out of the name and give \
+                 it with --accel-unit, --gyro-unit or --mag-unit"
+            }
+        },
     };
     let mut sensors = Vec::new();
     let mut unit_columns = Vec::new();

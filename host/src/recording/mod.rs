@@ -89,7 +89,7 @@ pub enum RecordingError {
         column: String,
     },
     /// A column name carries a unit imucal does not read for that column.
-    #[error("`{path}`, header: column `{column}` gives its unit as `{unit}`, which imucal does not read for that column; write one it reads in the brackets, or leave the unit out of the name and give it with the unit option (the units read there: {accepted})")]
+    #[error("`{path}`, header: column `{column}` gives its unit as `{unit}`, which imucal does not read for that column (the units read there: {accepted}); {fix}")]
     UnknownUnit {
         /// File concerned.
         path: String,
@@ -99,6 +99,8 @@ pub enum RecordingError {
         unit: String,
         /// The units accepted for that column.
         accepted: &'static str,
+        /// What to do instead, for that column.
+        fix: &'static str,
     },
     /// The columns of one sensor name different units.
     #[error("`{path}`, header: columns `{first}` and `{second}` give different units, but a sensor's three columns share one; correct the header")]
