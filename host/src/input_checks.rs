@@ -58,7 +58,7 @@ pub const FIELD_REFUSE_FACTOR: f64 = 2.0;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum InputError {
     /// The accelerometer's magnitude at rest does not match its declared unit.
-    #[error("the accelerometer reads about {magnitude:.3} at rest, which {looks_like}, but --accel-unit is {declared}; pass --accel-unit {fix}")]
+    #[error("the accelerometer reads about {magnitude:.3} at rest, which {looks_like}, but it is read as {declared} (--accel-unit, else a unit written in the header, else mps2); pass --accel-unit {fix}")]
     AccelUnit {
         /// Median magnitude of all samples, in the file's numbers.
         magnitude: f64,
@@ -80,7 +80,7 @@ pub enum InputError {
         fix: String,
     },
     /// The magnetometer's field magnitude does not match its declared unit.
-    #[error("the magnetometer's field in the data is about {radius:.3} ({how}), which {looks_like}, but --mag-unit is {declared}; pass --mag-unit {fix}")]
+    #[error("the magnetometer's field in the data is about {radius:.3} ({how}), which {looks_like}, but it is read as {declared} (--mag-unit, else a unit written in the header, else ut); pass --mag-unit {fix}")]
     MagUnit {
         /// Field magnitude in the file's numbers.
         radius: f64,
@@ -378,11 +378,20 @@ pub fn check_gyro_unit(recording: &Recording, still: &StillReport) -> Result<(),
             ),
             _ => None,
         };
+        // Times from --rate scale every turn angle by the rate's error: name it first.
+        let rate_given = !recording.time_from_file && !recording.time_is_index;
         return match fix {
             Some(fix) => Err(InputError::GyroUnit {
                 evidence,
                 declared: declared_name,
-                fix: fix.to_string(),
+                fix: if rate_given {
+                    format!(
+                        "the times come from --rate, and a rate off by that factor turns the \
+                         gyroscope as far: check --rate first; else {fix}"
+                    )
+                } else {
+                    fix.to_string()
+                },
             }),
             None => Ok(()),
         };

@@ -419,22 +419,46 @@ fn readings_quantised_coarser_than_their_noise_are_not_taken_for_a_saturated_axi
 }
 
 #[test]
+fn a_gyroscope_that_turns_too_far_under_a_given_rate_names_the_rate_first() {
+    // The clean recording without its time column, read at a tenth of its 100 Hz: every move
+    // lasts ten times as long, so the gyroscope seems to turn ten times too far.
+    let csv = Synthetic::new(twelve_directions()).csv();
+    let untimed: String = csv
+        .lines()
+        .map(|line| {
+            line.split_once(',')
+                .map_or(line, |(_, rest)| rest)
+                .to_string()
+                + "\n"
+        })
+        .collect();
+    let path = write("untimed.csv", untimed.as_bytes());
+    let outcome = imucal(&["fit", &path, "--sensor", "gyro", "--rate", "10"]);
+    assert!(
+        outcome.stderr.contains("the times come from --rate")
+            && outcome.stderr.contains("check --rate first"),
+        "{}",
+        outcome.stderr
+    );
+}
+
+#[test]
 fn accelerometer_units_contradicted_by_the_rest_magnitude_are_refused_with_the_right_flag() {
     let cases: [(f64, &str, &str); 3] = [
         (
             1.0,
             "mps2",
-            "which looks like g, but --accel-unit is mps2; pass --accel-unit g",
+            "which looks like g, but it is read as mps2 (--accel-unit, else a unit written in the header, else mps2); pass --accel-unit g",
         ),
         (
             G,
             "g",
-            "which looks like m/s², but --accel-unit is g; pass --accel-unit mps2",
+            "which looks like m/s², but it is read as g (--accel-unit, else a unit written in the header, else mps2); pass --accel-unit mps2",
         ),
         (
             16384.0,
             "mps2",
-            "looks like raw counts, but --accel-unit is mps2; pass --accel-unit counts",
+            "looks like raw counts, but it is read as mps2 (--accel-unit, else a unit written in the header, else mps2); pass --accel-unit counts",
         ),
     ];
     for (per_g, declared, sentence) in cases {
