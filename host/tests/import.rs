@@ -107,6 +107,7 @@ fn mapped_columns_are_read_with_the_time_unit_of_the_key() {
         Path::new("export.csv"),
         &mapping,
         Units::default(),
+        &[],
         None,
     )
     .unwrap();
@@ -138,6 +139,7 @@ fn mapping_errors_name_the_problem_and_the_available_columns() {
         Path::new("e.csv"),
         &mapping,
         Units::default(),
+        &[],
         None,
     )
     .unwrap_err()
@@ -153,6 +155,7 @@ fn mapping_errors_name_the_problem_and_the_available_columns() {
         Path::new("e.csv"),
         &mapping,
         Units::default(),
+        &[],
         Some(10.0),
     )
     .unwrap_err()
@@ -175,8 +178,15 @@ Time;Label;AccX;AccY;AccZ
     let mapping: ColumnMapping = "t_s=Time,pose=Label,ax=AccX,ay=AccY,az=AccZ"
         .parse()
         .unwrap();
-    let recording =
-        mapping::parse(text, Path::new("p.csv"), &mapping, Units::default(), None).expect("reads");
+    let recording = mapping::parse(
+        text,
+        Path::new("p.csv"),
+        &mapping,
+        Units::default(),
+        &[],
+        None,
+    )
+    .expect("reads");
     let labels = recording.labels.expect("a pose column");
     assert_eq!(labels.kind, imucal::recording::LabelKind::Pose);
     assert_eq!(labels.names, ["up", "down"]);
@@ -186,8 +196,15 @@ Time;Label;AccX;AccY;AccZ
     let segments: ColumnMapping = "t_s=Time,segment=Label,ax=AccX,ay=AccY,az=AccZ"
         .parse()
         .unwrap();
-    let recording =
-        mapping::parse(text, Path::new("p.csv"), &segments, Units::default(), None).expect("reads");
+    let recording = mapping::parse(
+        text,
+        Path::new("p.csv"),
+        &segments,
+        Units::default(),
+        &[],
+        None,
+    )
+    .expect("reads");
     let labels = recording.labels.expect("a segment column");
     assert_eq!(labels.kind, imucal::recording::LabelKind::Segment);
 
@@ -196,4 +213,45 @@ Time;Label;AccX;AccY;AccZ
         .unwrap_err()
         .to_string();
     assert!(twice.contains("two label columns"), "{twice}");
+}
+
+#[test]
+fn units_written_after_mapped_column_names_are_the_sensors_units_unless_an_option_says_otherwise() {
+    let text = "Time;AccX [g];AccY [g];AccZ [g];GyrX (dps);GyrY (dps);GyrZ (dps)\n\
+                0.00;0.01;0.02;1.00;0.5;0.0;-0.5\n\
+                0.01;0.01;0.02;1.00;0.5;0.0;-0.5\n";
+    let mapping: ColumnMapping =
+        "t_s=Time,ax=AccX [g],ay=AccY [g],az=AccZ [g],gx=GyrX (dps),gy=GyrY (dps),gz=GyrZ (dps)"
+            .parse()
+            .expect("a valid mapping");
+    let recording = mapping::parse(
+        text,
+        Path::new("u.csv"),
+        &mapping,
+        Units::default(),
+        &[],
+        None,
+    )
+    .expect("reads");
+    assert_eq!(recording.units.accel, AccelUnit::G);
+    assert_eq!(recording.units.gyro, GyroUnit::Dps);
+    // --accel-unit mps2 given against the names' g: refused, naming both.
+    let stated = Units {
+        accel: AccelUnit::Mps2,
+        ..Units::default()
+    };
+    let error = mapping::parse(
+        text,
+        Path::new("u.csv"),
+        &mapping,
+        stated,
+        &[Sensor::Accel],
+        None,
+    )
+    .expect_err("the option contradicts the header")
+    .to_string();
+    assert!(
+        error.contains("--accel-unit") && error.contains("AccX [g]"),
+        "{error}"
+    );
 }

@@ -210,6 +210,22 @@ pub struct InputArgs {
     pub direction_angle: f64,
 }
 
+impl InputArgs {
+    /// The sensors whose unit the user gave with a unit option (a unit written in a column's
+    /// name that says another is then refused, not taken).
+    pub fn units_stated(&self) -> Vec<imucal::recording::Sensor> {
+        use imucal::recording::Sensor;
+        [
+            (Sensor::Accel, self.accel_unit.is_some()),
+            (Sensor::Gyro, self.gyro_unit.is_some()),
+            (Sensor::Mag, self.mag_unit.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(sensor, stated)| stated.then_some(sensor))
+        .collect()
+    }
+}
+
 /// A finite number from `text` that satisfies `ok` (described by `what`), for flag values.
 fn number_that(text: &str, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, String> {
     let value: f64 = text

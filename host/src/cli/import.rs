@@ -13,7 +13,7 @@ pub fn load(input: &InputArgs, units: Units) -> anyhow::Result<Option<Recording>
     let path = &input.recording;
     if let Some(columns) = &input.columns {
         let mapping: ColumnMapping = columns.parse()?;
-        return mapping::load(path, &mapping, units, input.rate)
+        return mapping::load(path, &mapping, units, &input.units_stated(), input.rate)
             .map(Some)
             .context("the recording could not be read with the column mapping");
     }

@@ -117,17 +117,9 @@ fn read(input: &InputArgs, units: Units, only: Option<Sensor>) -> anyhow::Result
     if let Some(recording) = import::load(input, units)? {
         return Ok(recording);
     }
-    let units_stated = [
-        (Sensor::Accel, input.accel_unit.is_some()),
-        (Sensor::Gyro, input.gyro_unit.is_some()),
-        (Sensor::Mag, input.mag_unit.is_some()),
-    ]
-    .into_iter()
-    .filter_map(|(sensor, stated)| stated.then_some(sensor))
-    .collect();
     let options = LoadOptions {
         units,
-        units_stated,
+        units_stated: input.units_stated(),
         rate_hz: input.rate,
         mag_file: input.mag_file.clone(),
         no_mag_sibling: input.no_mag_sibling,

@@ -176,17 +176,38 @@ fn resolve_units(
     header: &Header,
     options: &LoadOptions,
 ) -> Result<Units, RecordingError> {
-    let mut units = options.units;
-    for &(sensor, column) in &header.unit_columns {
-        let name = &header.names[column];
+    units_from_names(
+        path,
+        &header.names,
+        &header.unit_columns,
+        options.units,
+        &options.units_stated,
+    )
+}
+
+/// `units` with each sensor's replaced by the unit written after the name of its column in
+/// `unit_columns` (index into `names`, e.g. `ax [g]`), unless the user stated the sensor's unit
+/// (`units_stated`) and the name says another, which is refused. Names without a unit, or
+/// with one imucal does not read, leave the sensor's unit as it is.
+pub(super) fn units_from_names(
+    path: &Path,
+    names: &[String],
+    unit_columns: &[(Sensor, usize)],
+    mut units: Units,
+    units_stated: &[Sensor],
+) -> Result<Units, RecordingError> {
+    let given = units;
+    for &(sensor, column) in unit_columns {
+        let Some(name) = names.get(column) else {
+            continue;
+        };
         let (_, Some(text)) = column_names::split_unit(name) else {
             continue;
         };
-        let Some(written) = options.units.with_symbol(sensor, text) else {
+        let Some(written) = given.with_symbol(sensor, text) else {
             continue;
         };
-        let stated = options.units_stated.contains(&sensor);
-        if stated && written.symbol(sensor) != options.units.symbol(sensor) {
+        if units_stated.contains(&sensor) && written.symbol(sensor) != given.symbol(sensor) {
             return Err(RecordingError::UnitDisagrees {
                 path: display(path),
                 column: name.clone(),
@@ -197,7 +218,7 @@ fn resolve_units(
                     Sensor::Gyro => "--gyro-unit",
                     Sensor::Mag => "--mag-unit",
                 },
-                given: options.units.symbol(sensor),
+                given: given.symbol(sensor),
             });
         }
         units = units.with_symbol(sensor, text).unwrap_or(units);

@@ -28,7 +28,8 @@ pub enum ImportError {
         /// Operating-system error.
         cause: std::io::Error,
     },
-    /// The input is not line-oriented UTF-8 text, or could not be read (see [`super::lines`]).
+    /// The input is not line-oriented UTF-8 text, or could not be read (see [`super::lines`]),
+    /// or a unit in a mapped column's name contradicts a unit option.
     #[error(transparent)]
     Text(#[from] super::RecordingError),
     /// A MotionCal log without any `Raw:` line.
@@ -243,11 +244,16 @@ fn split(line: &str, delimiter: char) -> Vec<&str> {
 }
 
 /// Reads delimited `text` with `mapping`; `path` names the file in errors and the recording.
+///
+/// A unit written after a mapped sensor column's name (`AccX [g]`) is that sensor's unit, as
+/// in imucal's own CSV, unless the sensor is in `units_stated` (its unit option was given) and
+/// the name says another, which is refused.
 pub fn parse(
     text: &str,
     path: &Path,
     mapping: &ColumnMapping,
     units: Units,
+    units_stated: &[Sensor],
     rate_hz: Option<f64>,
 ) -> Result<Recording, ImportError> {
     let shown = path.display().to_string();
@@ -282,6 +288,13 @@ pub fn parse(
             *slot = Some([index_of(x)?, index_of(y)?, index_of(z)?]);
         }
     }
+    let unit_columns: Vec<(Sensor, usize)> = Sensor::ALL
+        .into_iter()
+        .zip(sensor_columns)
+        .filter_map(|(sensor, columns)| Some((sensor, columns?[0])))
+        .collect();
+    let owned: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+    let units = super::csv::units_from_names(path, &owned, &unit_columns, units, units_stated)?;
     let temp_column = mapping.temp_c.as_deref().map(index_of).transpose()?;
     let time_column = match &mapping.time {
         Some((name, scale)) => Some((index_of(name)?, *scale)),
@@ -368,13 +381,14 @@ pub fn load(
     path: &Path,
     mapping: &ColumnMapping,
     units: Units,
+    units_stated: &[Sensor],
     rate_hz: Option<f64>,
 ) -> Result<Recording, ImportError> {
     let text = std::fs::read_to_string(path).map_err(|cause| ImportError::Io {
         path: path.display().to_string(),
         cause,
     })?;
-    parse(&text, path, mapping, units, rate_hz)
+    parse(&text, path, mapping, units, units_stated, rate_hz)
 }
 
 #[cfg(test)]
