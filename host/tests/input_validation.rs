@@ -416,6 +416,10 @@ fn readings_quantised_coarser_than_their_noise_are_not_taken_for_a_saturated_axi
     assert!(!outcome.stderr.contains("saturated"), "{}", outcome.stderr);
     let json: serde_json::Value = serde_json::from_str(&outcome.stdout).expect("JSON output");
     assert_eq!(json["accel"]["n_poses"], 12, "{json}");
+    // Each hold reads one value: its mean carries the rounding (± 0.1 g/√12), not the
+    // hidden noise averaged over 200 samples, so the model is not blamed for it.
+    let verdict = json["accel"]["verdict"].as_str().unwrap_or_default();
+    assert!(!verdict.contains("misses something"), "{verdict}");
 }
 
 #[test]

@@ -24,7 +24,7 @@
 
 use crate::fit::{Pose, Vec3};
 use crate::recording::{Recording, Sensor};
-use crate::stats::autocorrelation::run_stats;
+use crate::stats::autocorrelation::run_stats_quantised;
 use crate::still::{hold_samples, StillReport};
 
 /// One observation: a still pose or a short window of samples.
@@ -72,6 +72,7 @@ pub fn pose_observations(
     sensor: Sensor,
 ) -> Vec<Observation> {
     let mut out = Vec::new();
+    let quantum = recording.quantum(sensor);
     for interval in &still.intervals {
         let guard = hold_guard(still, interval.end.saturating_sub(interval.start));
         let (start, end) = (interval.start + guard, interval.end - guard);
@@ -103,7 +104,7 @@ pub fn pose_observations(
             continue;
         };
         let samples = held.kept;
-        let Some(stats) = run_stats(&samples) else {
+        let Some(stats) = run_stats_quantised(&samples, quantum) else {
             continue;
         };
         out.push(Observation {
@@ -138,10 +139,11 @@ pub fn window_observations(
         return Vec::new();
     }
     let stride = count.div_ceil(max_windows).max(1);
+    let quantum = recording.quantum(Sensor::Mag);
     let mut out = Vec::new();
     for w in (0..count).step_by(stride) {
         let range = w * window..(w + 1) * window;
-        let Some(stats) = run_stats(&mag.samples[range.clone()]) else {
+        let Some(stats) = run_stats_quantised(&mag.samples[range.clone()], quantum) else {
             continue;
         };
         let t0 = mag.time[range.start];
@@ -211,6 +213,7 @@ pub fn to_poses(obs: &[Observation]) -> Vec<Pose> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stats::autocorrelation::run_stats;
 
     /// Deterministic pseudo-normal numbers (sum of 12 uniforms from a linear congruential generator).
     fn noise(seed: u64, n: usize) -> Vec<f64> {

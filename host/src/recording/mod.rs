@@ -556,6 +556,22 @@ impl Recording {
         }
     }
 
+    /// Per axis, the smallest non-zero step between consecutive readings of `sensor`: the
+    /// resolution the readings are written with (a count, or the last decimal a logger
+    /// writes), at most. Infinite on an axis that never changes or for a sensor not recorded.
+    pub fn quantum(&self, sensor: Sensor) -> Vec3 {
+        let mut step = Vec3::repeat(f64::INFINITY);
+        for w in self.samples(sensor).unwrap_or_default().windows(2) {
+            for k in 0..3 {
+                let size = (w[1][k] - w[0][k]).abs();
+                if size > 0.0 && size < step[k] {
+                    step[k] = size;
+                }
+            }
+        }
+        step
+    }
+
     /// Median sample rate of the main stream in Hz (from time stamps), if it can be told.
     pub fn rate_hz(&self) -> Option<f64> {
         median_rate(&self.time)

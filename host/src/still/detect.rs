@@ -289,13 +289,14 @@ pub(super) fn detect(
         }
     }
     let relative_found_rest = passes_turning && !passes_resting;
+    let quanta = Sensor::ALL.map(|s| recording.quantum(s));
     let intervals: Vec<_> = merged
         .into_iter()
         .filter(|&(a, b)| recording.time[b - 1] - recording.time[a] >= options.min_hold_s)
         .map(|(a, b)| {
             let label = labels.and_then(|l| majority_label(&l.per_row[a..b]));
             let rows: Vec<usize> = (a..b).collect();
-            interval(recording, &rows, a, b, label)
+            interval(recording, &rows, a, b, label, &quanta)
         })
         .collect();
     if intervals.is_empty() && relative_found_rest && quietest_gyro_var.is_finite() {

@@ -5,13 +5,15 @@
 use super::intervals::{sensor_index, HoldLabel, StillInterval, StillReport, TempStats};
 use super::samples::hold_samples;
 use crate::fit::Pose;
+use crate::fit::Vec3;
 use crate::recording::{Recording, Sensor};
-use crate::stats::autocorrelation::run_stats;
+use crate::stats::autocorrelation::run_stats_quantised;
 use crate::stats::descriptive::mean_variance;
 
 /// Holds from a `pose` column: every row with the same label belongs to one hold.
 pub(super) fn from_pose_column(recording: &Recording) -> StillReport {
     let mut intervals = Vec::new();
+    let quanta = Sensor::ALL.map(|s| recording.quantum(s));
     if let Some(labels) = &recording.labels {
         for index in 0..labels.names.len() {
             let rows: Vec<usize> = labels
@@ -22,7 +24,14 @@ pub(super) fn from_pose_column(recording: &Recording) -> StillReport {
                 .map(|(i, _)| i)
                 .collect();
             if let (Some(&first), Some(&last)) = (rows.first(), rows.last()) {
-                intervals.push(interval(recording, &rows, first, last + 1, Some(index)));
+                intervals.push(interval(
+                    recording,
+                    &rows,
+                    first,
+                    last + 1,
+                    Some(index),
+                    &quanta,
+                ));
             }
         }
     }
@@ -38,13 +47,15 @@ pub(super) fn from_pose_column(recording: &Recording) -> StillReport {
 }
 
 /// The hold of rows `start..end` (statistics over `rows`), before direction clustering;
-/// `label` is the index of its label in the recording's labels.
+/// `label` is the index of its label in the recording's labels; `quanta` the recording's
+/// resolution per sensor ([`Recording::quantum`], in [`Sensor::ALL`] order).
 pub(super) fn interval(
     recording: &Recording,
     rows: &[usize],
     start: usize,
     end: usize,
     label: Option<usize>,
+    quanta: &[Vec3; 3],
 ) -> StillInterval {
     let labels = recording.labels.as_ref();
     let label_name = label.and_then(|index| {
@@ -62,7 +73,9 @@ pub(super) fn interval(
     let mut pose = |sensor: Sensor| {
         let held = hold_samples(recording, rows, t_start, t_end, sensor)?;
         dropped.extend(held.dropped);
-        sigma_mean[sensor_index(sensor)] = run_stats(&held.kept).map(|s| s.sigma_mean);
+        let quantum = quanta[sensor_index(sensor)];
+        sigma_mean[sensor_index(sensor)] =
+            run_stats_quantised(&held.kept, quantum).map(|s| s.sigma_mean);
         mean_variance(held.kept.iter()).map(|(mean, var, n)| Pose {
             mean,
             var,
