@@ -1,9 +1,12 @@
 //! Names in a header as loggers and spreadsheets write them: an imucal column name followed by
 //! its unit in brackets or parentheses (`ax [m/s2]`, `gx (dps)`, `mx [uT]`), and names that
 //! look like a sensor axis without being one of imucal's (`AccX`, `gyro_y`, `ax_raw`), which a
-//! reader leaves unread and a command must not then pass over in silence.
+//! reader leaves unread and a command must not then pass over in silence; and the units the
+//! names give the sensors ([`units_from_names`], for imucal's CSV and column mappings alike).
 
-use super::Sensor;
+use std::path::Path;
+
+use super::{display, RecordingError, Sensor, Units};
 
 /// A header name split into its column name and the unit written after it: `ax [m/s2]` gives
 /// `("ax", Some("m/s2"))`, `ax` gives `("ax", None)`. Only a unit that closes the name counts,
@@ -84,6 +87,47 @@ pub fn looks_like_axis(name: &str) -> Option<Sensor> {
                 .find(|s| prefixes(*s).contains(&stem))
         })
     })
+}
+
+/// `units` with each sensor's replaced by the unit written after the name of its column in
+/// `unit_columns` (index into `names`, e.g. `ax [g]`), unless the user stated the sensor's unit
+/// (`units_stated`) and the name says another, which is refused. Names without a unit, or
+/// with one imucal does not read, leave the sensor's unit as it is.
+pub fn units_from_names(
+    path: &Path,
+    names: &[String],
+    unit_columns: &[(Sensor, usize)],
+    mut units: Units,
+    units_stated: &[Sensor],
+) -> Result<Units, RecordingError> {
+    let given = units;
+    for &(sensor, column) in unit_columns {
+        let Some(name) = names.get(column) else {
+            continue;
+        };
+        let (_, Some(text)) = split_unit(name) else {
+            continue;
+        };
+        let Some(written) = given.with_symbol(sensor, text) else {
+            continue;
+        };
+        if units_stated.contains(&sensor) && written.symbol(sensor) != given.symbol(sensor) {
+            return Err(RecordingError::UnitDisagrees {
+                path: display(path),
+                column: name.clone(),
+                sensor,
+                header_unit: written.symbol(sensor),
+                flag: match sensor {
+                    Sensor::Accel => "--accel-unit",
+                    Sensor::Gyro => "--gyro-unit",
+                    Sensor::Mag => "--mag-unit",
+                },
+                given: given.symbol(sensor),
+            });
+        }
+        units = units.with_symbol(sensor, text).unwrap_or(units);
+    }
+    Ok(units)
 }
 
 #[cfg(test)]

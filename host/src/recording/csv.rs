@@ -176,54 +176,13 @@ fn resolve_units(
     header: &Header,
     options: &LoadOptions,
 ) -> Result<Units, RecordingError> {
-    units_from_names(
+    column_names::units_from_names(
         path,
         &header.names,
         &header.unit_columns,
         options.units,
         &options.units_stated,
     )
-}
-
-/// `units` with each sensor's replaced by the unit written after the name of its column in
-/// `unit_columns` (index into `names`, e.g. `ax [g]`), unless the user stated the sensor's unit
-/// (`units_stated`) and the name says another, which is refused. Names without a unit, or
-/// with one imucal does not read, leave the sensor's unit as it is.
-pub(super) fn units_from_names(
-    path: &Path,
-    names: &[String],
-    unit_columns: &[(Sensor, usize)],
-    mut units: Units,
-    units_stated: &[Sensor],
-) -> Result<Units, RecordingError> {
-    let given = units;
-    for &(sensor, column) in unit_columns {
-        let Some(name) = names.get(column) else {
-            continue;
-        };
-        let (_, Some(text)) = column_names::split_unit(name) else {
-            continue;
-        };
-        let Some(written) = given.with_symbol(sensor, text) else {
-            continue;
-        };
-        if units_stated.contains(&sensor) && written.symbol(sensor) != given.symbol(sensor) {
-            return Err(RecordingError::UnitDisagrees {
-                path: display(path),
-                column: name.clone(),
-                sensor,
-                header_unit: written.symbol(sensor),
-                flag: match sensor {
-                    Sensor::Accel => "--accel-unit",
-                    Sensor::Gyro => "--gyro-unit",
-                    Sensor::Mag => "--mag-unit",
-                },
-                given: given.symbol(sensor),
-            });
-        }
-        units = units.with_symbol(sensor, text).unwrap_or(units);
-    }
-    Ok(units)
 }
 
 /// Rows of a CSV file as columns of numbers (labels interned as they are read).

@@ -294,7 +294,8 @@ pub fn parse(
         .filter_map(|(sensor, columns)| Some((sensor, columns?[0])))
         .collect();
     let owned: Vec<String> = names.iter().map(|n| n.to_string()).collect();
-    let units = super::csv::units_from_names(path, &owned, &unit_columns, units, units_stated)?;
+    let units =
+        super::column_names::units_from_names(path, &owned, &unit_columns, units, units_stated)?;
     let temp_column = mapping.temp_c.as_deref().map(index_of).transpose()?;
     let time_column = match &mapping.time {
         Some((name, scale)) => Some((index_of(name)?, *scale)),
