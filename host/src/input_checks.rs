@@ -807,11 +807,7 @@ pub fn screen_holds(
         .zip(&reasons)
         .filter_map(|(interval, reason)| {
             let reason = reason.as_ref()?;
-            let name = interval.label_phrase();
-            Some(format!(
-                "hold at {:.1}–{:.1} s{name} is left out: {reason}",
-                interval.t_start, interval.t_end
-            ))
+            Some(format!("{} is left out: {reason}", interval.name()))
         })
         .collect();
     if !still.intervals.is_empty() && reasons.iter().all(Option::is_some) {

@@ -156,11 +156,7 @@ pub fn leave_one_out_where_refittable(
         .enumerate()
         .filter_map(|(i, e)| e.map(|e| (i, e)))
         .unzip();
-    if values.len() < 2 {
-        return None;
-    }
-    let rms = (values.iter().map(|e| e * e).sum::<f64>() / values.len() as f64).sqrt();
-    Some((rms, kept))
+    (values.len() >= 2).then(|| (fit::linalg::rms(&values), kept))
 }
 
 /// Fit the magnetometer from samples over many orientations to the field magnitude `reference`.
@@ -183,6 +179,11 @@ pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, F
         Method::AxisAligned => fit::axis_aligned::fit_axis_aligned(points, reference),
         Method::MinMax => {
             let poses = as_poses(points);
+            // The face search runs again only on a refusal, to word it for the field.
+            let refused = match fit::minmax::fit_minmax(&poses, reference) {
+                Err(FitError::Underdetermined(why)) => why,
+                other => return other,
+            };
             let missing = fit::validate::missing_faces(&poses);
             if !missing.is_empty() {
                 return Err(FitError::Underdetermined(format!(
@@ -194,7 +195,7 @@ pub fn fit_mag(method: Method, points: &[Vec3], reference: f64) -> Result<Fit, F
                     fit::validate::FACE_TOLERANCE_DEG
                 )));
             }
-            fit::minmax::fit_minmax(&poses, reference)
+            Err(FitError::Underdetermined(refused))
         }
         Method::SixPosition
         | Method::Chen
@@ -343,6 +344,15 @@ mod tests {
         }
     }
 
+    /// The point at `polar`, `azimuth` (radians) on the sphere of `radius` about the origin.
+    fn on_sphere(polar: f64, azimuth: f64, radius: f64) -> Vec3 {
+        Vec3::new(
+            polar.sin() * azimuth.cos(),
+            polar.sin() * azimuth.sin(),
+            polar.cos(),
+        ) * radius
+    }
+
     #[test]
     fn thinning_keeps_the_requested_count_in_order() {
         let points: Vec<Vec3> = (0..1000).map(|i| Vec3::new(i as f64, 0.0, 0.0)).collect();
@@ -364,12 +374,7 @@ mod tests {
             .map(|i| {
                 let t = i as f64 / 2000.0;
                 let polar = std::f64::consts::PI * t;
-                let azimuth = 40.0 * polar;
-                Vec3::new(
-                    polar.sin() * azimuth.cos(),
-                    polar.sin() * azimuth.sin(),
-                    polar.cos(),
-                ) * 50.0
+                on_sphere(polar, 40.0 * polar, 50.0)
             })
             .collect();
         stream.extend(std::iter::repeat_n(Vec3::new(0.0, 0.0, 50.0), 100_000));
@@ -395,16 +400,11 @@ mod tests {
 
     #[test]
     fn magnetometer_minmax_without_the_field_along_an_axis_names_the_field_not_a_face_up() {
-        // A hemisphere of directions: the field never points along −Z.
+        // A cap within 45° of +Z: the field never points along −Z (nor along ±X, ±Y).
         let points: Vec<Vec3> = (0..400)
             .map(|i| {
                 let polar = 0.5 * std::f64::consts::FRAC_PI_2 * (i % 20) as f64 / 20.0;
-                let azimuth = i as f64 * 0.7;
-                Vec3::new(
-                    polar.sin() * azimuth.cos(),
-                    polar.sin() * azimuth.sin(),
-                    polar.cos(),
-                ) * 50.0
+                on_sphere(polar, i as f64 * 0.7, 50.0)
             })
             .collect();
         let Err(FitError::Underdetermined(why)) = fit_mag(Method::MinMax, &points, 50.0) else {

@@ -105,7 +105,6 @@ impl StillInterval {
         if self.dropped.is_empty() {
             return None;
         }
-        let name = self.label_phrase();
         let what: Vec<String> = self.dropped.iter().map(DroppedSamples::phrase).collect();
         // The screen's bound is set so that a pose's own noise crosses it with small
         // probability over all its samples; a spike or a knock is a few samples. When most
@@ -118,12 +117,21 @@ impl StillInterval {
             "a spike, a corrupted read or a knock during the hold"
         };
         Some(format!(
-            "hold at {:.1}–{:.1} s{name}: outliers dropped from its statistics: {} (robust \
-             standard deviations from the hold's median): {cause}",
-            self.t_start,
-            self.t_end,
+            "{}: outliers dropped from its statistics: {} (robust standard deviations from the \
+             hold's median): {cause}",
+            self.name(),
             what.join(", ")
         ))
+    }
+
+    /// The hold as messages name it: "hold at 12.0–16.0 s (pose P12)".
+    pub fn name(&self) -> String {
+        format!(
+            "hold at {:.1}–{:.1} s{}",
+            self.t_start,
+            self.t_end,
+            self.label_phrase()
+        )
     }
 
     /// The hold's label in parentheses after a space, as messages name the hold (` (pose P12)`),
@@ -276,14 +284,7 @@ impl StillReport {
         self.intervals
             .iter()
             .filter(|i| i.pose(sensor).is_some())
-            .map(|i| {
-                format!(
-                    "hold at {:.1}–{:.1} s{}",
-                    i.t_start,
-                    i.t_end,
-                    i.label_phrase()
-                )
-            })
+            .map(StillInterval::name)
             .collect()
     }
 
