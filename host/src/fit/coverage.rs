@@ -346,7 +346,27 @@ pub fn guard_fit(
                 let cal = lens()
                     .filter(Calibration::is_finite)
                     .unwrap_or_else(|| sphere_start(points, reference));
-                check_coverage(points, noise, &cal, reference, model, hint)?;
+                let coverage = check_coverage(points, noise, &cal, reference, model, hint)?;
+                // Coverage within the rule can still leave the iteration creeping along its
+                // least determined direction: say where that direction lies.
+                if let FitError::NotConverged {
+                    method,
+                    iterations,
+                    detail,
+                } = error
+                {
+                    let axis = ["X", "Y", "Z"][coverage.least_sampled_axis.min(2)];
+                    return Err(FitError::NotConverged {
+                        method,
+                        iterations,
+                        detail: format!(
+                            "{detail}; the {} orientations lie RMS {:.1}° out of their best \
+                             plane, the sensor's {axis} axis the least sampled: readings with \
+                             that axis turned up and down steady the fit",
+                            coverage.distinct, coverage.plane_rms_deg
+                        ),
+                    });
+                }
             }
             Err(error)
         }

@@ -212,7 +212,54 @@ const _: () = assert!(STREAM_HALF_WINDOW == 3);
 /// identification", IEEE TCST 10(1), 2002), screened axis by axis like [`screen_vectors`] with
 /// one robust scale per axis for the whole stream. A smooth path leaves the deviations at the
 /// noise; a spike stands out by its own size.
+///
+/// Rows that repeat the reading before them (a logger writing a slower sensor into faster rows,
+/// each reading held until the next) are one reading: screened once, and their rows share its
+/// verdict. Screened row by row, the neighbours of a held reading would mostly be itself, the
+/// scale would collapse to the resolution, and every change of reading would look like a spike.
 pub fn screen_stream(samples: &[Vec3]) -> Screening {
+    let repeats = samples
+        .windows(2)
+        .filter(|w| same_reading(&w[0], &w[1]))
+        .count();
+    if repeats == 0 {
+        return screen_distinct_stream(samples);
+    }
+    let mut distinct: Vec<Vec3> = Vec::with_capacity(samples.len() - repeats);
+    let mut run_lengths: Vec<usize> = Vec::with_capacity(samples.len() - repeats);
+    for s in samples {
+        match (distinct.last(), run_lengths.last_mut()) {
+            (Some(last), Some(length)) if same_reading(last, s) => *length += 1,
+            _ => {
+                distinct.push(*s);
+                run_lengths.push(1);
+            }
+        }
+    }
+    let screened = screen_distinct_stream(&distinct);
+    let keep: Vec<bool> = screened
+        .keep
+        .iter()
+        .zip(&run_lengths)
+        .flat_map(|(&k, &length)| std::iter::repeat_n(k, length))
+        .collect();
+    let dropped = keep.iter().filter(|k| !**k).count();
+    Screening {
+        keep,
+        dropped,
+        ..screened
+    }
+}
+
+/// Whether two rows carry the same reading, bit for bit.
+fn same_reading(a: &Vec3, b: &Vec3) -> bool {
+    a.iter()
+        .zip(b.iter())
+        .all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// [`screen_stream`] of a stream without repeated rows.
+fn screen_distinct_stream(samples: &[Vec3]) -> Screening {
     let n = samples.len();
     if n < MIN_SCREENED.max(2 * STREAM_HALF_WINDOW + 1) {
         return Screening::keep_all(n);
@@ -261,11 +308,7 @@ pub fn stream_noise(samples: &[Vec3]) -> Option<Vec3> {
             0
         };
         let mut distinct: Vec<Vec3> = samples[start..start + length].to_vec();
-        distinct.dedup_by(|a, b| {
-            a.iter()
-                .zip(b.iter())
-                .all(|(x, y)| x.to_bits() == y.to_bits())
-        });
+        distinct.dedup_by(|a, b| same_reading(a, b));
         if distinct.len() < 2 * STREAM_HALF_WINDOW + 1 {
             continue;
         }
@@ -484,6 +527,27 @@ mod tests {
         assert!(stream_noise(&[Vec3::zeros(); 500]).is_none());
     }
 
+    #[test]
+    fn a_stream_of_held_readings_loses_only_its_spike_with_all_its_rows() {
+        // Each reading held for 5 rows (a 20 Hz magnetometer in 100 Hz rows). Screened row by
+        // row, most samples equalled their neighbours' median and every change of reading was
+        // called a spike (43 % of a real recording's rows). One reading made a spike: its 5
+        // rows go, nothing else, as on the stream read once per reading.
+        let mut held = noisy_turn(0.4, 5);
+        for row in &mut held[5000..5005] {
+            row.x += 40.0;
+        }
+        let screening = screen_stream(&held);
+        assert_eq!(screening.dropped, 5, "{screening:?}");
+        assert!(screening.keep[..5000].iter().all(|k| *k));
+        assert!(screening.keep[5000..5005].iter().all(|k| !*k));
+        let mut once: Vec<Vec3> = held.clone();
+        once.dedup_by(|a, b| same_reading(a, b));
+        let alone = screen_stream(&once);
+        assert_eq!(alone.dropped, 1);
+        assert_eq!(alone.bound_sigmas, screening.bound_sigmas);
+    }
+
     /// Standard normal numbers from a seeded generator.
     fn gaussian(seed: u64, n: usize) -> Vec<f64> {
         use rand::SeedableRng;
@@ -643,9 +707,14 @@ mod tests {
         for s in &mut samples[2000..2100] {
             *s = Vec3::new(1.0, 2.0, 3.0);
         }
-        let got = screen_stream(&samples);
+        let got = screen_distinct_stream(&samples);
         assert_eq!(got, reference(&samples));
         assert!(!got.keep[1234]);
+        // Read once per reading, the stuck run is one reading off the turn's path: all its
+        // rows go, with the spike.
+        let once = screen_stream(&samples);
+        assert!(!once.keep[1234]);
+        assert!(once.keep[2000..2100].iter().all(|k| !*k));
     }
 
     #[test]
