@@ -799,3 +799,47 @@ fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_re
     assert!(!batch.join("report.html").exists(), "nothing was written");
     let _ = std::fs::remove_dir_all(batch);
 }
+
+#[test]
+fn a_report_of_a_recording_without_times_plots_against_the_sample_number() {
+    // A magnetometer on an offset sphere, with neither a time column nor --rate.
+    let dir = scratch("untimed");
+    let mut text = String::from("mx,my,mz\n");
+    for (i, d) in directions(600).iter().enumerate() {
+        let wobble = 1.0 + 0.01 * (7.1 * i as f64).sin();
+        let _ = writeln!(
+            text,
+            "{:.4},{:.4},{:.4}",
+            40.0 * wobble * d.x + 12.0,
+            45.0 * wobble * d.y - 7.0,
+            50.0 * wobble * d.z + 3.0
+        );
+    }
+    let recording = dir.join("untimed.csv");
+    std::fs::write(&recording, text).expect("writable");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", dir.join("no-history.sqlite"))
+        .arg("report")
+        .arg(&recording)
+        .args(["--field-ut", "48", "-o"])
+        .arg(dir.join("r.html"))
+        .output()
+        .expect("run imucal");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(dir.join("r.html")).expect("the report is written");
+    assert!(
+        html.contains("magnetometer norm error against sample number"),
+        "the plot's title names the sample number"
+    );
+    // The SVG writes a label's text on a line of its own.
+    assert!(
+        html.contains(">\nsample\n</text>"),
+        "the axis is labelled `sample`"
+    );
+    assert!(!html.contains("time (s)"), "no axis claims seconds");
+    let _ = std::fs::remove_dir_all(dir);
+}
