@@ -826,3 +826,40 @@ fn a_refused_fit_names_the_hold_by_the_number_and_span_the_still_table_shows() {
     assert!(message.contains(&named), "{named}: {message}");
     assert!(!message.contains("pose 6"), "{message}");
 }
+
+#[test]
+fn a_unit_option_the_header_contradicts_exits_with_the_usage_status_naming_the_fix() {
+    let dir = scratch("unit-conflict");
+    let mut text = String::from("t_s,ax [m/s2],ay [m/s2],az [m/s2]\n");
+    for i in 0..10 {
+        text += &format!("{:.2},0,0,9.81\n", f64::from(i) / 100.0);
+    }
+    std::fs::write(dir.join("rec.csv"), &text).expect("writable");
+    std::fs::write(
+        dir.join("mapped.csv"),
+        text.replace(" [m/s2]", "_ms2 [m/s2]"),
+    )
+    .expect("writable");
+    for args in [
+        &["fit", "rec.csv", "--accel-unit", "g"][..],
+        &["still", "rec.csv", "--accel-unit", "g"],
+        &["report", "rec.csv", "--accel-unit", "g", "-o", "r.html"],
+        &[
+            "fit",
+            "mapped.csv",
+            "--accel-unit",
+            "g",
+            "--columns",
+            "t_s=t_s,ax=ax_ms2 [m/s2],ay=ay_ms2 [m/s2],az=az_ms2 [m/s2]",
+        ],
+    ] {
+        let out = imucal_in(&dir, args);
+        let message = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {message}");
+        assert!(
+            message.contains("but --accel-unit says g")
+                && message.contains("leave --accel-unit out"),
+            "{args:?}: {message}"
+        );
+    }
+}

@@ -770,7 +770,7 @@ fn an_output_path_ending_in_html_is_the_report_file_and_any_other_a_directory() 
 }
 
 #[test]
-fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_report_it() {
+fn a_batch_directory_is_a_usage_error_naming_each_boards_session_and_the_command_to_report_it() {
     // `calibrate --sim-boards N -o b1` writes one session directory per device id in b1.
     let batch = scratch("batch");
     let boards = [
@@ -789,7 +789,8 @@ fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_re
         .output()
         .expect("run imucal");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{stderr}");
+    // The command line names the wrong directory: exit status 2, as other usage errors.
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("directory of a batch"), "{stderr}");
     assert!(!stderr.contains("  "), "one sentence: {stderr}");
     for board in boards {

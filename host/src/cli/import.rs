@@ -15,7 +15,13 @@ pub fn load(input: &InputArgs, units: Units) -> anyhow::Result<Option<Recording>
         let mapping: ColumnMapping = columns.parse()?;
         return mapping::load(path, &mapping, units, &input.units_stated(), input.rate)
             .map(Some)
-            .context("the recording could not be read with the column mapping");
+            .map_err(|e| {
+                super::read_error(
+                    e.is_option_conflict(),
+                    e,
+                    "the recording could not be read with the column mapping",
+                )
+            });
     }
     // `--format auto` finds a MotionCal log in the ordinary reader, which reads a file and
     // standard input alike.

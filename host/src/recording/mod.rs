@@ -244,6 +244,165 @@ pub enum RecordingError {
     },
 }
 
+impl RecordingError {
+    /// Add `by` to the line number of an error about one line (for text parsed in pieces, each
+    /// counting its lines from 1).
+    pub(crate) fn shift_line(&mut self, by: usize) {
+        match self {
+            Self::LineTooLong { line, .. }
+            | Self::OutOfRange { line, .. }
+            | Self::BadNumber { line, .. }
+            | Self::FieldCount { line, .. }
+            | Self::TimeBackwards { line, .. }
+            | Self::ImutkLine { line, .. } => *line += by,
+            _ => {}
+        }
+    }
+}
+
+/// How a label column divides the rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LabelKind {
+    /// `pose`: each label is one static hold; rows labelled alike are averaged together.
+    Pose,
+    /// `segment`: labels name sections (separate recordings or phases); still intervals are
+    /// detected inside each section and never across a boundary.
+    Segment,
+}
+
+impl LabelKind {
+    /// The name of the column that carries labels of this kind (`pose` or `segment`).
+    pub fn column(self) -> &'static str {
+        match self {
+            LabelKind::Pose => "pose",
+            LabelKind::Segment => "segment",
+        }
+    }
+}
+
+/// A label column (`pose` or `segment`). Empty fields and `-` mean "no label".
+#[derive(Debug, Clone, PartialEq)]
+pub struct Labels {
+    /// Whether the labels are poses or sections.
+    pub kind: LabelKind,
+    /// Distinct label texts in order of first appearance.
+    pub names: Vec<String>,
+    /// Per row: index into `names`, or `None` for an unlabelled row.
+    pub per_row: Vec<Option<usize>>,
+}
+
+impl Labels {
+    /// Integer value of a label for [`crate::fit::Pose::label`]: the text itself when it is an
+    /// integer, otherwise its index in `names`.
+    pub fn value(&self, index: usize) -> i64 {
+        self.names
+            .get(index)
+            .and_then(|name| name.parse::<i64>().ok())
+            .unwrap_or(index as i64)
+    }
+}
+
+/// Magnetometer samples with their own time stamps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MagStream {
+    /// File the samples came from.
+    pub source: PathBuf,
+    /// Time of each sample in seconds, on the same time base as the main stream.
+    pub time: Vec<f64>,
+    /// Readings in the file's units.
+    pub samples: Vec<Vec3>,
+    /// Temperature per sample in °C from a `temp_c` column of the magnetometer's own file, if
+    /// it has one (`None` for magnetometer columns of the main file: theirs is the main file's).
+    pub temp_c: Option<Vec<f64>>,
+}
+
+/// One recording: sensor streams as read, their units and time stamps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    /// Main file.
+    pub source: PathBuf,
+    /// Time of each row in seconds. Without a `t_s` column: row index / rate, or the row index
+    /// itself when no rate was given (then `time_is_index` is set).
+    pub time: Vec<f64>,
+    /// True when `time` counts rows rather than seconds.
+    pub time_is_index: bool,
+    /// True when `time` was read from the file (a given sample rate is then not used).
+    pub time_from_file: bool,
+    /// Accelerometer readings per row, if present.
+    pub accel: Option<Vec<Vec3>>,
+    /// Gyroscope readings per row, if present.
+    pub gyro: Option<Vec<Vec3>>,
+    /// Die temperature per row in °C, if present.
+    pub temp_c: Option<Vec<f64>>,
+    /// Magnetometer readings (same rows as the main file, or a file with its own clock).
+    pub mag: Option<MagStream>,
+    /// `pose` or `segment` labels, if present.
+    pub labels: Option<Labels>,
+    /// Columns of the header that were not read: not part of the format, or replaced by
+    /// another file.
+    pub ignored_columns: Vec<String>,
+    /// Units of the sensor columns.
+    pub units: Units,
+    /// True when the main file was read as IMU-TK text, whose time stamps are in the unit
+    /// [`LoadOptions::imutk_time_scale`] gives (other formats name theirs).
+    pub read_as_imutk: bool,
+    /// Rows left out because they repeated the row before them exactly, time stamp and every
+    /// value (a logger that wrote a sample twice): counted twice, a sample would shrink every
+    /// noise estimate and σ it enters.
+    pub repeated_rows: usize,
+}
+
+/// File format of a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Format {
+    /// Decide from the first lines: a MotionCal serial log when a `Raw:` line is among them
+    /// ([`motioncal::looks_like_motioncal`]), else a header of names means CSV, four numbers
+    /// mean IMU-TK.
+    #[default]
+    Auto,
+    /// CSV with a header line of column names.
+    Csv,
+    /// IMU-TK text: `timestamp x y z` per line, the main file being the accelerometer.
+    Imutk,
+}
+
+/// How to read a recording.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LoadOptions {
+    /// Units of the sensor columns.
+    pub units: Units,
+    /// Sensors whose unit in `units` the user stated (rather than left at the default). For the
+    /// others, a unit the header writes after a column name (`ax [g]`) is used; a stated unit
+    /// the header contradicts is refused rather than either being guessed right.
+    pub units_stated: Vec<Sensor>,
+    /// Sample rate for files without a `t_s` column (ignored when `t_s` exists).
+    pub rate_hz: Option<f64>,
+    /// Magnetometer file with its own clock. When `None`, a sibling `<stem>_mag.csv` is used
+    /// if the main file has no magnetometer columns and such a file exists.
+    pub mag_file: Option<PathBuf>,
+    /// Do not look for a sibling magnetometer file.
+    pub no_mag_sibling: bool,
+    /// Format of the main file.
+    pub format: Format,
+    /// IMU-TK only: the gyroscope file paired row by row with the accelerometer file.
+    pub gyro_file: Option<PathBuf>,
+    /// IMU-TK only: seconds per time-stamp unit (1 for seconds, 1e-6 for microseconds).
+    pub imutk_time_scale: Option<f64>,
+}
+
+impl RecordingError {
+    /// Whether the error is an option that contradicts the file (a unit option against the
+    /// unit the header writes), which the user fixes in the command line, not in the file.
+    pub fn is_option_conflict(&self) -> bool {
+        match self {
+            Self::UnitDisagrees { .. } => true,
+            Self::SiblingMag { cause, .. } => cause.is_option_conflict(),
+            Self::MotionCal(cause) => cause.is_option_conflict(),
+            _ => false,
+        }
+    }
+}
+
 impl Recording {
     /// Read a recording with the given options (see [`LoadOptions`]).
     pub fn load(path: &Path, options: &LoadOptions) -> Result<Self, RecordingError> {
