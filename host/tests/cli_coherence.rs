@@ -755,3 +755,111 @@ fn a_history_database_that_cannot_be_used_stops_calibrate_before_a_board_is_writ
     assert!(db.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Seven holds at 100 Hz, 2 s each, labelled `P1` … `P7` in a `pose` column: the six faces, then
+/// one tilted 45° between +X and +Z, which no face is within 30° of.
+fn six_faces_and_a_tilt() -> String {
+    let g = 9.81;
+    let h = g / 2f64.sqrt();
+    let holds = [
+        [0.0, 0.0, g],
+        [0.0, 0.0, -g],
+        [g, 0.0, 0.0],
+        [-g, 0.0, 0.0],
+        [0.0, g, 0.0],
+        [0.0, -g, 0.0],
+        [h, 0.0, h],
+    ];
+    let mut text = String::from("t_s,ax,ay,az,pose\n");
+    for (k, mean) in holds.iter().enumerate() {
+        for i in 0..200 {
+            let row = (k * 200 + i) as f64;
+            let noise = |axis: f64| 0.01 * (row * (1.7 + axis)).sin();
+            text += &format!(
+                "{:.2},{:.5},{:.5},{:.5},P{}\n",
+                row / 100.0,
+                mean[0] + noise(0.0),
+                mean[1] + noise(1.0),
+                mean[2] + noise(2.0),
+                k + 1
+            );
+        }
+    }
+    text
+}
+
+#[test]
+fn a_refused_fit_names_the_hold_by_the_number_and_span_the_still_table_shows() {
+    let dir = scratch("hold-names");
+    std::fs::write(dir.join("rec.csv"), six_faces_and_a_tilt()).expect("writable");
+    let table = imucal_in(&dir, &["still", "rec.csv"]);
+    assert!(table.status.success(), "{}", stderr(&table));
+    let table = String::from_utf8_lossy(&table.stdout).into_owned();
+    // The row of the tilted hold: `#`, t_start, t_end, dur, label.
+    let row: Vec<&str> = table
+        .lines()
+        .map(str::split_whitespace)
+        .map(Iterator::collect)
+        .find(|fields: &Vec<&str>| fields.get(4) == Some(&"P7"))
+        .unwrap_or_else(|| panic!("a row labelled P7: {table}"));
+    assert_eq!(row[0], "7", "holds are numbered from 1: {table}");
+    let (start, end): (f64, f64) = (row[1].parse().unwrap(), row[2].parse().unwrap());
+    let json = imucal_in(&dir, &["still", "rec.csv", "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&json.stdout).expect("JSON");
+    assert_eq!(json["intervals"][6]["number"], 7, "{json}");
+
+    let out = imucal_in(
+        &dir,
+        &[
+            "fit",
+            "rec.csv",
+            "--sensor",
+            "accel",
+            "--method",
+            "six-position",
+        ],
+    );
+    let message = stderr(&out);
+    assert!(!out.status.success(), "{message}");
+    let named =
+        format!("hold #7 at {start:.1}–{end:.1} s (pose P7) is more than 30° from every axis");
+    assert!(message.contains(&named), "{named}: {message}");
+    assert!(!message.contains("pose 6"), "{message}");
+}
+
+#[test]
+fn a_unit_option_the_header_contradicts_exits_with_the_usage_status_naming_the_fix() {
+    let dir = scratch("unit-conflict");
+    let mut text = String::from("t_s,ax [m/s2],ay [m/s2],az [m/s2]\n");
+    for i in 0..10 {
+        text += &format!("{:.2},0,0,9.81\n", f64::from(i) / 100.0);
+    }
+    std::fs::write(dir.join("rec.csv"), &text).expect("writable");
+    std::fs::write(
+        dir.join("mapped.csv"),
+        text.replace(" [m/s2]", "_ms2 [m/s2]"),
+    )
+    .expect("writable");
+    for args in [
+        &["fit", "rec.csv", "--accel-unit", "g"][..],
+        &["still", "rec.csv", "--accel-unit", "g"],
+        &["report", "rec.csv", "--accel-unit", "g", "-o", "r.html"],
+        &[
+            "fit",
+            "mapped.csv",
+            "--accel-unit",
+            "g",
+            "--columns",
+            "t_s=t_s,ax=ax_ms2 [m/s2],ay=ay_ms2 [m/s2],az=az_ms2 [m/s2]",
+        ],
+    ] {
+        let out = imucal_in(&dir, args);
+        let message = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {message}");
+        assert!(
+            message.contains("but --accel-unit says g")
+                && message.contains("leave --accel-unit out"),
+            "{args:?}: {message}"
+        );
+    }
+}

@@ -344,7 +344,7 @@ fn a_magnetometer_spike_inside_a_hold_is_dropped_named_and_leaves_the_alignment_
         "{stderr}"
     );
     assert!(
-        stderr.contains("hold at 15."),
+        stderr.contains("hold #") && stderr.contains(" at 15."),
         "the warning names the hold: {stderr}"
     );
     let alignment = &json(&stdout)["mag"]["alignment"];

@@ -59,9 +59,10 @@ fn units_in_the_header_read_every_sensor_in_them_without_unit_flags() {
         json["intervals"], plain["intervals"],
         "the same holds as with --gyro-unit dps"
     );
-    // A flag that contradicts the header is refused, naming both.
+    // A flag that contradicts the header is refused, naming both, with the usage status: the
+    // command line is what is fixed.
     let (code, _, stderr) = imucal(&["still", &path, "--gyro-unit", "rads"]);
-    assert_eq!(code, Some(1), "{stderr}");
+    assert_eq!(code, Some(2), "{stderr}");
     assert!(
         stderr.contains("`gx (dps)`") && stderr.contains("--gyro-unit says rad/s"),
         "{stderr}"

@@ -182,3 +182,31 @@ fn standard_input_without_magnetometer_columns_points_to_mag_file() {
         offset(&file_fit())
     );
 }
+
+/// A MotionCal serial log of [`mag_recording`]'s field (as 0.1 µT counts) after the banner a
+/// sketch prints, so that only its `Raw:` lines tell it from a CSV file.
+fn motioncal_log() -> String {
+    let mut text = String::from("Adafruit AHRS calibration sketch\n");
+    for line in mag_recording().lines().skip(1) {
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|f| f.parse().expect("a number"))
+            .collect();
+        text += &format!(
+            "Raw:0,0,8192,0,0,0,{:.0},{:.0},{:.0}\n",
+            v[1] * 10.0,
+            v[2] * 10.0,
+            v[3] * 10.0
+        );
+    }
+    text
+}
+
+#[test]
+fn a_motioncal_log_on_standard_input_is_read_as_the_same_log_by_path() {
+    let path = scratch("motioncal").join("log.txt");
+    std::fs::write(&path, motioncal_log()).expect("writable");
+    let from_file = fit_mag(path.to_str().expect("utf-8 path"), None).expect("the log fits");
+    let from_stdin = fit_mag("-", Some(&motioncal_log())).expect("the log on stdin fits");
+    assert_eq!(offset(&from_stdin), offset(&from_file));
+}

@@ -770,7 +770,7 @@ fn an_output_path_ending_in_html_is_the_report_file_and_any_other_a_directory() 
 }
 
 #[test]
-fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_report_it() {
+fn a_batch_directory_is_a_usage_error_naming_each_boards_session_and_the_command_to_report_it() {
     // `calibrate --sim-boards N -o b1` writes one session directory per device id in b1.
     let batch = scratch("batch");
     let boards = [
@@ -789,7 +789,8 @@ fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_re
         .output()
         .expect("run imucal");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{stderr}");
+    // The command line names the wrong directory: exit status 2, as other usage errors.
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("directory of a batch"), "{stderr}");
     assert!(!stderr.contains("  "), "one sentence: {stderr}");
     for board in boards {
@@ -798,4 +799,48 @@ fn a_batch_directory_is_refused_naming_each_boards_session_and_the_command_to_re
     }
     assert!(!batch.join("report.html").exists(), "nothing was written");
     let _ = std::fs::remove_dir_all(batch);
+}
+
+#[test]
+fn a_report_of_a_recording_without_times_plots_against_the_sample_number() {
+    // A magnetometer on an offset sphere, with neither a time column nor --rate.
+    let dir = scratch("untimed");
+    let mut text = String::from("mx,my,mz\n");
+    for (i, d) in directions(600).iter().enumerate() {
+        let wobble = 1.0 + 0.01 * (7.1 * i as f64).sin();
+        let _ = writeln!(
+            text,
+            "{:.4},{:.4},{:.4}",
+            40.0 * wobble * d.x + 12.0,
+            45.0 * wobble * d.y - 7.0,
+            50.0 * wobble * d.z + 3.0
+        );
+    }
+    let recording = dir.join("untimed.csv");
+    std::fs::write(&recording, text).expect("writable");
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .env("IMUCAL_DB", dir.join("no-history.sqlite"))
+        .arg("report")
+        .arg(&recording)
+        .args(["--field-ut", "48", "-o"])
+        .arg(dir.join("r.html"))
+        .output()
+        .expect("run imucal");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(dir.join("r.html")).expect("the report is written");
+    assert!(
+        html.contains("magnetometer norm error against sample number"),
+        "the plot's title names the sample number"
+    );
+    // The SVG writes a label's text on a line of its own.
+    assert!(
+        html.contains(">\nsample\n</text>"),
+        "the axis is labelled `sample`"
+    );
+    assert!(!html.contains("time (s)"), "no axis claims seconds");
+    let _ = std::fs::remove_dir_all(dir);
 }

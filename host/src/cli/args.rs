@@ -36,6 +36,10 @@ pub enum Command {
     )]
     Fit(FitArgs),
     /// List the still intervals of a recording and the gravity directions they cover.
+    ///
+    /// The holds are numbered from 1 (`#`; `number` in --json), as every message that names a
+    /// hold names it: "hold #3 at 12.0–16.0 s (pose P12)". A hold that fit, analyze and report
+    /// leave out keeps its number, and is missing from the table.
     #[command(
         after_help = "Example:\n  imucal still data/real/tsi_mpu6050_multipos.csv --accel-unit counts --gyro-unit counts"
     )]

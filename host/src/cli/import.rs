@@ -7,23 +7,25 @@ use imucal::recording::{motioncal, Recording, Units};
 
 use super::args::{FormatArg, InputArgs};
 
-/// The recording when the arguments ask for an imported format (or `--format auto` finds a
-/// MotionCal log); `None` when the ordinary readers apply.
+/// The recording when the arguments ask for an imported format; `None` when the ordinary
+/// readers apply (they also find a MotionCal log by its `Raw:` lines).
 pub fn load(input: &InputArgs, units: Units) -> anyhow::Result<Option<Recording>> {
     let path = &input.recording;
     if let Some(columns) = &input.columns {
         let mapping: ColumnMapping = columns.parse()?;
         return mapping::load(path, &mapping, units, &input.units_stated(), input.rate)
             .map(Some)
-            .context("the recording could not be read with the column mapping");
+            .map_err(|e| {
+                super::read_error(
+                    e.is_option_conflict(),
+                    e,
+                    "the recording could not be read with the column mapping",
+                )
+            });
     }
-    let motioncal = match input.format {
-        FormatArg::Motioncal => true,
-        // A directory or unreadable file is left to the ordinary readers' messages.
-        FormatArg::Auto if path.is_file() => motioncal::file_looks_like_motioncal(path),
-        _ => false,
-    };
-    if !motioncal {
+    // `--format auto` finds a MotionCal log in the ordinary reader, which reads a file and
+    // standard input alike.
+    if input.format != FormatArg::Motioncal {
         return Ok(None);
     }
     motioncal::load(path, input.rate)

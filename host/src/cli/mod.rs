@@ -24,7 +24,6 @@ mod write_policy;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use clap::ValueEnum;
 use imucal::pipeline::{InputOptions, ReferenceError, References};
 use imucal::recording::{
@@ -139,7 +138,7 @@ fn read(input: &InputArgs, units: Units, only: Option<Sensor>) -> anyhow::Result
         }),
     };
     let recording = Recording::load(&recording_file(&input.recording)?, &options)
-        .context("the recording could not be read")?;
+        .map_err(|e| read_error(e.is_option_conflict(), e, "the recording could not be read"))?;
     // Options that the file makes moot are said to be so, not silently dropped.
     if input.rate.is_some() && recording.time_from_file {
         say!("imucal: warning: --rate is ignored: the recording has its own time stamps");
@@ -163,6 +162,21 @@ fn read(input: &InputArgs, units: Units, only: Option<Sensor>) -> anyhow::Result
         );
     }
     Ok(recording)
+}
+
+/// The error of a recording that could not be read, with `context`: a usage error (exit
+/// status 2) when an option contradicts the file (`conflict`), since the command line is what
+/// the user fixes then.
+pub fn read_error(
+    conflict: bool,
+    error: impl std::error::Error + Send + Sync + 'static,
+    context: &str,
+) -> anyhow::Error {
+    if conflict {
+        UsageError(format!("{context}: {error}")).into()
+    } else {
+        anyhow::Error::new(error).context(context.to_string())
+    }
 }
 
 /// Refuses a recording that lacks a sensor the command uses while columns that look like that

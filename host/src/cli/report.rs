@@ -144,13 +144,15 @@ fn not_a_session(path: &Path) -> anyhow::Error {
             .iter()
             .map(|s| format!("`imucal report {}`", s.display()))
             .collect();
-        return anyhow::anyhow!(
+        // The command line names the wrong directory: a usage error, exit status 2.
+        return super::UsageError(format!(
             "`{}` is the directory of a batch of `imucal calibrate`, with the sessions of {}; a \
              report is of one board's session, so report each: {}",
             path.display(),
             count_boards(sessions.len()),
             commands.join(", ")
-        );
+        ))
+        .into();
     }
     let missing: Vec<&str> = ["params.json", "poses.json"]
         .into_iter()

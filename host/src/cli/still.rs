@@ -88,7 +88,7 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             .iter()
             .map(|i| {
                 json!({
-                    "t_start": i.t_start, "t_end": i.t_end, "label": i.label,
+                    "number": i.number, "t_start": i.t_start, "t_end": i.t_end, "label": i.label,
                     "label_name": i.label_name.as_ref().map(|l| l.text.clone()),
                     "direction": i.direction,
                     "accel_mean": i.accel.as_ref().map(|p| triple(&p.mean)),
@@ -156,7 +156,7 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
         shown.name(),
         recording.units.symbol(shown)
     );
-    for (k, i) in report.intervals.iter().enumerate() {
+    for i in &report.intervals {
         let label = i
             .label_name
             .as_ref()
@@ -171,7 +171,8 @@ pub fn run(args: &StillArgs) -> anyhow::Result<()> {
             format!("[{:.4}, {:.4}, {:.4}]", p.mean.x, p.mean.y, p.mean.z)
         });
         println!(
-            "{k:>3} {:>9.2} {:>9.2} {:>6.1} {label:>6} {dir:>4}  {mean}",
+            "{:>3} {:>9.2} {:>9.2} {:>6.1} {label:>6} {dir:>4}  {mean}",
+            i.number,
             i.t_start,
             i.t_end,
             i.duration()

@@ -10,14 +10,14 @@ use super::observations::{MAG_WINDOW_SAMPLES, MAX_MAG_WINDOWS};
 use crate::fit::{Fit, Method, Pose, Vec3};
 use crate::geomag::{local_field_today, LocalField, Location, RadiusCheck};
 use crate::recording::{Recording, Sensor, Units};
-use crate::still::StillReport;
+use crate::still::{name_poses, StillReport};
 
 use super::align::align_mag;
 use super::calibration::{
     bias_noise_test, norm_noise_test, pose_noise_floor, sample_noise_floor, stream_noise_test,
     RecordingCalibration, SensorOutcome,
 };
-use super::chain::{default_accel_chain, unknowns};
+use super::chain::{default_accel_chain, unknowns, CandidateOutcome};
 use super::gyro::{fit_gyroscope, gyro_unit_scale, moot_gyro_scale};
 use super::input::{check_input_then, CheckedInput, InputOptions};
 use super::methods::{fit_accel, fit_mag, leave_one_out_where_refittable};
@@ -261,7 +261,17 @@ impl SensorContext<'_> {
                     }
                     f
                 }),
-                None => default_accel_chain(&poses, gravity).map(|choice| {
+                None => default_accel_chain(&poses, gravity).map(|mut choice| {
+                    // The candidates' sentences name the holds as the `still` table does.
+                    let names = still.pose_names(sensor);
+                    choice.reason = name_poses(&choice.reason, &names);
+                    for candidate in &mut choice.candidates {
+                        if let CandidateOutcome::Refused(why)
+                        | CandidateOutcome::NotValidated(why) = &mut candidate.outcome
+                        {
+                            *why = name_poses(why, &names);
+                        }
+                    }
                     outcome.notes.push(choice.reason.clone());
                     let fit = choice.fit.clone();
                     outcome.chain = Some(choice);
@@ -293,7 +303,8 @@ impl SensorContext<'_> {
             }
             fit
         };
-        outcome.fit = fit.map_err(|e| e.to_string());
+        // A refusal names a pose by its position among the poses fitted: named as the hold.
+        outcome.fit = fit.map_err(|e| name_poses(&e.to_string(), &still.pose_names(sensor)));
         outcome
     }
 }

@@ -155,6 +155,16 @@ impl<'a> LineReader<'a> {
         }
     }
 
+    /// Up to `want` bytes of the input not yet handed out, without consuming them (fewer at the
+    /// end of the input), so that a format can be told from the first lines of input read only
+    /// once, such as standard input.
+    pub fn peek(&mut self, want: usize) -> Result<&[u8], RecordingError> {
+        while !self.eof && self.end - self.start < want {
+            self.fill()?;
+        }
+        Ok(&self.buf[self.start..self.end.min(self.start + want)])
+    }
+
     /// Number of the last line handed out.
     pub fn line_no(&self) -> usize {
         self.line_no

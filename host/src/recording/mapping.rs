@@ -109,6 +109,14 @@ pub enum ImportError {
     },
 }
 
+impl ImportError {
+    /// Whether the error is an option that contradicts the file (see
+    /// [`super::RecordingError::is_option_conflict`]).
+    pub fn is_option_conflict(&self) -> bool {
+        matches!(self, Self::Text(cause) if cause.is_option_conflict())
+    }
+}
+
 /// Where each imucal column comes from.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct ColumnMapping {

@@ -128,6 +128,9 @@ pub enum RecordingError {
         /// The option's unit.
         given: &'static str,
     },
+    /// A MotionCal serial log (found by [`Format::Auto`]) that could not be read.
+    #[error(transparent)]
+    MotionCal(Box<mapping::ImportError>),
     /// A header names no sensor column at all.
     #[error("`{path}`, header: no sensor columns found (expected some of `ax ay az`, `gx gy gz`, `mx my mz`); header was `{header}`; name the columns in the first line, e.g. `t_s,ax,ay,az,gx,gy,gz`, or read the file as it is with --columns (any delimiter, e.g. `--columns t_ms=Time,ax=AccX,ay=AccY,az=AccZ`)")]
     NoSensor {
@@ -352,7 +355,9 @@ pub struct Recording {
 /// File format of a recording.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Format {
-    /// Decide from the first line: a header of names means CSV, four numbers mean IMU-TK.
+    /// Decide from the first lines: a MotionCal serial log when a `Raw:` line is among them
+    /// ([`motioncal::looks_like_motioncal`]), else a header of names means CSV, four numbers
+    /// mean IMU-TK.
     #[default]
     Auto,
     /// CSV with a header line of column names.
@@ -385,6 +390,19 @@ pub struct LoadOptions {
     pub imutk_time_scale: Option<f64>,
 }
 
+impl RecordingError {
+    /// Whether the error is an option that contradicts the file (a unit option against the
+    /// unit the header writes), which the user fixes in the command line, not in the file.
+    pub fn is_option_conflict(&self) -> bool {
+        match self {
+            Self::UnitDisagrees { .. } => true,
+            Self::SiblingMag { cause, .. } => cause.is_option_conflict(),
+            Self::MotionCal(cause) => cause.is_option_conflict(),
+            _ => false,
+        }
+    }
+}
+
 impl Recording {
     /// Read a recording with the given options (see [`LoadOptions`]).
     pub fn load(path: &Path, options: &LoadOptions) -> Result<Self, RecordingError> {
@@ -394,6 +412,12 @@ impl Recording {
             }
         }
         let mut lines = lines::LineReader::open(path)?;
+        // A MotionCal serial log is told from its first lines, read once: a file and standard
+        // input alike.
+        if options.format == Format::Auto && motioncal::lines_look_like_motioncal(&mut lines)? {
+            return motioncal::parse_lines(&mut lines, path, options.rate_hz)
+                .map_err(|e| RecordingError::MotionCal(Box::new(e)));
+        }
         let first = first_data_line(&mut lines, options.format)?;
         let format = match options.format {
             Format::Auto => match &first {

@@ -79,8 +79,17 @@ pub fn parse(text: &str, path: &Path, rate_hz: Option<f64>) -> Result<Recording,
     parse_lines(&mut lines, path, rate_hz)
 }
 
+/// True when the first [`SNIFF_BYTES`] of `lines` hold a `Raw:` line, read without consuming
+/// them, so that standard input is told apart as a file is ([`file_looks_like_motioncal`]).
+pub(super) fn lines_look_like_motioncal(
+    lines: &mut LineReader<'_>,
+) -> Result<bool, super::RecordingError> {
+    let head = lines.peek(SNIFF_BYTES)?;
+    Ok(looks_like_motioncal(&String::from_utf8_lossy(head)))
+}
+
 /// Reads a MotionCal log line by line from `lines`.
-fn parse_lines(
+pub(super) fn parse_lines(
     lines: &mut LineReader<'_>,
     path: &Path,
     rate_hz: Option<f64>,

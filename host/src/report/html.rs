@@ -105,13 +105,25 @@ pub fn render_html(data: &ReportData) -> Result<String, ReportError> {
             &after,
             true,
         )?));
-        body.push_str("</div><h3>Residual against time and temperature</h3><div class=row>");
+        // A recording without times has only its samples' numbers to plot against.
+        let (title, axis, heading) = if mag.time_is_index {
+            (
+                "magnetometer norm error against sample number",
+                "sample",
+                "sample number",
+            )
+        } else {
+            ("magnetometer norm error against time", "time (s)", "time")
+        };
+        body.push_str(&format!(
+            "</div><h3>Residual against {heading} and temperature</h3><div class=row>"
+        ));
         let pairs = |x: &[f64], y: &[f64]| -> Vec<(f64, f64)> {
             x.iter().copied().zip(y.iter().copied()).collect()
         };
         body.push_str(&figure(&plots::residual_against(
-            "magnetometer norm error against time",
-            "time (s)",
+            title,
+            axis,
             "norm error (%)",
             &pairs(&mag.time_s, &before),
             &pairs(&mag.time_s, &after),

@@ -161,8 +161,10 @@ pub struct MagSamples {
     pub raw: Vec<Vec3>,
     /// Calibrated samples.
     pub calibrated: Vec<Vec3>,
-    /// Time of each sample, s.
+    /// Time of each sample, s; its number when the recording has no times (`time_is_index`).
     pub time_s: Vec<f64>,
+    /// Whether `time_s` holds sample numbers: a recording without a time column or `--rate`.
+    pub time_is_index: bool,
     /// Temperature of each sample, °C, when known.
     pub temp_c: Option<Vec<f64>>,
     /// Where the temperature came from, when not from the magnetometer's own rows.

@@ -254,6 +254,9 @@ fn mag_samples(data: &mut ReportData, input: &CheckedInput, outcome: &SensorOutc
         raw: points.to_vec(),
         calibrated: points.iter().map(|p| fit.cal.apply(p)).collect(),
         time_s,
+        // The magnetometer on the main file's rows is numbered as they are; a file of its own
+        // has its own time column.
+        time_is_index: recording.time_is_index && mag.time == recording.time,
         temp_c,
         temp_note,
         field: fit.reference,

@@ -279,6 +279,7 @@ pub fn from_session_dir(dir: &Path) -> Result<ReportData, ReportError> {
         raw: mag_raw,
         calibrated: mag_calibrated,
         time_s,
+        time_is_index: false,
         temp_c: mag_temp_recorded.then_some(mag_temp),
         temp_note: None,
         field,

@@ -95,6 +95,8 @@ pub(super) fn interval(
         })
     });
     StillInterval {
+        // Numbered once all holds are found (see `super::find_still`).
+        number: 0,
         start,
         end,
         t_start,

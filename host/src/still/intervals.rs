@@ -35,6 +35,9 @@ impl std::fmt::Display for HoldLabel {
 /// One static hold.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StillInterval {
+    /// The hold's number as `imucal still` lists it and every message names it: counted from 1
+    /// in order of time among the holds found, and kept when others are left out.
+    pub number: usize,
     /// First row (main stream) of the hold.
     pub start: usize,
     /// One past the last row.
@@ -124,10 +127,12 @@ impl StillInterval {
         ))
     }
 
-    /// The hold as messages name it: "hold at 12.0–16.0 s (pose P12)".
+    /// The hold as messages name it, by its number in the `imucal still` table, its time span
+    /// and its label: "hold #3 at 12.0–16.0 s (pose P12)".
     pub fn name(&self) -> String {
         format!(
-            "hold at {:.1}–{:.1} s{}",
+            "hold #{} at {:.1}–{:.1} s{}",
+            self.number,
             self.t_start,
             self.t_end,
             self.label_phrase()
@@ -278,7 +283,7 @@ impl StillReport {
             .collect()
     }
 
-    /// Each of [`Self::poses`] named as the hold warnings name it: "hold at 12.0–16.0 s
+    /// Each of [`Self::poses`] named as the hold warnings name it: "hold #3 at 12.0–16.0 s
     /// (pose P12)".
     pub fn pose_names(&self, sensor: Sensor) -> Vec<String> {
         self.intervals
@@ -298,11 +303,72 @@ impl StillReport {
     }
 }
 
+/// `text` (a fit's sentence) with each pose the fit names by its position among the poses it was
+/// given, "pose 6" (counted from 0), named as the hold it is among `names` ([`StillReport::pose_names`]):
+/// "hold #7 at 30.0–34.0 s". A position beyond `names` is left as it is.
+pub fn name_poses(text: &str, names: &[String]) -> String {
+    const WORD: &str = "pose ";
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find(WORD) {
+        let (before, from) = rest.split_at(at);
+        out.push_str(before);
+        let after = &from[WORD.len()..];
+        let digits = after.len() - after.trim_start_matches(|c: char| c.is_ascii_digit()).len();
+        let word_start = out
+            .chars()
+            .next_back()
+            .is_none_or(|c| !c.is_alphanumeric() && c != '_');
+        let word_end = after[digits..]
+            .chars()
+            .next()
+            .is_none_or(|c| !c.is_alphanumeric() && c != '_');
+        let name = after[..digits]
+            .parse::<usize>()
+            .ok()
+            .filter(|_| digits > 0 && word_start && word_end)
+            .and_then(|i| names.get(i));
+        match name {
+            Some(name) => {
+                out.push_str(name);
+                rest = &after[digits..];
+            }
+            None => {
+                out.push_str(WORD);
+                rest = after;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
 /// Position of `sensor` in per-sensor arrays ordered accelerometer, gyroscope, magnetometer.
 pub(super) fn sensor_index(sensor: Sensor) -> usize {
     match sensor {
         Sensor::Accel => 0,
         Sensor::Gyro => 1,
         Sensor::Mag => 2,
+    }
+}
+
+#[cfg(test)]
+mod name_tests {
+    use super::name_poses;
+
+    #[test]
+    fn a_fits_pose_position_is_named_as_the_hold_and_other_words_are_left() {
+        let names = [
+            "hold #1 at 0.0–2.0 s (pose 5)".to_string(),
+            "hold #2 at 3.0–5.0 s".to_string(),
+        ];
+        assert_eq!(
+            name_poses(
+                "pose 1 is tilted; pose 0 too; pose 7; expose 1; pose 10x",
+                &names
+            ),
+            "hold #2 at 3.0–5.0 s is tilted; hold #1 at 0.0–2.0 s (pose 5) too; pose 7; expose 1; \
+             pose 10x"
+        );
     }
 }

@@ -41,7 +41,7 @@ use crate::recording::{LabelKind, Recording};
 use detect::detect;
 pub use detect::{BREAK_S, MAX_STILL_GYRO_STD_DPS};
 use holds::from_pose_column;
-pub use intervals::{HoldLabel, NoiseFloor, StillInterval, StillReport, TempStats};
+pub use intervals::{name_poses, HoldLabel, NoiseFloor, StillInterval, StillReport, TempStats};
 pub use options::{StillError, StillOptions, MAX_MARGIN, MIN_MARGIN};
 pub use samples::{hold_samples, DroppedSamples, HoldSamples};
 
@@ -60,6 +60,9 @@ pub fn find_still(
         Some(labels) if labels.kind == LabelKind::Pose => from_pose_column(recording),
         _ => detect(recording, options)?,
     };
+    for (k, interval) in report.intervals.iter_mut().enumerate() {
+        interval.number = k + 1;
+    }
     report.cluster_directions(recording, options.direction_angle_deg);
     Ok(report)
 }
