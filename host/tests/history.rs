@@ -542,3 +542,44 @@ fn the_history_command_gives_crcs_as_hex_and_fails_naming_the_boards_for_an_unkn
     // The board that is there is listed.
     assert!(history(&[&record.device_id]).status.success());
 }
+
+#[test]
+fn a_large_change_the_fits_gave_no_sigma_for_is_named_in_the_default_list() {
+    let dir = history_support::scratch_dir("cli-unscaled");
+    let url = format!("sqlite://{}", dir.join("history.sqlite").display());
+    let mut store = HistoryStore::open_url(Some(&url)).expect("open");
+    let before = board_record(3);
+    let mut after = before.clone();
+    after.recorded_unix_ms += 86_400_000;
+    // Small changes of the accelerometer's gains and one offset, which have σ, and a 5 %
+    // gyroscope gain change that neither record has a σ for.
+    for k in 0..3 {
+        after.params.accel.a[k][k] += 1e-6;
+    }
+    after.params.accel.b[1] += 1e-6;
+    after.params.gyro.a[0][0] *= 1.05;
+    after.sigma.remove("gyro.A.xx");
+    let mut before_no_gyro_sigma = before.clone();
+    before_no_gyro_sigma.sigma.remove("gyro.A.xx");
+    store.record(&before_no_gyro_sigma).expect("write");
+    store.record(&after).expect("write");
+    let history = device_changes(store.records(None).expect("read"));
+    let changes = &history[1].changes;
+    let gyro = changes
+        .iter()
+        .position(|c| c.parameter == "gyro.A.xx")
+        .expect("compared");
+    // Ranked first among those without σ, after every one with σ.
+    assert!(changes[..gyro].iter().all(|c| c.change_sigma.is_some()));
+    assert!(changes[gyro + 1..].iter().all(|c| c.change_sigma.is_none()));
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["history", "--db", &url, &before.device_id])
+        .output()
+        .expect("imucal history runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("gyro.A.xx") && stdout.contains("+5.00 % of its value; no σ"),
+        "{stdout}"
+    );
+}

@@ -277,10 +277,29 @@ fn print_entry(entry: &RecordChanges, shown: usize) {
                     None => format!("{} {:+.2e}", c.parameter, c.change),
                 })
                 .collect();
-            if changed.len() > shown {
+            // A change the fits gave no σ for ranks after every one they did; the largest of
+            // them is named even when the list is cut before it.
+            let unscaled = changed
+                .iter()
+                .skip(shown)
+                .find(|c| c.change_sigma.is_none());
+            let mut hidden = changed.len().saturating_sub(shown);
+            if let Some(c) = unscaled {
+                listed.push(if c.before == 0.0 {
+                    format!("{} {:+.2e} (no σ)", c.parameter, c.change)
+                } else {
+                    format!(
+                        "{} {:+.2e} ({:+.2} % of its value; no σ)",
+                        c.parameter,
+                        c.change,
+                        100.0 * c.change / c.before.abs()
+                    )
+                });
+                hidden -= 1;
+            }
+            if hidden > 0 {
                 listed.push(format!(
-                    "and {} more (--changes {} lists them)",
-                    changed.len() - shown,
+                    "and {hidden} more (--changes {} lists them)",
                     changed.len()
                 ));
             }

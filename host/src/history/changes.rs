@@ -29,6 +29,18 @@ pub struct ParameterChange {
     pub change_sigma: Option<f64>,
 }
 
+impl ParameterChange {
+    /// `|after − before| / |before|`, or the absolute change when `before` is 0 (an offset that
+    /// was exactly zero, or a cross term).
+    pub fn relative(&self) -> f64 {
+        if self.before == 0.0 {
+            self.change.abs()
+        } else {
+            (self.change / self.before).abs()
+        }
+    }
+}
+
 /// One record of a board with its changes since the board's previous record.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RecordChanges {
@@ -214,9 +226,13 @@ fn parameter_changes(
             })
         })
         .collect();
-    changes.sort_by(|a, b| {
-        let key = |c: &ParameterChange| c.change_sigma.map_or(-1.0, f64::abs);
-        key(b).total_cmp(&key(a))
+    // Those with a σ by its multiple; those without (a fit that gave none) after them, by
+    // their relative size, so that a 5 % gain change is not listed after a change of 1e-9.
+    changes.sort_by(|a, b| match (a.change_sigma, b.change_sigma) {
+        (Some(x), Some(y)) => y.abs().total_cmp(&x.abs()),
+        (Some(_), None) => std::cmp::Ordering::Less,
+        (None, Some(_)) => std::cmp::Ordering::Greater,
+        (None, None) => b.relative().total_cmp(&a.relative()),
     });
     changes
 }
