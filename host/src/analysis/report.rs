@@ -21,7 +21,7 @@ use serde_json::{json, Map, Value};
 
 use super::effects::EffectKind;
 use super::{EffectResult, EffectStatus, RecordingAnalysis, SensorAnalysis};
-use crate::stats::chi_square::ChiSquareTest;
+use crate::stats::chi_square::{ChiSquareTest, CONSISTENCY_ALPHA};
 
 /// Why a report could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -225,8 +225,10 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
             ));
         } else {
             out.push_str(&format!(
-                "  final residual is consistent with the noise (χ²/dof = {:.2})\n",
-                a.test_after.reduced()
+                "  final residual is consistent with the noise at the {}% level (χ²/dof = {:.2}, {})\n",
+                100.0 * CONSISTENCY_ALPHA,
+                a.test_after.reduced(),
+                a.test_after.p_text()
             ));
         }
         out.push('\n');

@@ -133,6 +133,212 @@ fn evaluate_base(
     Some((splits, fit, ho))
 }
 
+/// Significance level of the nested F test ([`lack_of_fit_p`]) by which a higher degree of
+/// `bias_temperature` replaces a lower one: the same level as a new effect's, Bonferroni aside
+/// (two comparisons at most, both within one family already being tested).
+pub const DEGREE_ALPHA: f64 = ALPHA;
+
+/// `bias_temperature` added to the model `effects` (fitted parameters `params`), its degree
+/// chosen on every observation by the nested F test: degree `d` replaces the degree chosen so
+/// far when it lowers χ² significantly (`p ≤ DEGREE_ALPHA`, noise estimated from the higher
+/// degree's residual, so an inflated floor cancels). Degree 3 is compared with degree 1 when
+/// degree 2 was not chosen (a cubic with a small square term). The chosen model is then
+/// evaluated held out, falling back to a lower degree whose folds can be fitted. `Err` with the
+/// first degree's kind and unknowns when not even degree 1 can be fitted on every fold.
+fn temperature_degree(
+    problem: &Problem,
+    effects: &[EffectKind],
+    params: &nalgebra::DVector<f64>,
+    splits: &Splits,
+) -> Result<(EffectKind, ExtendedFit, HeldOut), (EffectKind, usize)> {
+    let rows: Vec<usize> = (0..problem.points.len()).collect();
+    let residuals = rows.len() * problem.components();
+    let mut fits: Vec<(EffectKind, ExtendedFit)> = Vec::new();
+    for degree in 1..=3u8 {
+        let kind = EffectKind::BiasTemperature(degree);
+        let mut with = effects.to_vec();
+        with.push(kind);
+        let start = extend_start(params, kind.param_count());
+        let Some(fit) = fit_rows(problem, &with, &rows, &start) else {
+            break;
+        };
+        fits.push((kind, fit));
+    }
+    let mut chosen = 0;
+    for higher in 1..fits.len() {
+        let (low, high) = (&fits[chosen].1, &fits[higher].1);
+        let extra = high.params.len() - low.params.len();
+        let dof = residuals.saturating_sub(high.params.len());
+        if lack_of_fit_p(low.cost, high.cost, extra, dof) <= DEGREE_ALPHA {
+            chosen = higher;
+        }
+    }
+    for index in (0..=chosen).rev() {
+        let (kind, fit) = &fits[index];
+        if let Some(ho) = held_out(problem, &fit.effects, fit, splits) {
+            return Ok((*kind, fit.clone(), ho));
+        }
+    }
+    let first = EffectKind::BiasTemperature(1);
+    Err((first, params.len() + first.param_count()))
+}
+
+/// The model `fit` with its `bias_temperature` term (if any) refitted at the degree
+/// [`temperature_degree`] chooses beside the other effects; `None` when it has no such term or
+/// the degree stays.
+fn rechoose_degree(
+    problem: &Problem,
+    fit: &ExtendedFit,
+    splits: &Splits,
+) -> Option<(ExtendedFit, HeldOut)> {
+    let index = fit
+        .effects
+        .iter()
+        .position(|k| matches!(k, EffectKind::BiasTemperature(_)))?;
+    let (effects, start) = without_effect(problem, fit, index);
+    let rows: Vec<usize> = (0..problem.points.len()).collect();
+    let others = fit_rows(problem, &effects, &rows, &start)?;
+    let (kind, refit, ho) = temperature_degree(problem, &effects, &others.params, splits).ok()?;
+    (kind != fit.effects[index]).then_some((refit, ho))
+}
+
+/// The other half of the time–temperature pair: a temperature effect's is `bias_drift`, a
+/// drift's is `bias_temperature` (its degree chosen when it is fitted).
+fn time_temperature_partner(kind: EffectKind) -> Option<EffectKind> {
+    match kind {
+        EffectKind::BiasTemperature(_) | EffectKind::ScaleTemperature => {
+            Some(EffectKind::BiasDrift)
+        }
+        EffectKind::BiasDrift => Some(EffectKind::BiasTemperature(1)),
+        _ => None,
+    }
+}
+
+/// Form check of a time or temperature effect `kind`, the last effect of `fit` (held out
+/// `ho`): a bias free in shape over the same variable — for a temperature effect also one over
+/// time, since in a sequential recording any slow change of the bias is a function of time —
+/// added to the model must not both fit significantly better (lack-of-fit F test at
+/// [`FORM_ALPHA`]) and predict held-out poses better by the worth-having gain. The model the
+/// free shape is compared against holds `partner` too (the other time or temperature
+/// candidate, when still untested): otherwise a true drift beside a true temperature effect is
+/// a slow change the free shape over time fits and the temperature polynomial cannot, and the
+/// right effect would be rejected for the other's absence. `Some(note)` when the form is wrong.
+fn other_form(
+    problem: &Problem,
+    splits: &Splits,
+    fit: &ExtendedFit,
+    ho: &HeldOut,
+    kind: EffectKind,
+    partner: Option<EffectKind>,
+) -> Option<String> {
+    let components = problem.components();
+    let n = problem.points.len();
+    let with_partner = partner.and_then(|p| match p {
+        EffectKind::BiasTemperature(_) => {
+            temperature_degree(problem, &fit.effects, &fit.params, splits)
+                .ok()
+                .map(|(k, f, h)| (k, f, h))
+        }
+        other => {
+            let mut effects = fit.effects.clone();
+            effects.push(other);
+            let start = extend_start(&fit.params, other.param_count());
+            evaluate(problem, &effects, &start, splits).map(|(f, h)| (other, f, h))
+        }
+    });
+    let (partner, base_fit, base_ho) = match &with_partner {
+        Some((k, f, h)) => (Some(*k), f, h),
+        None => (None, fit, ho),
+    };
+    let mut checks = vec![EffectKind::BinnedBias(kind.needs_temperature())];
+    if kind.needs_temperature() {
+        checks.push(EffectKind::BinnedBias(false));
+    }
+    let (binned, p, gain) = checks.into_iter().find_map(|binned| {
+        let mut effects = base_fit.effects.clone();
+        effects.push(binned);
+        let start = extend_start(&base_fit.params, binned.param_count());
+        let (free_fit, free_ho) = evaluate(problem, &effects, &start, splits)?;
+        let dof = (n * components).saturating_sub(free_fit.params.len());
+        let p = lack_of_fit_p(base_fit.cost, free_fit.cost, binned.param_count(), dof);
+        let cmp = Comparison::new(base_ho, &free_ho, components);
+        (p <= FORM_ALPHA && cmp.gain_per_component >= MIN_GAIN_PER_COMPONENT).then_some((
+            binned,
+            p,
+            cmp.gain_per_component,
+        ))
+    })?;
+    let beside = partner.map_or(String::new(), |k| format!(", even beside {}", k.name()));
+    Some(format!(
+        "explains part of the residual, but a bias free in shape over {}{beside} fits it better (lack-of-fit \
+         F test p = {p:.1e}) and predicts held-out poses better by {gain:.2} variances of the inflated floor: \
+         the dependence has another form than this family, which these tests do not identify (e.g. a step, \
+         hysteresis, a random walk, or an effect of another variable), so it is not accepted",
+        binned.variable(),
+    ))
+}
+
+/// Two candidates accepted together: each with its comparison against the model with the
+/// other alone, the joint fit and its held-out losses.
+struct Pair {
+    members: Vec<(EffectKind, Comparison)>,
+    fit: ExtendedFit,
+    ho: HeldOut,
+}
+
+/// The best pair of this round's candidates (`round`: each added alone to `current`), tested
+/// jointly against `current` by the acceptance rule with `m` = the number of pairs tested
+/// (Bonferroni); each member must also pass the rule against the model with the other member
+/// alone, so that no member rides on its partner. The one with the smallest p-value among
+/// those that pass. When temperature and time are confounded, pairs of which both members
+/// depend on time or temperature are not tested.
+fn best_pair(
+    problem: &Problem,
+    splits: &Splits,
+    current: &(ExtendedFit, HeldOut),
+    round: &[(EffectKind, Comparison, ExtendedFit, HeldOut)],
+    confounded: bool,
+) -> Option<Pair> {
+    let components = problem.components();
+    let pairs: Vec<(usize, usize)> = (0..round.len())
+        .flat_map(|i| (i + 1..round.len()).map(move |j| (i, j)))
+        .filter(|&(i, j)| {
+            !(confounded
+                && is_time_or_temperature(round[i].0)
+                && is_time_or_temperature(round[j].0))
+        })
+        .collect();
+    let m = pairs.len();
+    let mut best: Option<(f64, Pair)> = None;
+    for (i, j) in pairs {
+        let (a, b) = (round[i].0, round[j].0);
+        let mut effects = current.0.effects.clone();
+        effects.push(a);
+        effects.push(b);
+        let start = extend_start(&current.0.params, a.param_count() + b.param_count());
+        let Some((fit, ho)) = evaluate(problem, &effects, &start, splits) else {
+            continue;
+        };
+        let joint = Comparison::new(&current.1, &ho, components);
+        let given_b = Comparison::new(&round[j].3, &ho, components);
+        let given_a = Comparison::new(&round[i].3, &ho, components);
+        if !(joint.passes(m) && given_b.passes(m) && given_a.passes(m)) {
+            continue;
+        }
+        if best.as_ref().is_none_or(|(p, _)| joint.p_value < *p) {
+            best = Some((
+                joint.p_value,
+                Pair {
+                    members: vec![(a, given_b), (b, given_a)],
+                    fit,
+                    ho,
+                },
+            ));
+        }
+    }
+    best.map(|(_, pair)| pair)
+}
+
 /// What [`analyse_observations`] needs besides the observations.
 #[derive(Debug, Clone)]
 pub struct SensorSetup<'a> {
@@ -241,37 +447,25 @@ pub fn analyse_observations(
         let m = remaining.len();
         let mut round: Vec<(EffectKind, Comparison, ExtendedFit, HeldOut)> = Vec::new();
         for &cand in &remaining {
-            let mut best: Option<(EffectKind, Comparison, ExtendedFit, HeldOut)> = None;
-            let degrees: Vec<EffectKind> = match cand {
+            let chosen = match cand {
                 EffectKind::BiasTemperature(_) => {
-                    (1..=3).map(EffectKind::BiasTemperature).collect()
+                    temperature_degree(&problem, &current.0.effects, &current.0.params, &splits)
                 }
-                other => vec![other],
+                other => {
+                    let mut effects = current.0.effects.clone();
+                    effects.push(other);
+                    let start = extend_start(&current.0.params, other.param_count());
+                    evaluate(&problem, &effects, &start, &splits)
+                        .map(|(fit, ho)| (other, fit, ho))
+                        .ok_or((other, start.len()))
+                }
             };
-            for kind in degrees {
-                let mut effects = current.0.effects.clone();
-                effects.push(kind);
-                let start = extend_start(&current.0.params, kind.param_count());
-                let Some((fit, ho)) = evaluate(&problem, &effects, &start, &splits) else {
-                    if best.is_none() {
-                        unfittable.push((kind, start.len()));
-                    }
-                    break;
-                };
-                let cmp = Comparison::new(&current.1, &ho, components);
-                // A higher degree replaces a lower one only if it beats it by the same rule.
-                let keep = match &best {
-                    None => true,
-                    Some((_, _, _, prev_ho)) => Comparison::new(prev_ho, &ho, components).passes(m),
-                };
-                if keep {
-                    best = Some((kind, cmp, fit, ho));
-                } else {
-                    break;
+            match chosen {
+                Ok((kind, fit, ho)) => {
+                    let cmp = Comparison::new(&current.1, &ho, components);
+                    round.push((kind, cmp, fit, ho));
                 }
-            }
-            if let Some(b) = best {
-                round.push(b);
+                Err(unknowns) => unfittable.push(unknowns),
             }
         }
         remaining.retain(|r| !unfittable.iter().any(|(k, _)| k.name() == r.name()));
@@ -290,7 +484,60 @@ pub fn analyse_observations(
         for (k, c, f, _) in &round {
             last.push((*k, c.clone(), f.clone()));
         }
-        let Some(w) = winner else { break };
+        let Some(w) = winner else {
+            // No candidate passes alone, yet the residual is above the floor: two effects can
+            // hide each other, each tested against a floor the other inflates (the Birge ratio
+            // of a model without it) and, for time and temperature, against a free shape that
+            // the other fills. Test the pairs jointly.
+            let above = !ChiSquareTest::new(current.0.cost, n * components, current.0.params.len())
+                .consistent();
+            if !above {
+                break;
+            }
+            let Some(pair) = best_pair(&problem, &splits, &current, &round, confounded) else {
+                break;
+            };
+            let Pair { members, fit, ho } = pair;
+            let names: Vec<&'static str> = members.iter().map(|(k, _)| k.name()).collect();
+            remaining.retain(|r| !names.contains(&r.name()));
+            let mut rejected = false;
+            for (kind, _) in &members {
+                if !is_time_or_temperature(*kind) {
+                    continue;
+                }
+                let partner = time_temperature_partner(*kind)
+                    .filter(|p| remaining.iter().any(|r| r.name() == p.name()));
+                if let Some(why) = other_form(&problem, &splits, &fit, &ho, *kind, partner) {
+                    wrong_form.push((kind.name(), why));
+                    last.retain(|(k, _, _)| k.name() != kind.name());
+                    last.push((
+                        *kind,
+                        Comparison::new(&current.1, &ho, components),
+                        fit.clone(),
+                    ));
+                    remaining.extend(
+                        members
+                            .iter()
+                            .map(|(k, _)| *k)
+                            .filter(|k| k.name() != kind.name()),
+                    );
+                    rejected = true;
+                    break;
+                }
+            }
+            if rejected {
+                continue;
+            }
+            for (kind, cmp) in members {
+                last.retain(|(k, _, _)| k.name() != kind.name());
+                last.push((kind, cmp, fit.clone()));
+            }
+            current = (fit, ho);
+            if let Some(r) = rechoose_degree(&problem, &current.0, &splits) {
+                current = r;
+            }
+            continue;
+        };
         let time_or_temp = is_time_or_temperature(round[w].0);
         if confounded && time_or_temp {
             confounded_found = true;
@@ -307,46 +554,26 @@ pub fn analyse_observations(
                 let (kind, _, fit, ho) = round.swap_remove(t);
                 provisional.push(kind.name());
                 current = (fit, ho);
+                if let Some(r) = rechoose_degree(&problem, &current.0, &splits) {
+                    current = r;
+                }
             }
             continue;
         }
         let (kind, _, fit, ho) = round.swap_remove(w);
         remaining.retain(|r| r.name() != kind.name());
         if time_or_temp {
-            // Form check: a bias free in shape over the same variable, added to the effect, must
-            // neither fit significantly better (lack-of-fit F test) nor predict visibly better;
-            // for a temperature effect, nor one free in shape over time (the recording is
-            // sequential, so any slow change of the bias is a function of time).
-            let mut checks = vec![EffectKind::BinnedBias(kind.needs_temperature())];
-            if kind.needs_temperature() {
-                checks.push(EffectKind::BinnedBias(false));
-            }
-            let other_form =
-                checks.into_iter().find_map(|binned| {
-                    let mut effects = fit.effects.clone();
-                    effects.push(binned);
-                    let start = extend_start(&fit.params, binned.param_count());
-                    let (free_fit, free_ho) = evaluate(&problem, &effects, &start, &splits)?;
-                    let dof = (n * components).saturating_sub(free_fit.params.len());
-                    let p = lack_of_fit_p(fit.cost, free_fit.cost, binned.param_count(), dof);
-                    let cmp = Comparison::new(&ho, &free_ho, components);
-                    (p <= FORM_ALPHA && cmp.gain_per_component >= MIN_GAIN_PER_COMPONENT)
-                        .then_some((binned, p, cmp.gain_per_component))
-                });
-            if let Some((binned, p, gain)) = other_form {
-                wrong_form.push((
-                    kind.name(),
-                    format!(
-                        "explains part of the residual, but a bias free in shape over {} fits it better (lack-of-fit \
-                         F test p = {p:.1e}) and predicts held-out poses better by {gain:.2} variances of the inflated floor: \
-                         the dependence has another form (a step, hysteresis, a random walk), so it is not accepted",
-                        binned.variable(),
-                    ),
-                ));
+            let partner = time_temperature_partner(kind)
+                .filter(|p| remaining.iter().any(|r| r.name() == p.name()));
+            if let Some(why) = other_form(&problem, &splits, &fit, &ho, kind, partner) {
+                wrong_form.push((kind.name(), why));
                 continue;
             }
         }
         current = (fit, ho);
+        if let Some(r) = rechoose_degree(&problem, &current.0, &splits) {
+            current = r;
+        }
     }
 
     // A drift whose residual still follows time is the straight-line part of a random walk or
@@ -461,7 +688,11 @@ pub fn analyse_observations(
                 ),
             },
         };
-        let index = fit.effects.len() - 1;
+        let index = fit
+            .effects
+            .iter()
+            .rposition(|k| k.name() == kind.name())
+            .unwrap_or(fit.effects.len() - 1);
         results.push(EffectResult {
             kind: *kind,
             status,
