@@ -217,8 +217,22 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
             } else {
                 "unexplained: the final residual"
             };
+            let confounded: Vec<&str> = a
+                .effects
+                .iter()
+                .filter(|e| e.status == EffectStatus::Confounded)
+                .map(|e| e.kind.name())
+                .collect();
+            let candidates = if confounded.is_empty() {
+                "no candidate explains it".to_string()
+            } else {
+                format!(
+                    "{} would explain part of it but was set aside as confounded (see above)",
+                    confounded.join(" and ")
+                )
+            };
             out.push_str(&format!(
-                "  {what} ({:.3e} {u} RMS) is {:.1}× the noise, each observation weighed by its own (χ²/dof = {:.1}; an RMS below the floor's can be far above the noise of the observations that carry it), and no candidate explains it{corr}\n",
+                "  {what} ({:.3e} {u} RMS) is {:.1}× the noise, each observation weighed by its own (χ²/dof = {:.1}; an RMS below the floor's can be far above the noise of the observations that carry it), and {candidates}{corr}\n",
                 a.rms_after,
                 a.test_after.reduced().sqrt(),
                 a.test_after.reduced()

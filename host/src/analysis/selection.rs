@@ -19,8 +19,9 @@ use crate::pipeline::observations::Observation;
 use crate::recording::Sensor;
 use crate::stats::chi_square::ChiSquareTest;
 
-/// Above this |ρ| between pose temperature and pose time, temperature and time effects are
-/// reported as confounded instead of choosing one.
+/// Above this |ρ| between pose temperature and pose time, a temperature polynomial is nearly a
+/// polynomial in time: a temperature effect that beats the linear drift is still kept only
+/// provisionally. Below it, and for a drift, the data decide ([`tell_apart`]).
 pub const CONFOUNDING_LIMIT: f64 = 0.95;
 
 fn pearson(a: &[f64], b: &[f64]) -> Option<f64> {
@@ -290,23 +291,17 @@ struct Pair {
 /// jointly against `current` by the acceptance rule with `m` = the number of pairs tested
 /// (Bonferroni); each member must also pass the rule against the model with the other member
 /// alone, so that no member rides on its partner. The one with the smallest p-value among
-/// those that pass. When temperature and time are confounded, pairs of which both members
-/// depend on time or temperature are not tested.
+/// those that pass. A time and a temperature effect the data cannot tell apart fail the
+/// second condition: neither adds to the other.
 fn best_pair(
     problem: &Problem,
     splits: &Splits,
     current: &(ExtendedFit, HeldOut),
     round: &[(EffectKind, Comparison, ExtendedFit, HeldOut)],
-    confounded: bool,
 ) -> Option<Pair> {
     let components = problem.components();
     let pairs: Vec<(usize, usize)> = (0..round.len())
         .flat_map(|i| (i + 1..round.len()).map(move |j| (i, j)))
-        .filter(|&(i, j)| {
-            !(confounded
-                && is_time_or_temperature(round[i].0)
-                && is_time_or_temperature(round[j].0))
-        })
         .collect();
     let m = pairs.len();
     let mut best: Option<(f64, Pair)> = None;
@@ -337,6 +332,48 @@ fn best_pair(
         }
     }
     best.map(|(_, pair)| pair)
+}
+
+/// Whether the data tell a time or temperature effect from its rival (the other of the pair).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Distinction {
+    /// The first adds to the second significantly (it may or may not need the second too).
+    First,
+    /// Only the second adds to the first: the data prefer the second. The p-values of the first
+    /// beside the second and of the second beside the first.
+    Second(f64, f64),
+    /// Neither adds significantly to the other: the same p-values.
+    Neither(f64, f64),
+}
+
+/// Tell the models `first` and `second` (each the current model plus one effect, fitted on every
+/// observation) apart by encompassing: both effects fitted together, then the nested F test
+/// ([`lack_of_fit_p`] at [`ALPHA`]) of each one's contribution beside the other. The F test
+/// weighs the fall in χ² against the noise the joint model leaves (its own Birge ratio), so a
+/// correlation of temperature and time however high decides nothing by itself: what counts is
+/// whether the part of each variable the other does not follow changes the fit by more than
+/// the noise. Neither significant: confounded. When the joint model cannot be fitted, the two
+/// are taken as confounded.
+fn tell_apart(
+    problem: &Problem,
+    first: &(EffectKind, Comparison, ExtendedFit, HeldOut),
+    second: &(EffectKind, Comparison, ExtendedFit, HeldOut),
+) -> Distinction {
+    let rows: Vec<usize> = (0..problem.points.len()).collect();
+    let mut effects = first.2.effects.clone();
+    effects.push(second.0);
+    let start = extend_start(&first.2.params, second.0.param_count());
+    let Some(joint) = fit_rows(problem, &effects, &rows, &start) else {
+        return Distinction::Neither(1.0, 1.0);
+    };
+    let dof = (rows.len() * problem.components()).saturating_sub(joint.params.len());
+    let p_first = lack_of_fit_p(second.2.cost, joint.cost, first.0.param_count(), dof);
+    let p_second = lack_of_fit_p(first.2.cost, joint.cost, second.0.param_count(), dof);
+    match (p_first <= ALPHA, p_second <= ALPHA) {
+        (true, _) => Distinction::First,
+        (false, true) => Distinction::Second(p_first, p_second),
+        (false, false) => Distinction::Neither(p_first, p_second),
+    }
 }
 
 /// What [`analyse_observations`] needs besides the observations.
@@ -403,7 +440,6 @@ pub fn analyse_observations(
     let temps: Option<Vec<f64>> = observations.iter().map(|o| o.temp_c).collect();
     let times: Vec<f64> = observations.iter().map(|o| o.time_s).collect();
     let temp_time_correlation = temps.as_ref().and_then(|t| pearson(t, &times));
-    let confounded = temp_time_correlation.is_some_and(|r| r.abs() > CONFOUNDING_LIMIT);
 
     let families: &[EffectKind] = match base {
         BaseKind::Norm { .. } => &NORM_FAMILIES,
@@ -443,6 +479,10 @@ pub fn analyse_observations(
     let mut wrong_form: Vec<(&'static str, String)> = Vec::new();
     let mut unfittable: Vec<(EffectKind, usize)> = Vec::new();
     let mut provisional: Vec<&'static str> = Vec::new();
+    // Set aside for a rival the data prefer: (name, why).
+    let mut preferred: Vec<(&'static str, String)> = Vec::new();
+    // Why the time and temperature effects were not told apart.
+    let mut confounding: Option<String> = None;
     while !remaining.is_empty() {
         let m = remaining.len();
         let mut round: Vec<(EffectKind, Comparison, ExtendedFit, HeldOut)> = Vec::new();
@@ -494,7 +534,7 @@ pub fn analyse_observations(
             if !above {
                 break;
             }
-            let Some(pair) = best_pair(&problem, &splits, &current, &round, confounded) else {
+            let Some(pair) = best_pair(&problem, &splits, &current, &round) else {
                 break;
             };
             let Pair { members, fit, ho } = pair;
@@ -538,9 +578,52 @@ pub fn analyse_observations(
             }
             continue;
         };
+        let mut w = w;
         let time_or_temp = is_time_or_temperature(round[w].0);
-        if confounded && time_or_temp {
+        let rival = time_temperature_partner(round[w].0)
+            .and_then(|p| round.iter().position(|(k, _, _, _)| k.name() == p.name()));
+        let told_apart = rival.map(|r| tell_apart(&problem, &round[w], &round[r]));
+        if let (Some(r), Some(Distinction::Second(p_first, p_second))) = (rival, told_apart) {
+            // The data prefer the rival: it adds to the winner, the winner does not add to it.
+            if round[r].1.passes(m) {
+                preferred.push((
+                    round[w].0.name(),
+                    format!(
+                        "lowers held-out error, but {} explains the same residual and more: beside it this effect \
+                         adds nothing significant (nested F test p = {p_first:.1e}), while it adds to this one \
+                         (p = {p_second:.1e}); it is tested again beside it",
+                        round[r].0.name()
+                    ),
+                ));
+                w = r;
+            }
+        }
+        let winner_kind = round[w].0;
+        let high_correlation = temp_time_correlation.is_some_and(|r| r.abs() > CONFOUNDING_LIMIT);
+        let reason = match told_apart {
+            Some(Distinction::Neither(p_first, p_second)) if time_or_temp => Some(format!(
+                "{} and {} lower χ² alike: beside each other neither adds significantly (nested F test \
+                 p = {p_first:.1e} for {}, {p_second:.1e} for {}), so the data do not tell temperature from time \
+                 (ρ = {:.3})",
+                winner_kind.name(),
+                rival.map_or("", |r| round[r].0.name()),
+                winner_kind.name(),
+                rival.map_or("", |r| round[r].0.name()),
+                temp_time_correlation.unwrap_or(f64::NAN),
+            )),
+            _ if time_or_temp && winner_kind.needs_temperature() && high_correlation => {
+                Some(format!(
+                    "temperature follows time (ρ = {:.3}, above {CONFOUNDING_LIMIT}), so a polynomial in \
+                     temperature is one in time as well, while the time family holds only a linear drift: a \
+                     linear drift not fitting as well does not tell temperature from time",
+                    temp_time_correlation.unwrap_or(f64::NAN),
+                ))
+            }
+            _ => None,
+        };
+        if let Some(reason) = reason {
             confounded_found = true;
+            confounding = Some(reason);
             remaining.retain(|r| !is_time_or_temperature(*r));
             // The firmware can only apply a temperature term: keep the best temperature
             // candidate that passes, marked provisional, rather than nothing.
@@ -648,12 +731,12 @@ pub fn analyse_observations(
             coefficients: coefficients(&problem, &final_fit, idx, unit, inflation),
             note: if provisional.contains(&kind.name()) {
                 format!(
-                    "provisional: confounded with time (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); lowers the held-out mean square error by \
-                     {:.0} % (corrected t p = {p_value:.1e}) but a drift in time would do the same. Kept because the firmware \
-                     applies temperature terms only; confirm with a recording where temperature does not follow time \
-                     (a cool-down, or a second warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
-                    temp_time_correlation.unwrap_or(f64::NAN),
-                    100.0 * score
+                    "provisional: confounded with time: lowers the held-out mean square error by {:.0} % \
+                     (corrected t p = {p_value:.1e}), but {}. Kept because the firmware applies temperature terms \
+                     only; confirm with a recording where temperature does not follow time (a cool-down, or a second \
+                     warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
+                    100.0 * score,
+                    confounding.as_deref().unwrap_or("the data do not tell temperature from time"),
                 )
             } else {
                 format!(
@@ -675,11 +758,14 @@ pub fn analyse_observations(
         };
         let note = match status {
             EffectStatus::Confounded => format!(
-                "would improve held-out error, but temperature and time are correlated (ρ = {:.3}, limit {CONFOUNDING_LIMIT}); \
-                 record with temperature varying independently of time to tell them apart",
-                temp_time_correlation.unwrap_or(f64::NAN)
+                "would improve held-out error, but {}; record with temperature varying independently of time",
+                confounding.as_deref().unwrap_or("the data do not tell temperature from time"),
             ),
-            _ => match wrong_form.iter().find(|(name, _)| *name == kind.name()) {
+            _ => match wrong_form
+                .iter()
+                .chain(&preferred)
+                .find(|(name, _)| *name == kind.name())
+            {
                 Some((_, why)) => why.clone(),
                 None => format!(
                     "held-out gain {:.2} variances of the inflated floor per component (white-noise floor × {:.2}, \
