@@ -174,8 +174,7 @@ fn temperature_degree(
             chosen = higher;
         }
     }
-    for index in (0..=chosen).rev() {
-        let (kind, fit) = &fits[index];
+    for (kind, fit) in fits[..=chosen].iter().rev() {
         if let Some(ho) = held_out(problem, &fit.effects, fit, splits) {
             return Ok((*kind, fit.clone(), ho));
         }
@@ -236,9 +235,7 @@ fn other_form(
     let n = problem.points.len();
     let with_partner = partner.and_then(|p| match p {
         EffectKind::BiasTemperature(_) => {
-            temperature_degree(problem, &fit.effects, &fit.params, splits)
-                .ok()
-                .map(|(k, f, h)| (k, f, h))
+            temperature_degree(problem, &fit.effects, &fit.params, splits).ok()
         }
         other => {
             let mut effects = fit.effects.clone();
