@@ -14,22 +14,37 @@
 //!
 //! Selection is forward: every remaining candidate is tested against the current model; the
 //! one with the smallest p-value among those that pass is accepted, and the round repeats.
-//! Temperature and time are told apart only when the observations decorrelate them: when the
-//! Pearson correlation of pose temperature and pose time exceeds [`CONFOUNDING_LIMIT`] in
-//! magnitude (a board warming after power-on), the best temperature effect that passes is
-//! accepted marked *provisional: confounded with time* — the firmware applies temperature terms
-//! only — and its time rival is reported `confounded`; the note names the recording that would
-//! confirm it (a cool-down or a second warm-up). A pure time drift is still not written as
-//! temperature when the recording also holds a decorrelated part: then |ρ| is below the limit
-//! and the two are compared on the data. Candidates whose model cannot be fitted on every
+//! `bias_temperature` enters at the degree (1–3) the nested F test of χ² chooses on every
+//! observation ([`selection::DEGREE_ALPHA`]), and that degree is chosen again beside each effect
+//! accepted after it (a temperature polynomial fitted while another effect was still in the
+//! residual can be short of a degree). When no candidate passes alone but the residual is above
+//! the floor, the pairs of candidates are tested jointly, with `m` = the number of pairs, and
+//! each member must also pass beside the other alone: two real effects can hide each other,
+//! each tested against a floor that the other's residual inflates.
+//! Temperature and time are told apart on the data: when the winner of a round is a time or
+//! temperature effect and its rival (the drift for a temperature effect, the temperature
+//! polynomial for a drift) is a candidate too, both are fitted together and the nested F test
+//! asks whether each lowers χ² beside the other, against the noise the joint model leaves. The
+//! rival alone adding: the rival is taken instead. Neither adding: the two are confounded — the
+//! best temperature effect that passes is accepted marked *provisional: confounded with time* —
+//! the firmware applies temperature terms only — and its time rival is reported `confounded`;
+//! the note names the recording that would confirm it (a cool-down or a second warm-up). A
+//! correlation of pose temperature and pose time above [`CONFOUNDING_LIMIT`] in magnitude does
+//! not by itself set a drift aside, but a temperature effect is then provisional even when it
+//! beats the drift: temperature following time, a polynomial in it is one in time too, and the
+//! time family holds only the linear drift. Candidates whose model cannot be fitted on every
 //! held-out fold are reported `not_fittable`, with the number of poses still needed. A time or
 //! temperature effect must also pass a form check: a bias free in shape over the same variable
 //! (constant within each of 8 quantile bins), added to it, must not both fit significantly better
 //! (lack-of-fit F test at [`crossval::FORM_ALPHA`]) and predict the held-out poses better by the
-//! worth-having gain; otherwise the dependence has another form (a step, hysteresis) and the
-//! effect is rejected rather than accepted as an approximation. A temperature effect must pass
-//! the same check against a bias free in shape over time (any slow change of the bias is a
-//! function of time in a sequential recording). An accepted `bias_drift` is taken out again when
+//! worth-having gain; otherwise the dependence has another form than the family (a step,
+//! hysteresis, a random walk — the check does not say which) and the effect is rejected rather
+//! than accepted as an approximation. A temperature effect must pass the same check against a
+//! bias free in shape over time (any slow change of the bias is a function of time in a
+//! sequential recording). The model the free shape is compared with holds the other time or
+//! temperature candidate too, while that one is untested: a true drift beside a true
+//! temperature effect is otherwise a slow change in time that the free shape fits and the
+//! polynomial cannot. An accepted `bias_drift` is taken out again when
 //! the final residual still follows time ([`time_structure`]): a linear trend then is the
 //! straight-line part of a random walk, steps or hysteresis, not a drift. When accepted effects
 //! leave a residual above the floor the report says "partly explained".

@@ -21,7 +21,7 @@ use serde_json::{json, Map, Value};
 
 use super::effects::EffectKind;
 use super::{EffectResult, EffectStatus, RecordingAnalysis, SensorAnalysis};
-use crate::stats::chi_square::ChiSquareTest;
+use crate::stats::chi_square::{ChiSquareTest, CONSISTENCY_ALPHA};
 
 /// Why a report could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -217,16 +217,32 @@ pub fn to_text(analysis: &RecordingAnalysis) -> String {
             } else {
                 "unexplained: the final residual"
             };
+            let confounded: Vec<&str> = a
+                .effects
+                .iter()
+                .filter(|e| e.status == EffectStatus::Confounded)
+                .map(|e| e.kind.name())
+                .collect();
+            let candidates = if confounded.is_empty() {
+                "no candidate explains it".to_string()
+            } else {
+                format!(
+                    "{} would explain part of it but was set aside as confounded (see above)",
+                    confounded.join(" and ")
+                )
+            };
             out.push_str(&format!(
-                "  {what} ({:.3e} {u} RMS) is {:.1}× the noise, each observation weighed by its own (χ²/dof = {:.1}; an RMS below the floor's can be far above the noise of the observations that carry it), and no candidate explains it{corr}\n",
+                "  {what} ({:.3e} {u} RMS) is {:.1}× the noise, each observation weighed by its own (χ²/dof = {:.1}; an RMS below the floor's can be far above the noise of the observations that carry it), and {candidates}{corr}\n",
                 a.rms_after,
                 a.test_after.reduced().sqrt(),
                 a.test_after.reduced()
             ));
         } else {
             out.push_str(&format!(
-                "  final residual is consistent with the noise (χ²/dof = {:.2})\n",
-                a.test_after.reduced()
+                "  final residual is consistent with the noise at the {}% level (χ²/dof = {:.2}, {})\n",
+                100.0 * CONSISTENCY_ALPHA,
+                a.test_after.reduced(),
+                a.test_after.p_text()
             ));
         }
         out.push('\n');

@@ -177,7 +177,7 @@ pub struct SensorAnalysis {
     pub base_note: Option<String>,
     /// Every candidate tested.
     pub effects: Vec<EffectResult>,
-    /// The final residual is above the floor and no candidate explains it.
+    /// The final residual is above the floor (the χ² test at its level) after the accepted effects.
     pub unexplained: bool,
     /// The recorded variable the final residual correlates with best, and the correlation.
     pub best_correlate: Option<(String, f64)>,
