@@ -275,3 +275,39 @@ fn a_sketch_session_says_up_front_what_the_board_cannot_apply_judges_it_poor_for
         "{flashed}"
     );
 }
+
+#[test]
+fn a_stalled_capture_on_a_lossy_link_names_the_link_with_its_loss_not_the_hold() {
+    use imucal::device::LinkStats;
+    use imucal::session::SessionError;
+    // The counters of the seed-81 session behind a link dropping 1e-3 of its bytes.
+    let stats = LinkStats {
+        frame_errors: 5_992,
+        good_frames: 10_332,
+        lost_samples: 119_920,
+        received_samples: 205_180,
+        ..LinkStats::default()
+    };
+    let note = stats.noisy_link_note().expect("a noisy link");
+    let error = SessionError::NoProgress {
+        port: "/dev/ttyACM0".into(),
+        waited_s: 180.0,
+        missing: "+X+Z up".into(),
+        link_note: Some(note),
+    }
+    .to_string();
+    assert!(
+        error.contains("Not the hold")
+            && error.contains("36.9 %")
+            && error.contains("cable")
+            && !error.contains("Hold the board still"),
+        "{error}"
+    );
+    // A sound link leaves the advice about the hold.
+    let sound = LinkStats {
+        good_frames: 16_000,
+        received_samples: 300_000,
+        ..LinkStats::default()
+    };
+    assert_eq!(sound.noisy_link_note(), None);
+}
