@@ -562,7 +562,10 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         let lost = match outcome.lost_samples {
             0 => "no sample lost".to_string(),
             1 => "1 sample lost in transit".to_string(),
-            n => format!("{n} samples lost in transit"),
+            n => format!(
+                "{n} samples lost in transit ({:.1} % of the stream)",
+                100.0 * outcome.sample_loss_rate
+            ),
         };
         let stream = match outcome.stream_rate_hz {
             rate if rate > 0.0 => format!(", stream {rate:.1} Hz with {lost}"),
@@ -598,6 +601,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             None => "writes the parameters again".to_string(),
             Some(why) => format!("writes them; they are not on the board: {why}"),
         };
+        if let Some(note) = &outcome.link_note {
+            println!(
+                "Link: {note}; what the session lost (samples, the gyroscope's moves) is the \
+                 link's doing, not the handling"
+            );
+        }
         println!(
             "Saved {} (`imucal flash {}` {flash})",
             dir.display(),

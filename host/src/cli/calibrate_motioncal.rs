@@ -136,6 +136,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             .context("the session summary could not be read back")?;
         println!("{summary}");
     }
+    let poor = outcome.fit.verdict.level == imucal::session::solve::VerdictLevel::Poor;
+    if outcome.echo.is_none() && poor && !args.accept_poor {
+        anyhow::bail!(
+            "the verdict is poor for what this board applies, so the packet was not sent; it is \
+             saved as {packet}: `imucal flash {packet} --port {port} --protocol motioncal` sends \
+             it (it still corrects the offsets), or run again with --accept-poor",
+            packet = dir.join("motioncal.bin").display()
+        );
+    }
     if terminal.decision == Some(WriteDecision::NoOneToAsk) {
         let packet = dir.join("motioncal.bin");
         return Err(not_asked(

@@ -8,7 +8,7 @@ use clap::{Args, Subcommand};
 use imucal::device::{list_ports, DeviceClient, ParamsFile};
 use imucal_protocol::{CalibrationSet, SensorSet, StreamKind, Welcome};
 
-use super::board::{connect, describe_params, PortArgs};
+use super::board::{connect, describe_params, BoardProtocol, PortArgs};
 use super::device_stream::{record, stream, RecordArgs, StreamArgs};
 use super::params::ParamsCommand;
 
@@ -65,6 +65,15 @@ pub struct FlashArgs {
     /// Write the file even though it was made for another board (or other sensors or ranges).
     #[arg(long)]
     pub force_other_device: bool,
+    /// What the board at --port runs: imucal's firmware, or a sketch for MotionCal (Adafruit's
+    /// calibration sketch), which is sent the file's 68-byte calibration packet (a
+    /// `motioncal.bin`, or what the sketch can apply of a params.json) and checked by its echo.
+    #[arg(long, value_enum, default_value = "imucal", conflicts_with = "sim")]
+    pub protocol: BoardProtocol,
+    /// Simulator: what the simulated board runs, imucal's firmware or Adafruit's MotionCal
+    /// calibration sketch.
+    #[arg(long, value_enum, default_value = "imucal", requires = "sim")]
+    pub sim_protocol: BoardProtocol,
     /// Where to record the flash.
     #[command(flatten)]
     pub history: super::history::RecordArgs,
@@ -208,6 +217,14 @@ fn info(args: &PortArgs) -> anyhow::Result<()> {
 
 fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     let shown = args.params.display().to_string();
+    let protocol = if args.port.sim {
+        args.sim_protocol
+    } else {
+        args.protocol
+    };
+    if protocol == BoardProtocol::Motioncal {
+        return flash_sketch(args, &shown);
+    }
     let file = ParamsFile::load(&args.params)?;
     if let (Some(why), true) = (file.holds_nothing(), args.reset.is_empty()) {
         anyhow::bail!("`{shown}` is not written: {why}");
@@ -252,6 +269,42 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     super::history::record(&args.history, record)
 }
 
+/// Longest wait for a sketch board's `Cal1:`/`Cal2:` echo (Adafruit's sketch prints it every
+/// 1.5 s).
+const SKETCH_ECHO_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// `flash --protocol motioncal`: sends the file's calibration packet to a MotionCal sketch
+/// board and checks the board's echo of it. Nothing is recorded in the history: the sketch
+/// reports no id to record it under.
+fn flash_sketch(args: &FlashArgs, shown: &str) -> anyhow::Result<()> {
+    use imucal::compat::motioncal::RawAccelScaling;
+    use imucal::compat::MotionCalClient;
+    anyhow::ensure!(
+        args.reset.is_empty(),
+        "--reset sets sensors of imucal's firmware to identity; a MotionCal sketch takes a whole \
+         packet, so leave out --reset"
+    );
+    let (calibration, note) = imucal::compat::sketch_calibration_of_file(&args.params)?;
+    if let Some(note) = note {
+        say_part!("{note}");
+    }
+    let board = args.port.open_board(BoardProtocol::Motioncal)?;
+    let mut client = MotionCalClient::open(&board.path, RawAccelScaling::AdafruitSketch)?;
+    let echo = client.send_calibration(&calibration, SKETCH_ECHO_TIMEOUT)?;
+    println!(
+        "sent {shown} to {} as MotionCal's calibration packet; the board echoed Cal1:/Cal2: \
+         matching it (largest difference {:.2e}, within its print precision)",
+        board.path, echo.max_difference
+    );
+    if !args.history.no_history {
+        say!(
+            "imucal: note: not recorded in the calibration history: a MotionCal sketch board \
+             reports no id to record it under"
+        );
+    }
+    Ok(())
+}
+
 /// Refuses a file made for another board unless `force`; notes a file that names no board.
 /// Returns the other board's id when `force` lets its file through.
 fn check_binding(
@@ -271,10 +324,18 @@ fn check_binding(
         // No ranges to compare: the set itself must still be one this board's parts can have.
         None => file.beyond_the_board(welcome),
     };
+    let sketch = file.from_sketch_board();
+    if sketch {
+        mismatches.push(format!(
+            "it was measured on a board running a MotionCal calibration sketch (the sketch's \
+             readings, scales and axes), not on imucal's firmware of device {board}; send it to \
+             that sketch board with `imucal flash {shown} --port PORT --protocol motioncal`"
+        ));
+    }
     match file.device_id() {
         // Where the file came from is not known (a `device` block may have been removed), so
         // only its provenance, when it has one, is quoted.
-        None if mismatches.is_empty() => say!(
+        None if mismatches.is_empty() && !sketch => say!(
             "imucal: note: `{shown}` names no board (no `device` block, no device id{}); its \
              set fits the board's sensors and ranges, writing it to device {board}",
             file.provenance
@@ -295,6 +356,9 @@ fn check_binding(
             "imucal: warning: writing `{shown}` although {} (--force-other-device)",
             mismatches.join("; ")
         );
+        if sketch {
+            return Ok(Some("a MotionCal sketch board".to_string()));
+        }
         return Ok(file
             .device_id()
             .filter(|id| *id != board)

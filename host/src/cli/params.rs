@@ -97,6 +97,7 @@ fn get(args: &GetArgs) -> anyhow::Result<()> {
         methods: Default::default(),
         input_units: Default::default(),
         created_unix_s: imucal::pipeline::calibrate::now_unix_s(),
+        board_firmware: None,
     });
     let shown = args.output.display();
     std::fs::write(&args.output, file.to_json())

@@ -47,3 +47,65 @@ pub enum CompatError {
         gap: f32,
     },
 }
+
+/// Why a file could not be turned into a calibration packet for a sketch board.
+#[derive(Debug, Error)]
+pub enum SketchFileError {
+    /// The file could not be read.
+    #[error("cannot read `{path}` ({cause}); check the path")]
+    Io {
+        /// The file.
+        path: String,
+        /// The operating system's error.
+        cause: std::io::Error,
+    },
+    /// A packet whose signature, CRC or values fail.
+    #[error("`{path}` is not a valid MotionCal calibration packet: {cause}; export it again with `imucal export PARAMS --format motioncal -o cal.bin`")]
+    Packet {
+        /// The file.
+        path: String,
+        /// Why the packet was refused.
+        cause: PacketError,
+    },
+    /// Not a packet and not a parameter file.
+    #[error(transparent)]
+    Params(#[from] crate::device::ParamsFileError),
+    /// A parameter file without a form the sketch can store.
+    #[error("`{path}` cannot be put in a calibration packet: {cause}")]
+    Compat {
+        /// The file.
+        path: String,
+        /// Why.
+        cause: CompatError,
+    },
+}
+
+/// The calibration a sketch board is sent for the file at `path`: a 68-byte MotionCal packet
+/// (`motioncal.bin`, `imucal export --format motioncal`) as it is, or a parameter file's part
+/// the sketch can apply, with a note of what it cannot (to show the user).
+pub fn sketch_calibration_of_file(
+    path: &std::path::Path,
+) -> Result<(AdafruitCalibration, Option<String>), SketchFileError> {
+    let shown = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|cause| SketchFileError::Io {
+        path: shown.clone(),
+        cause,
+    })?;
+    if bytes.get(..2) == Some(&motioncal::PACKET_SIGNATURE[..]) {
+        return decode_packet(&bytes)
+            .map(|cal| (cal, None))
+            .map_err(|cause| SketchFileError::Packet { path: shown, cause });
+    }
+    let file = crate::device::ParamsFile::load(path)?;
+    let set = file.to_calibration_set(&shown)?;
+    let compat = |cause| SketchFileError::Compat {
+        path: shown.clone(),
+        cause,
+    };
+    let mut conversion = AdafruitCalibration::from_set(&set).map_err(compat)?;
+    if !file.fitted_sensors().contains(&"mag") {
+        conversion.calibration.mag_field = adafruit::LIBRARY_DEFAULT_FIELD_UT;
+    }
+    let note = limitations(&set, &[]).map_err(compat)?.describe();
+    Ok((conversion.calibration, (!note.is_empty()).then_some(note)))
+}

@@ -306,6 +306,30 @@ pub fn parse_line(line: &str) -> Result<SketchLine, LineError> {
     }
 }
 
+/// The tag of the first line in `bytes` that a MotionCal sketch prints and parses as one
+/// (`Raw:`, `Uni:`, `Cal1:`, `Cal2:`), or `None`: what tells, on a port that answers none of
+/// imucal's requests, a board running such a sketch. Two such lines are asked for, so a stray
+/// byte run that happens to spell a tag does not count.
+pub fn sketch_tag_in(bytes: &[u8]) -> Option<&'static str> {
+    let mut first = None;
+    let mut count = 0;
+    for line in LineSplitter::new().push(bytes) {
+        let tag = match parse_line(&line) {
+            Ok(SketchLine::Raw(_)) => "Raw:",
+            Ok(SketchLine::Uni(_)) => "Uni:",
+            Ok(SketchLine::Cal1(_)) => "Cal1:",
+            Ok(SketchLine::Cal2(_)) => "Cal2:",
+            _ => continue,
+        };
+        first.get_or_insert(tag);
+        count += 1;
+        if count >= 2 {
+            return first;
+        }
+    }
+    None
+}
+
 /// Splits a byte stream into lines at `\n`, `\r` or `\r\n` (MotionCal ends a line at `\r`,
 /// the sketch's `println` sends `\r\n`); empty lines are skipped.
 #[derive(Debug, Default, Clone)]

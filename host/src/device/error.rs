@@ -73,6 +73,46 @@ pub enum DeviceError {
         /// How many times it was sent.
         tries: u32,
     },
+    /// The board did not answer imucal's requests, but printed the text lines of a sketch for
+    /// MotionCal (`Raw:`, `Uni:`, `Cal1:`/`Cal2:`): it runs such a sketch, not imucal's firmware.
+    #[error(
+        "{port} runs a MotionCal calibration sketch (it prints `{tag}` lines), not imucal's \
+         firmware, so it has no id, parameters or commands to answer; for this board use \
+         `imucal calibrate --port {port} --protocol motioncal` (calibrates it and sends the \
+         packet), `imucal flash FILE --port {port} --protocol motioncal` (sends a saved \
+         motioncal.bin or params.json), `imucal stream --port {port} --protocol motioncal`, \
+         and `imucal export FILE --format motioncal -o cal.bin` (or `adafruit-json`) for the \
+         sketch's library or `--format c-header` (rust, json) for your own code; or flash \
+         imucal's firmware to the board"
+    )]
+    MotionCalSketch {
+        /// The port.
+        port: String,
+        /// The first tag heard, e.g. `Raw:`.
+        tag: &'static str,
+    },
+    /// The board did not answer, and the frames that did arrive failed their checks: the link
+    /// loses or corrupts bytes.
+    #[error(
+        "no answer from {port} to {request} after {tries} tries, and {bad} of the {frames} frames \
+         that arrived failed their check ({rate:.1} %): the serial link is noisy; try another \
+         USB cable, plug the board in directly instead of through a hub, and check the baud rate \
+         (115200)"
+    )]
+    NoisyLink {
+        /// The port.
+        port: String,
+        /// The request that went unanswered.
+        request: &'static str,
+        /// How many times it was sent.
+        tries: u32,
+        /// Frames that failed their check.
+        bad: u64,
+        /// Frames that arrived, good and bad.
+        frames: u64,
+        /// `bad` as a percentage of `frames`.
+        rate: f64,
+    },
     /// The board speaks an incompatible protocol major version.
     #[error("{port} speaks imucal protocol {}.{}, this imucal speaks {}.{}; {advice}", .device.major, .device.minor, .host.major, .host.minor)]
     VersionMismatch {

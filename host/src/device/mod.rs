@@ -19,7 +19,7 @@ mod samples;
 pub use client::capture::{PoseProgress, PoseRequest};
 pub use client::{ClientOptions, DeviceClient, EventHandler, LinkStats};
 pub use error::DeviceError;
-pub use params_json::{ParamsFile, ParamsFileError, PARAMS_FILE_FORMAT};
+pub use params_json::{ParamsFile, ParamsFileError, MOTIONCAL_SKETCH, PARAMS_FILE_FORMAT};
 pub use ports::{
     choose_port, choose_port_with_reason, list_ports, open_port, BoardMatch, PortInfo, PortKind,
     UsbIds, BAUD_RATE, READ_POLL,

@@ -241,7 +241,16 @@ pub struct Provenance {
     pub input_units: BTreeMap<String, String>,
     /// When it was fitted, seconds since the Unix epoch.
     pub created_unix_s: u64,
+    /// What the board ran when it was not imucal's firmware: [`MOTIONCAL_SKETCH`] for a
+    /// board running a MotionCal calibration sketch, whose readings (scales, axes, the
+    /// sketch's own conversions) are not those imucal's firmware calibrates. Absent: imucal's
+    /// firmware, or a recording.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub board_firmware: Option<String>,
 }
+
+/// [`Provenance::board_firmware`] of a calibration measured on a MotionCal sketch board.
+pub const MOTIONCAL_SKETCH: &str = "motioncal-sketch";
 
 impl Provenance {
     /// This tool's name and version.
@@ -706,6 +715,14 @@ impl ParamsFile {
                 format!(": {}", reasons.join("; "))
             }
         ))
+    }
+
+    /// Whether it was measured on a board running a MotionCal sketch (its provenance says so).
+    pub fn from_sketch_board(&self) -> bool {
+        self.provenance
+            .as_ref()
+            .and_then(|p| p.board_firmware.as_deref())
+            == Some(MOTIONCAL_SKETCH)
     }
 
     /// The device id the file names: its board's, else the one `fit --device` recorded.

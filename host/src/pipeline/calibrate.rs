@@ -202,6 +202,7 @@ fn calibrate_with(
             methods,
             input_units: input_units(&recording.units, &input.sensors),
             created_unix_s: now_unix_s(),
+            board_firmware: None,
         },
         sensors,
         gravity_mps2: references.references.gravity_mps2,

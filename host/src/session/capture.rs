@@ -126,6 +126,7 @@ impl<L: Read + Write> Runner<'_, L> {
                     port: self.client.port_name().to_string(),
                     waited_s: timeout.as_secs_f64(),
                     missing: names(&needed),
+                    link_note: self.client.stats().noisy_link_note(),
                 });
             }
             let chunk = self.read_chunk()?;

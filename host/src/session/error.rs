@@ -4,6 +4,10 @@
 use crate::device::DeviceError;
 use crate::fit::FitError;
 
+/// What to try when no orientation was captured on a sound link.
+const NO_PROGRESS_ADVICE: &str = "Hold the board still in one of them as pictured (within \
+     20°), or allow more time with --pose-timeout";
+
 /// Why a guided calibration session failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
@@ -24,8 +28,7 @@ pub enum SessionError {
     /// No new orientation was captured for too long.
     #[error(
         "no new orientation was captured on {port} for {waited_s:.0} s; still needed: {missing}. \
-         Hold the board still in one of them as pictured (within 20°), or allow more time with \
-         --pose-timeout"
+         {}", .link_note.as_ref().map_or_else(|| NO_PROGRESS_ADVICE.to_string(), |note| format!("Not the hold: {note}"))
     )]
     NoProgress {
         /// The port.
@@ -34,6 +37,9 @@ pub enum SessionError {
         waited_s: f64,
         /// Names of the orientations still needed.
         missing: String,
+        /// The link's loss when it is noisy enough to explain the stall
+        /// ([`crate::device::LinkStats::noisy_link_note`]).
+        link_note: Option<String>,
     },
     /// The magnetometer phase ended without enough directions.
     #[error(

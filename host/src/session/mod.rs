@@ -145,6 +145,11 @@ pub struct SessionOutcome {
     pub stream_rate_hz: f64,
     /// Samples lost in transit over the whole session.
     pub lost_samples: u64,
+    /// Fraction of the stream's samples lost in transit.
+    pub sample_loss_rate: f64,
+    /// A noisy link's measured loss and what to check, when the link was noisy enough to
+    /// matter ([`crate::device::LinkStats::noisy_link_note`]).
+    pub link_note: Option<String>,
 }
 
 /// How a session runs beyond its options: where it is saved as it goes, poses of an earlier
@@ -315,6 +320,8 @@ fn run_phases<L: Read + Write>(
         fit_wall_seconds,
         stream_rate_hz: 0.0,
         lost_samples: 0,
+        sample_loss_rate: 0.0,
+        link_note: None,
         fit,
         gyro_scale,
     };
@@ -356,7 +363,10 @@ fn run_phases<L: Read + Write>(
         outcome.wall_seconds = wall_start.elapsed().as_secs_f64();
         outcome.session_seconds = runner.board_time_s()? - board_start_s;
     }
-    outcome.lost_samples = runner.client.stats().lost_samples;
+    let stats = runner.client.stats();
+    outcome.lost_samples = stats.lost_samples;
+    outcome.sample_loss_rate = stats.sample_loss_rate();
+    outcome.link_note = stats.noisy_link_note();
     outcome.mag_samples = std::mem::take(&mut runner.mag);
     Ok(outcome)
 }

@@ -386,11 +386,21 @@ fn collect<'a, L: Read + Write>(
     }
 }
 
+/// What a sketch board does with the packet, said when its session starts: the verdict at the
+/// end is of this, not of imucal's full model.
+pub const SKETCH_LIMITS_NOTE: &str = "a MotionCal sketch's library applies only the \
+     accelerometer's and gyroscope's offsets (not their scale and axis matrices) and a \
+     symmetric soft iron, so the verdict is of what this board will apply; if the part's \
+     scale errors exceed the budget it will be poor for this firmware whatever the session \
+     (--accept-poor still sends the packet, which corrects the offsets); firmware that applies \
+     the full model (imucal's, or your own from `imucal export params.json --format c-header`) \
+     meets the budget";
+
 /// Adds to `fit`'s verdict what the Adafruit library's model costs on the poses: beyond a
-/// budget the board's readings miss it whatever the fit, so a good verdict becomes marginal.
-/// Not poor, however far beyond: poor means measure again, and no session can do better with
-/// this library (the packet still improves on the part, whose offsets are its largest error);
-/// the reason says how far, and that firmware applying the full model meets the budget.
+/// budget the board's readings miss it whatever the fit, so the verdict is poor for this
+/// firmware. The reason says how far, that measuring again cannot change it, that the packet
+/// still corrects the offsets (the part's largest error; `--accept-poor` sends it), and that
+/// firmware applying the full model meets the budget.
 fn judge_what_the_board_applies(
     fit: &mut SessionFit,
     limits: &AdafruitLimitations,
@@ -399,10 +409,12 @@ fn judge_what_the_board_applies(
     let mut reasons = Vec::new();
     if limits.accel_error_mg > budgets.accel_mg {
         reasons.push(format!(
-            "the sketch's library applies only the accelerometer's offsets, not its scale and \
-             axis terms: on the {} poses the board's |a| is off by up to {:.2} mg, {:.1}× the \
-             {:.1} mg budget; measuring again cannot change that, firmware that applies the \
-             full model (params.json) can",
+            "poor for this firmware: the sketch's library applies only the accelerometer's \
+             offsets, not its scale and axis terms: on the {} poses the board's |a| is off by \
+             up to {:.2} mg, {:.1}× the {:.1} mg budget; measuring again cannot change that, \
+             firmware that applies the full model can (imucal's firmware, or your own from \
+             `imucal export params.json --format c-header`); --accept-poor sends the packet \
+             anyway, which corrects the offsets",
             limits.poses,
             limits.accel_error_mg,
             limits.accel_error_mg / budgets.accel_mg,
@@ -411,17 +423,19 @@ fn judge_what_the_board_applies(
     }
     if limits.mag_error_pct_of_field > budgets.mag_pct {
         reasons.push(format!(
-            "the sketch's library holds a symmetric soft iron: on the {} poses the board's |m| \
-             is off by up to {:.2} % of the field, {:.1}× the {:.1} % budget; measuring again \
-             cannot change that, firmware that applies the full model (params.json) can",
+            "poor for this firmware: the sketch's library holds a symmetric soft iron: on the \
+             {} poses the board's |m| is off by up to {:.2} % of the field, {:.1}× the {:.1} % \
+             budget; measuring again cannot change that, firmware that applies the full model \
+             can (imucal's firmware, or your own from `imucal export params.json --format \
+             c-header`); --accept-poor sends the packet anyway",
             limits.poses,
             limits.mag_error_pct_of_field,
             limits.mag_error_pct_of_field / budgets.mag_pct,
             budgets.mag_pct
         ));
     }
-    if !reasons.is_empty() && fit.verdict.level == VerdictLevel::Good {
-        fit.verdict.level = VerdictLevel::Marginal;
+    if !reasons.is_empty() {
+        fit.verdict.level = VerdictLevel::Poor;
     }
     fit.verdict.reasons.extend(reasons);
 }
@@ -445,6 +459,7 @@ pub fn run_motioncal_session<L: Read + Write>(
         )));
     }
     let wall_start = Instant::now();
+    observer.event(&SessionEvent::Note(SKETCH_LIMITS_NOTE.to_string()));
     let (collector, read) = collect(client, options, observer, readings)?;
     let coverage = collector.coverage();
     let session = &options.session;
@@ -515,6 +530,32 @@ pub fn save_motioncal_readings(
     Ok(path)
 }
 
+/// The session's parameter file: the fitted set, its provenance naming the MotionCal sketch
+/// board it was measured on, so that `imucal flash` does not write it to a board running
+/// imucal's firmware (whose readings are another's) without being told to.
+pub fn sketch_params_file(outcome: &MotionCalOutcome) -> crate::device::ParamsFile {
+    use crate::device::params_json::Provenance;
+    let mut file = crate::device::ParamsFile::from(&outcome.fit.set);
+    file.provenance = Some(Provenance {
+        tool: Provenance::tool(),
+        source: format!(
+            "a session on a MotionCal sketch board ({} `{}` lines)",
+            outcome.readings,
+            if outcome.unified_lines {
+                "Uni:"
+            } else {
+                "Raw:"
+            }
+        ),
+        device_id: None,
+        methods: Default::default(),
+        input_units: Default::default(),
+        created_unix_s: outcome.fit.set.created_unix_s,
+        board_firmware: Some(crate::device::MOTIONCAL_SKETCH.to_string()),
+    });
+    file
+}
+
 /// Name of the readings file in a sketch session's directory.
 pub const READINGS_FILE: &str = "readings.csv";
 
@@ -527,7 +568,6 @@ pub fn save_motioncal_session(
     readings: &[UnitSample],
     dir: &std::path::Path,
 ) -> std::io::Result<Vec<std::path::PathBuf>> {
-    use crate::device::ParamsFile;
     let mut written = vec![save_motioncal_readings(readings, dir)?];
     let mut write = |name: &str, bytes: &[u8]| -> std::io::Result<()> {
         let path = dir.join(name);
@@ -537,7 +577,7 @@ pub fn save_motioncal_session(
     };
     write(
         "params.json",
-        ParamsFile::from(&outcome.fit.set).to_json().as_bytes(),
+        sketch_params_file(outcome).to_json().as_bytes(),
     )?;
     let cal = &outcome.conversion.calibration;
     let packet = crate::compat::encode_packet(cal).map_err(std::io::Error::other)?;

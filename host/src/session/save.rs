@@ -103,6 +103,9 @@ pub struct SessionSummary {
     pub stream_rate_hz: Option<f64>,
     /// Samples lost in transit.
     pub lost_samples: u64,
+    /// A noisy link's measured loss and what to check; absent when the link was sound.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub link_note: Option<String>,
 }
 
 /// The summary of `outcome`.
@@ -151,6 +154,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         notes: outcome.fit.notes.clone(),
         stream_rate_hz: (outcome.stream_rate_hz > 0.0).then_some(outcome.stream_rate_hz),
         lost_samples: outcome.lost_samples,
+        link_note: outcome.link_note.clone(),
     }
 }
 

@@ -39,11 +39,7 @@ impl<L: Read + Write> DeviceClient<L> {
                 return Ok((reply, attempt > 0));
             }
         }
-        Err(DeviceError::NoAnswer {
-            port: self.port.clone(),
-            request: request_name(body),
-            tries,
-        })
+        Err(self.why_no_answer(request_name(body), tries))
     }
 
     pub(super) fn send_request(&mut self, seq: u16, body: &RequestBody) -> Result<(), DeviceError> {
@@ -122,8 +118,12 @@ impl<L: Read + Write> DeviceClient<L> {
             };
             match message {
                 Err(_) => self.stats.frame_errors += 1,
-                Ok(DeviceMessage::Event(event)) => self.dispatch(event),
+                Ok(DeviceMessage::Event(event)) => {
+                    self.stats.good_frames += 1;
+                    self.dispatch(event);
+                }
                 Ok(DeviceMessage::Response(response)) => {
+                    self.stats.good_frames += 1;
                     if Some(response.seq) == seq {
                         return Ok(Some(response.body));
                     }
@@ -146,7 +146,13 @@ impl<L: Read + Write> DeviceClient<L> {
                 Ok(false)
             }
             Ok(n) => {
-                self.rx.extend_from_slice(chunk.get(..n).unwrap_or(&chunk));
+                let bytes = chunk.get(..n).unwrap_or(&chunk);
+                if !self.connected && self.heard.len() < super::HEARD_LIMIT {
+                    let room = super::HEARD_LIMIT - self.heard.len();
+                    self.heard
+                        .extend_from_slice(bytes.get(..room.min(n)).unwrap_or(bytes));
+                }
+                self.rx.extend_from_slice(bytes);
                 Ok(true)
             }
             Err(e) if is_transient(e.kind()) => Ok(false),

@@ -76,7 +76,84 @@ pub struct LinkStats {
     pub dropped_events: u64,
     /// Stream samples lost in transit (gaps in the stream index).
     pub lost_samples: u64,
+    /// Frames that arrived and passed their checks.
+    pub good_frames: u64,
+    /// Stream samples that arrived.
+    pub received_samples: u64,
 }
+
+impl LinkStats {
+    /// Of the frames that arrived, the fraction that failed their checks (0 when none
+    /// arrived).
+    pub fn frame_error_rate(&self) -> f64 {
+        let frames = self.frame_errors + self.good_frames;
+        if frames == 0 {
+            0.0
+        } else {
+            self.frame_errors as f64 / frames as f64
+        }
+    }
+
+    /// Of the stream samples the board sent, the fraction lost in transit (0 when none were
+    /// sent).
+    pub fn sample_loss_rate(&self) -> f64 {
+        let sent = self.lost_samples + self.received_samples;
+        if sent == 0 {
+            0.0
+        } else {
+            self.lost_samples as f64 / sent as f64
+        }
+    }
+
+    /// A sentence naming a noisy link, with its measured loss, when the counters show one (a
+    /// sample loss of [`NOISY_SAMPLE_LOSS`] or more, or frames failing their checks as
+    /// [`Self::shows_noisy_link`] says); `None` otherwise.
+    pub fn noisy_link_note(&self) -> Option<String> {
+        let loss = self.sample_loss_rate();
+        if loss < NOISY_SAMPLE_LOSS && !self.shows_noisy_link() {
+            return None;
+        }
+        let mut measured = Vec::new();
+        if self.lost_samples > 0 {
+            measured.push(format!(
+                "{} of {} stream samples lost ({:.1} %)",
+                self.lost_samples,
+                self.lost_samples + self.received_samples,
+                100.0 * loss
+            ));
+        }
+        if self.frame_errors > 0 {
+            measured.push(format!(
+                "{} of {} frames failed their check ({:.2} %)",
+                self.frame_errors,
+                self.frame_errors + self.good_frames,
+                100.0 * self.frame_error_rate()
+            ));
+        }
+        Some(format!(
+            "the serial link is noisy: {}; try another USB cable, plug the board in directly \
+             instead of through a hub, and check the baud rate (115200)",
+            measured.join(", ")
+        ))
+    }
+
+    /// Whether the frames that failed their checks show a link that loses or corrupts bytes:
+    /// at least one in a thousand of those that arrived, and either a good frame besides (an
+    /// imucal board is there) or three bad ones. A request left unanswered on a link this
+    /// noisy was lost on the way, not ignored.
+    pub fn shows_noisy_link(&self) -> bool {
+        self.frame_errors >= 1
+            && (self.good_frames >= 1 || self.frame_errors >= 3)
+            && self.frame_error_rate() >= 1e-3
+    }
+}
+
+/// A fraction of stream samples lost in transit that is the link's doing, not a slow reader's:
+/// a working USB serial link loses none.
+pub const NOISY_SAMPLE_LOSS: f64 = 0.01;
+
+/// Most bytes kept of what arrived before the handshake, to tell a board that prints text.
+const HEARD_LIMIT: usize = 8192;
 
 /// A caller's receiver of events, set with [`DeviceClient::set_event_handler`].
 pub type EventHandler = Box<dyn FnMut(&Event) + Send>;
@@ -102,6 +179,10 @@ pub struct DeviceClient<L: Read + Write = Box<dyn SerialPort>> {
     still: Option<bool>,
     gaps: GapTracker,
     stats: LinkStats,
+    /// The first bytes read before the handshake completed (at most [`HEARD_LIMIT`]); emptied
+    /// once connected.
+    heard: Vec<u8>,
+    connected: bool,
 }
 
 impl<L: Read + Write> std::fmt::Debug for DeviceClient<L> {
@@ -224,6 +305,8 @@ impl<L: Read + Write> DeviceClient<L> {
             still: None,
             gaps: GapTracker::default(),
             stats: LinkStats::default(),
+            heard: Vec::new(),
+            connected: false,
         };
         client.handshake()?;
         Ok(client)
@@ -247,11 +330,7 @@ impl<L: Read + Write> DeviceClient<L> {
             // giving up, in case Ping is what the board does not understand.
             Err(DeviceError::NoAnswer { .. }) => self
                 .exchange(&hello, self.options.reply_timeout, 1)
-                .map_err(|_| DeviceError::NoAnswer {
-                    port: self.port.clone(),
-                    request: "Ping",
-                    tries: self.options.connect_tries,
-                })?,
+                .map_err(|_| self.why_no_answer("Ping", self.options.connect_tries))?,
             Err(e) => return Err(e),
         }
         .0;
@@ -280,7 +359,38 @@ impl<L: Read + Write> DeviceClient<L> {
         // Events from before this session (a stream left running) are not the caller's.
         self.events.clear();
         self.logs.clear();
+        self.connected = true;
+        self.heard = Vec::new();
         Ok(())
+    }
+
+    /// The error for `request` left unanswered after `tries`: a MotionCal sketch when the port
+    /// printed its lines, a noisy link when the frames that arrived show one, else no answer.
+    pub(super) fn why_no_answer(&self, request: &'static str, tries: u32) -> DeviceError {
+        if !self.connected {
+            if let Some(tag) = crate::compat::motioncal::sketch_tag_in(&self.heard) {
+                return DeviceError::MotionCalSketch {
+                    port: self.port.clone(),
+                    tag,
+                };
+            }
+        }
+        let stats = self.stats;
+        if stats.shows_noisy_link() {
+            return DeviceError::NoisyLink {
+                port: self.port.clone(),
+                request,
+                tries,
+                bad: stats.frame_errors,
+                frames: stats.frame_errors + stats.good_frames,
+                rate: 100.0 * stats.frame_error_rate(),
+            };
+        }
+        DeviceError::NoAnswer {
+            port: self.port.clone(),
+            request,
+            tries,
+        }
     }
 
     /// What the board said about itself at connect.

@@ -65,11 +65,13 @@ impl<L: Read + Write> DeviceClient<L> {
                 Event::SampleBatch(batch) => {
                     let lost = self.gaps.observe(batch.header(), batch.len());
                     self.stats.lost_samples += u64::from(lost);
+                    self.stats.received_samples += batch.len() as u64;
                     return Ok(Some(SampleChunk::from_raw(&batch, &scales, lost)));
                 }
                 Event::CalibratedBatch(batch) => {
                     let lost = self.gaps.observe(batch.header(), batch.len());
                     self.stats.lost_samples += u64::from(lost);
+                    self.stats.received_samples += batch.len() as u64;
                     return Ok(Some(SampleChunk::from_calibrated(&batch, lost)));
                 }
                 Event::Log(line) => {
