@@ -472,6 +472,8 @@ pub fn analyse_observations(
     }
     let mut current: (ExtendedFit, HeldOut) = (base_fit.clone(), base_ho.clone());
     let mut last: Vec<(EffectKind, Comparison, ExtendedFit)> = Vec::new();
+    // The number of candidates each was tested among in its last round (the `m` of `α/m`).
+    let mut tested_among: Vec<(&'static str, usize)> = Vec::new();
     let mut confounded_found = false;
     let mut wrong_form: Vec<(&'static str, String)> = Vec::new();
     let mut unfittable: Vec<(EffectKind, usize)> = Vec::new();
@@ -520,6 +522,8 @@ pub fn analyse_observations(
         last.retain(|(k, _, _)| !round.iter().any(|(rk, _, _, _)| rk.name() == k.name()));
         for (k, c, f, _) in &round {
             last.push((*k, c.clone(), f.clone()));
+            tested_among.retain(|(name, _)| *name != k.name());
+            tested_among.push((k.name(), m));
         }
         let Some(w) = winner else {
             // No candidate passes alone, yet the residual is above the floor: two effects can
@@ -728,17 +732,17 @@ pub fn analyse_observations(
             coefficients: coefficients(&problem, &final_fit, idx, unit, inflation),
             note: if provisional.contains(&kind.name()) {
                 format!(
-                    "provisional: confounded with time: lowers the held-out mean square error by {:.0} % \
+                    "provisional: confounded with time: lowers the held-out mean square error by {} % \
                      (corrected t p = {p_value:.1e}), but {}. Kept because the firmware applies temperature terms \
                      only; confirm with a recording where temperature does not follow time (a cool-down, or a second \
                      warm-up from cold): the same coefficients confirm it, different ones mean a drift in time",
-                    100.0 * score,
+                    percent(score),
                     confounding.as_deref().unwrap_or("the data do not tell temperature from time"),
                 )
             } else {
                 format!(
-                    "lowers the held-out mean square error by {:.0} % (corrected t p = {p_value:.1e})",
-                    100.0 * score
+                    "lowers the held-out mean square error by {} % (corrected t p = {p_value:.1e})",
+                    percent(score)
                 )
             },
         });
@@ -764,11 +768,21 @@ pub fn analyse_observations(
                 .find(|(name, _)| *name == kind.name())
             {
                 Some((_, why)) => why.clone(),
-                None => format!(
-                    "held-out gain {:.2} variances of the inflated floor per component (white-noise floor × {:.2}, \
-                     the Birge ratio), corrected t p = {:.2e}: not enough (needs ≥ {MIN_GAIN_PER_COMPONENT} and p ≤ {ALPHA}/m, m candidates in the round)",
-                    cmp.gain_per_component, cmp.floor_inflation, cmp.p_value
-                ),
+                None => {
+                    let level = match tested_among.iter().find(|(name, _)| *name == kind.name()) {
+                        Some(&(_, m)) => format!(
+                            "p ≤ {ALPHA}/{m} = {:.1e}, {m} candidate{} tested in its round",
+                            ALPHA / m as f64,
+                            if m == 1 { "" } else { "s" }
+                        ),
+                        None => format!("p ≤ {ALPHA}/m, m candidates in the round"),
+                    };
+                    format!(
+                        "held-out gain {:.2} variances of the inflated floor per component (white-noise floor × {:.2}, \
+                         the Birge ratio), corrected t p = {:.2e}: not enough (needs ≥ {MIN_GAIN_PER_COMPONENT} and {level})",
+                        cmp.gain_per_component, cmp.floor_inflation, cmp.p_value
+                    )
+                }
             },
         };
         let index = fit
@@ -864,4 +878,33 @@ pub fn analyse_observations(
         final_fit,
         problem,
     })
+}
+
+/// A fraction as a percentage for the notes: whole per cent, but never "100" for a fraction
+/// below one (99.95 % is not all of it) nor "0" for one above zero.
+fn percent(fraction: f64) -> String {
+    let p = 100.0 * fraction;
+    let whole = p.round();
+    if (whole >= 100.0 && p < 100.0) || (whole <= 0.0 && p > 0.0) {
+        let digits = (-(100.0 - p).abs().min(p.abs()).log10())
+            .ceil()
+            .clamp(1.0, 6.0) as usize;
+        format!("{p:.digits$}")
+    } else {
+        format!("{whole:.0}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::percent;
+
+    #[test]
+    fn a_fraction_just_below_one_is_not_called_all_of_it() {
+        assert_eq!(percent(0.36), "36");
+        assert_eq!(percent(0.9995), "99.95");
+        assert_eq!(percent(1.0), "100");
+        assert_eq!(percent(0.004), "0.4");
+        assert_eq!(percent(0.0), "0");
+    }
 }
