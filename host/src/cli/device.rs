@@ -231,13 +231,38 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     let (mut client, _board) = connect(&args.port)?;
     let measured_on = check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
     let kept = merge_with_active(&mut client, &file, &mut set, &args.reset, &shown)?;
-    let status = client.write_params_verified(&set)?;
-    println!(
-        "wrote {shown} to {} (CRC {:#010x}, store sequence {}), committed, and verified by reading it back",
-        client.port_name(),
-        status.active_crc,
-        status.active_seq
-    );
+    // A write that committed is recorded even when its read-back could not be completed
+    // (the board's status shows the new set's CRC); the command still fails then.
+    let (status, unsettled) = match client.write_params_settled(&set) {
+        Ok(report) => {
+            if let Some(recovered) = &report.recovered {
+                say!("imucal: note: {recovered}");
+            }
+            println!(
+                "wrote {shown} to {} (CRC {:#010x}, store sequence {}), committed, and verified \
+                 by reading it back",
+                client.port_name(),
+                report.status.active_crc,
+                report.status.active_seq
+            );
+            (report.status, None)
+        }
+        Err(imucal::device::DeviceError::WriteUnsettled {
+            committed: Some(status),
+            port,
+            state,
+            cause,
+        }) => {
+            let error = imucal::device::DeviceError::WriteUnsettled {
+                committed: Some(status),
+                port,
+                state,
+                cause,
+            };
+            (status, Some(error))
+        }
+        Err(error) => return Err(error.into()),
+    };
     let welcome = client.welcome();
     let mut record = imucal::history::CalibrationRecord::new(
         &welcome.device_id.to_string(),
@@ -249,7 +274,14 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     if let Some(measured_on) = measured_on {
         record.board = imucal::history::BoardWrite::FromOtherBoard { measured_on };
     }
-    super::history::record(&args.history, record)
+    super::history::record(&args.history, record)?;
+    match unsettled {
+        Some(error) => {
+            say!("imucal: note: the write is recorded in the history, as the board's status shows the new set active");
+            Err(error.into())
+        }
+        None => Ok(()),
+    }
 }
 
 /// Refuses a file made for another board unless `force`; notes a file that names no board.

@@ -30,6 +30,7 @@ impl<L: Read + Write> DeviceClient<L> {
     ) -> Result<(ResponseBody, bool), DeviceError> {
         let seq = self.take_seq();
         let tries = tries.max(1);
+        let bad_before = self.stats.frame_errors;
         for attempt in 0..tries {
             if attempt > 0 {
                 self.stats.retries += 1;
@@ -43,6 +44,7 @@ impl<L: Read + Write> DeviceClient<L> {
             port: self.port.clone(),
             request: request_name(body),
             tries,
+            bad_frames: self.stats.frame_errors.saturating_sub(bad_before),
         })
     }
 

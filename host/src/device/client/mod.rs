@@ -31,6 +31,7 @@ use super::{open_port, DeviceError};
 pub(super) mod capture;
 mod link;
 mod params;
+pub use params::WriteReport;
 mod stream;
 
 /// Timeouts and retry counts of a [`DeviceClient`].
@@ -245,12 +246,17 @@ impl<L: Read + Write> DeviceClient<L> {
             Ok(_) => self.exchange(&hello, self.options.reply_timeout, self.options.tries)?,
             // Hello is the one request every protocol version keeps; try it once before
             // giving up, in case Ping is what the board does not understand.
-            Err(DeviceError::NoAnswer { .. }) => self
+            Err(DeviceError::NoAnswer { bad_frames, .. }) => self
                 .exchange(&hello, self.options.reply_timeout, 1)
-                .map_err(|_| DeviceError::NoAnswer {
+                .map_err(|e| DeviceError::NoAnswer {
                     port: self.port.clone(),
                     request: "Ping",
                     tries: self.options.connect_tries,
+                    bad_frames: bad_frames
+                        + match e {
+                            DeviceError::NoAnswer { bad_frames, .. } => bad_frames,
+                            _ => 0,
+                        },
                 })?,
             Err(e) => return Err(e),
         }
