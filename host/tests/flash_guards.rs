@@ -391,3 +391,41 @@ fn flash_recording_in(
         .output()
         .expect("the imucal binary runs")
 }
+
+#[test]
+fn a_set_past_every_common_parts_bounds_is_refused_as_calibrate_refuses_it_unless_accepted() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    // A damaged accelerometer's offset, and a hand-edited gain of 1.5 on the x axis.
+    for (name, edit) in [
+        (
+            "offset",
+            (|s: &mut CalibrationSet| s.accel.b[0] = 3.1547) as fn(&mut CalibrationSet),
+        ),
+        ("gain", |s: &mut CalibrationSet| s.accel.a[0][0] = 1.5),
+    ] {
+        let mut set = calibrated_set();
+        edit(&mut set);
+        let path = temp_file(&format!("past-{name}.json"));
+        std::fs::write(&path, ParamsFile::from(&set).to_json()).expect("temp dir writable");
+        let before = fake.state().active;
+        let out = flash(&path, &fake.path, &[]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {stderr}");
+        assert!(
+            stderr.contains("of every common part") && stderr.contains("--accept-outlier"),
+            "{name}: {stderr}"
+        );
+        assert_eq!(fake.state().active, before, "{name}: nothing written");
+        let out = flash(&path, &fake.path, &["--accept-outlier"]);
+        let stderr = text(&out.stderr);
+        let _ = std::fs::remove_file(&path);
+        assert!(out.status.success(), "{name}: {stderr}");
+        assert!(stderr.contains("(--accept-outlier)"), "{name}: {stderr}");
+        assert_eq!(
+            fake.state().active.accel,
+            set.accel,
+            "{name}: written when accepted"
+        );
+    }
+}
+

@@ -617,7 +617,8 @@ pub struct CalibrateArgs {
     /// offset or gain, a magnet next to the magnetometer, gyroscope noise), the last ones.
     #[arg(long, default_value_t = 0, requires = "sim_boards")]
     pub sim_faulty: u16,
-    /// Write a board's parameters even when it is an outlier against its fleet or batch.
+    /// Write a board's parameters even when it is an outlier against its fleet or batch, or past
+    /// a bound of every common part's datasheet (a damaged sensor).
     #[arg(long)]
     pub accept_outlier: bool,
     /// Simulator: seed of the board's errors, noise and the simulated person.

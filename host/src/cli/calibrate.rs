@@ -297,6 +297,7 @@ pub(super) fn session_options(
         mag_timeout: duration_arg("--mag-timeout", args.mag_timeout)?,
         rest_timeout: duration_arg("--rest-timeout", args.rest_timeout)?,
         rounds: usize::from(args.rounds),
+        accept_outlier: args.accept_outlier,
         ..SessionOptions::default()
     })
 }
@@ -434,7 +435,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let mut outcome = result.map_err(|error| {
         anyhow::anyhow!("{error}\nContinue with `{}`", resume_command(args, &dir))
     })?;
-    if !outcome.written {
+    if !outcome.written && outcome.not_written_because.is_none() {
         outcome.not_written_because = Some(
             match terminal.decision {
                 Some(WriteDecision::RefusedPoor) => "poor verdict",
@@ -627,6 +628,18 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     // Nothing written because of the verdict is a failure for scripts, after all is saved.
     if terminal.decision == Some(WriteDecision::RefusedPoor) && !final_summary.written {
         return Err(refused_poor("The calibration", &dir.join("params.json")));
+    }
+    if let Some(why) = final_summary
+        .not_written_because
+        .as_deref()
+        .filter(|why| why.starts_with(imucal::history::part_limits::PART_LIMITS_REFUSAL))
+    {
+        anyhow::bail!(
+            "The calibration is not written: {why}. It is saved in {}; check the board, or write \
+             it anyway with `imucal flash {} --accept-outlier`",
+            dir.display(),
+            dir.join("params.json").display()
+        );
     }
     if terminal.decision == Some(WriteDecision::NoOneToAsk) {
         return Err(not_asked(

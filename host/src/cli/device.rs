@@ -65,6 +65,10 @@ pub struct FlashArgs {
     /// Write the file even though it was made for another board (or other sensors or ranges).
     #[arg(long)]
     pub force_other_device: bool,
+    /// Write the file even though a parameter is past a bound of every common part's datasheet
+    /// (a damaged sensor, or a hand-edited file), as `calibrate --accept-outlier` does.
+    #[arg(long)]
+    pub accept_outlier: bool,
     /// Where to record the flash.
     #[command(flatten)]
     pub history: super::history::RecordArgs,
@@ -227,6 +231,7 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
         );
     }
     let mut set = file.to_calibration_set(&shown)?;
+    hold_to_part_limits(&file, &shown, args.accept_outlier)?;
     super::history::check_before_writing(&args.history)?;
     let (mut client, _board) = connect(&args.port)?;
     let measured_on = check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
@@ -280,6 +285,27 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
             say!("imucal: note: the write is recorded in the history, as the board's status shows the new set active");
             Err(error.into())
         }
+        None => Ok(()),
+    }
+}
+
+/// The bounds `calibrate` holds a set to ([`imucal::history::part_limits`]): a refusing one
+/// refuses the file unless `accept`, a warning one is said.
+fn hold_to_part_limits(file: &ParamsFile, shown: &str, accept: bool) -> anyhow::Result<()> {
+    use imucal::history::part_limits::{beyond_part_limits_of, refusal_phrase, warning_phrases};
+    let findings = beyond_part_limits_of(file);
+    for warning in warning_phrases(&findings) {
+        say!("imucal: warning: `{shown}`: {warning}");
+    }
+    match refusal_phrase(&findings) {
+        Some(why) if accept => {
+            say!("imucal: warning: writing `{shown}` although {why} (--accept-outlier)");
+            Ok(())
+        }
+        Some(why) => anyhow::bail!(
+            "`{shown}` is not written: {why}; check the board (or the file, if it was edited by \
+             hand), or pass --accept-outlier to write it anyway"
+        ),
         None => Ok(()),
     }
 }
