@@ -755,3 +755,51 @@ fn a_history_database_that_cannot_be_used_stops_calibrate_before_a_board_is_writ
     assert!(db.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_written_set_that_misses_its_target_at_rest_is_named_in_the_verdict_and_history_and_fails() {
+    let dir = scratch("missed-target");
+    let out = imucal_in(
+        &dir,
+        &[
+            "calibrate",
+            "--sim",
+            "--sim-seed",
+            "50",
+            "--sim-effect",
+            "bias_step",
+            "--yes",
+            "-o",
+            "s",
+        ],
+    );
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("written and verified on the board, but misses its targets at rest"),
+        "{text}"
+    );
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("s/summary.json")).expect("summary.json"),
+    )
+    .expect("JSON");
+    assert_eq!(summary["written"], true);
+    assert_ne!(summary["verdict"]["level"], "good");
+    let reasons = summary["verdict"]["reasons"].to_string();
+    assert!(reasons.contains("misses its target at rest"), "{reasons}");
+    let location = imucal::history::DbLocation::Sqlite(dir.join("history.sqlite"));
+    let mut store = imucal::history::HistoryStore::open(&location).expect("history");
+    let records = store.records(None).expect("records");
+    let verdict = records
+        .last()
+        .and_then(|r| r.record.verdict.clone())
+        .expect("a recorded verdict");
+    assert!(
+        verdict
+            .reasons
+            .iter()
+            .any(|r| r.contains("misses its target at rest")),
+        "{verdict:?}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -516,6 +516,10 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         final_summary.missed_targets = on_board
             .map(|a| a.missed_targets(outcome.fit.budgets))
             .unwrap_or_default();
+        final_summary.verdict = imucal::session::verdict_with_missed_targets(
+            &final_summary.verdict,
+            &final_summary.missed_targets,
+        );
         final_summary.accel_rest_error_mg = on_board.map(|a| a.accel_error_mg);
         final_summary.mag_rest_error_pct = on_board.map(|a| a.mag_error_pct);
         final_summary.gyro_rest_error_dps = on_board.map(|a| a.gyro_rate_dps);
@@ -623,6 +627,16 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         anyhow::bail!(
             "the extended set is on the board, but its check at rest failed: {why}; check the \
              board with `imucal stream --calibrated`"
+        );
+    }
+    // A set on the board that misses its own target at rest fails the command, as a failed
+    // check at rest does: the board holds it, the summary and the history say what it missed.
+    if final_summary.written && !final_summary.missed_targets.is_empty() {
+        anyhow::bail!(
+            "the set is written and verified on the board, but misses its targets at rest: {}; \
+             the verdict and the history record it (the set stays on the board: calibrate \
+             again, or with --analyze to look for the effect the model lacks)",
+            final_summary.missed_targets.join("; ")
         );
     }
     // Nothing written because of the verdict is a failure for scripts, after all is saved.

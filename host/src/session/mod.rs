@@ -87,7 +87,10 @@ pub use motion::{MotionMonitor, MotionState};
 pub use options::SessionOptions;
 pub use rest::{rest_errors, RestErrors};
 pub use rest_phase::stream_for;
-pub use save::{load_mag_samples, load_moves, load_poses, save_session, summary, SessionSummary};
+pub use save::{
+    load_mag_samples, load_moves, load_poses, save_session, summary, verdict_with_missed_targets,
+    SessionSummary,
+};
 pub use save::{MOVES_FILE, PROGRESS_FILE};
 pub use solve::{
     fit_session, Budgets, CapturedPose, FieldSource, SessionFit, Uncertainties, Verdict,
