@@ -757,6 +757,44 @@ fn a_history_database_that_cannot_be_used_stops_calibrate_before_a_board_is_writ
 }
 
 #[test]
+fn calibrate_option_values_it_cannot_run_with_exit_2_naming_the_cause_and_the_fix() {
+    let dir = scratch("sim-values");
+    for (args, words) in [
+        (
+            &[
+                "calibrate",
+                "--sim",
+                "--sim-effect",
+                "foo",
+                "--yes",
+                "-o",
+                "a",
+            ][..],
+            "use one of",
+        ),
+        (
+            &[
+                "calibrate",
+                "--sim-boards",
+                "2",
+                "--sim-faulty",
+                "3",
+                "--yes",
+                "-o",
+                "b",
+            ][..],
+            "give --sim-faulty 2 or less",
+        ),
+    ] {
+        let out = imucal_in(&dir, args);
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {text}");
+        assert!(text.contains(words), "{args:?}: {text}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn a_written_set_that_misses_its_target_at_rest_is_named_in_the_verdict_and_history_and_fails() {
     let dir = scratch("missed-target");
     let out = imucal_in(

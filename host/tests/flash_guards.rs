@@ -429,3 +429,32 @@ fn a_set_past_every_common_parts_bounds_is_refused_as_calibrate_refuses_it_unles
     }
 }
 
+#[test]
+fn a_file_with_nan_or_of_an_unread_format_or_a_huge_value_says_so_plainly() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let json = ParamsFile::from(&calibrated_set()).to_json();
+    let path = temp_file("plain.json");
+    let pretty: serde_json::Value = serde_json::from_str(&json).expect("JSON");
+    let pretty = serde_json::to_string_pretty(&pretty).expect("JSON");
+    let with_nan = pretty.replacen("0.25", "NaN", 1);
+    assert_ne!(with_nan, pretty);
+    let format_0 = pretty.replacen("\"format\": 2", "\"format\": 0", 1);
+    assert_ne!(format_0, pretty);
+    let huge = pretty.replacen("0.25", "1e300", 1);
+    for (text_of_file, words) in [
+        (
+            with_nan,
+            "NaN or Infinity are not allowed in JSON parameters",
+        ),
+        (format_0, "reads formats 1 to 2"),
+        (huge, "1e300"),
+    ] {
+        std::fs::write(&path, &text_of_file).expect("temp dir writable");
+        let out = flash(&path, &fake.path, &[]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(words), "{words}: {stderr}");
+        assert!(stderr.len() < 600, "{stderr}");
+    }
+    let _ = std::fs::remove_file(&path);
+}

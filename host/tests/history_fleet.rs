@@ -672,3 +672,53 @@ fn a_flashed_sets_finding_names_a_hand_edited_or_foreign_file_among_its_causes()
         .contains("hand-edited"));
 }
 
+#[test]
+fn fleet_json_with_too_few_boards_prints_an_object_with_the_reason_and_fails() {
+    let dir = std::env::temp_dir().join(format!("imucal-fleet-json-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let db = format!("sqlite://{}", dir.join("h.sqlite").display());
+    {
+        let location = imucal::history::DbLocation::parse(&db).expect("url");
+        let mut store = HistoryStore::open(&location).expect("open");
+        for seed in 0..3 {
+            store.record(&board_record(seed)).expect("write");
+        }
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["fleet", "--db", &db, "--json"])
+        .output()
+        .expect("imucal runs");
+    assert_eq!(out.status.code(), Some(1));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    assert_eq!(json["boards"], 3);
+    assert!(
+        json["error"]
+            .as_str()
+            .expect("a reason")
+            .contains("at least"),
+        "{json}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn fleet_option_values_out_of_range_exit_2_naming_the_cause_and_the_fix() {
+    for (args, words) in [
+        (&["--false-alarm", "1.5"][..], "would flag every board"),
+        (
+            &["--false-alarm", "1e-300"][..],
+            "no board could ever be flagged",
+        ),
+        (&["--min-spread-values", "0"][..], "give 3 or more"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["fleet", "--db", "sqlite:///nonexistent/never.sqlite"])
+            .args(args)
+            .output()
+            .expect("imucal runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(words), "{args:?}: {stderr}");
+    }
+}
