@@ -78,7 +78,7 @@ pub enum DeviceError {
     },
     /// Contact was lost in or after a commit and the board's active set could not be read
     /// back with certainty: the new set may or may not be active.
-    #[error("{cause}; {state}")]
+    #[error("{}; {state}", interrupted_by(.cause))]
     WriteUnsettled {
         /// The port.
         port: String,
@@ -174,6 +174,20 @@ fn no_answer_text(port: &str, request: &str, tries: &u32, bad_frames: &u64) -> S
             "no answer from {port} to {request} after {tries} tries: is the board running imucal \
              firmware, and is this the right port (`imucal ports`)?"
         )
+    }
+}
+
+/// What interrupted a write, for [`DeviceError::WriteUnsettled`]: a lost answer is stated
+/// plainly, since the board was reached again and its counters say whether the link is to blame.
+fn interrupted_by(cause: &DeviceError) -> String {
+    match cause {
+        DeviceError::NoAnswer {
+            port,
+            request,
+            tries,
+            ..
+        } => format!("no answer from {port} to {request} after {tries} tries"),
+        other => other.to_string(),
     }
 }
 
