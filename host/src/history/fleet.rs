@@ -504,6 +504,22 @@ impl FleetModel {
     pub fn outlying(&self, record: &CalibrationRecord) -> Vec<Finding> {
         let mut findings = self.distances(record);
         findings.retain(|f| f.robust_z.abs() > f.threshold_z);
+        // An offset's length adds nothing when one of its axes is beyond its own threshold:
+        // that axis names the fault more precisely.
+        let axes_beyond: Vec<String> = findings
+            .iter()
+            .filter(|f| !f.parameter.ends_with(".length"))
+            .filter_map(|f| {
+                f.parameter
+                    .rsplit_once('.')
+                    .map(|(prefix, _)| prefix.to_string())
+            })
+            .collect();
+        findings.retain(|f| {
+            f.parameter
+                .strip_suffix(".length")
+                .is_none_or(|prefix| !axes_beyond.iter().any(|p| p == prefix))
+        });
         findings
     }
 }
