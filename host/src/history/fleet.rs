@@ -626,15 +626,18 @@ pub const METHOD: &str = "per parameter: median and 1.4826·MAD of the fleet (50
     split over the parameters tested (Bonferroni); a parameter's own spread when ≥ 20 boards \
     have it, else the deviations of its sensor's axes of the same kind pooled (one datasheet \
     tolerance per part); matrix entries a record's model does not estimate (exactly 0 or 1) are \
-    not counted";
+    not counted; each sensor's offset is also tested as a vector, its length d = √Σz² against \
+    √(3·F) of Snedecor's F(3, ν) at its share of the false-alarm rate";
 
 fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
-    let distances = model.distances(&stored.record);
-    let max_abs_z = distances.first().map_or(0.0, |f| f.robust_z.abs());
-    let findings: Vec<Finding> = distances
-        .into_iter()
-        .filter(|f| f.robust_z.abs() > f.threshold_z)
-        .collect();
+    // The largest |z| of a parameter; an offset's length has its own, larger threshold.
+    let max_abs_z = model
+        .distances(&stored.record)
+        .iter()
+        .filter(|f| !f.parameter.ends_with(".length"))
+        .map(|f| f.robust_z.abs())
+        .fold(0.0, f64::max);
+    let findings = model.outlying(&stored.record);
     BoardResult {
         device_id: stored.record.device_id.clone(),
         record_id: stored.id,
