@@ -51,6 +51,15 @@ pub enum ParamTamper {
         /// Bit of the `f32` to flip.
         bit: u8,
     },
+    /// From the first `CommitParams` the host sends, pass `skip` replies, then garble the next
+    /// `lose` (their frames fail the host's check): answers lost in or after a commit that the
+    /// board carried out.
+    LoseRepliesAfterCommit {
+        /// Replies passed intact first (0: the commit's own reply is lost).
+        skip: u8,
+        /// Replies garbled after those.
+        lose: u8,
+    },
 }
 
 /// Which faults a [`FaultyLink`] injects; [`LinkFaults::default`] injects none.
@@ -240,6 +249,16 @@ impl Lane {
     }
 }
 
+/// `frame` with one bit of a middle byte flipped (never into a delimiter), so that it fails
+/// its check.
+fn garbled(mut frame: Vec<u8>) -> Vec<u8> {
+    let middle = frame.len() / 2;
+    if let Some(byte) = frame.get_mut(middle) {
+        *byte ^= if *byte == 0x10 { 0x20 } else { 0x10 };
+    }
+    frame
+}
+
 /// Payload of a complete frame (CRC checked), or `None` when it is not a valid frame.
 fn payload_of(frame: &[u8]) -> Option<Vec<u8>> {
     let mut decoder = FrameDecoder::<MAX_FRAME>::new();
@@ -273,6 +292,11 @@ pub struct FaultyLink {
     params_tampered: u64,
     /// Seq and host CRC of tampered writes whose echo is to be rewritten.
     hidden_echoes: Vec<(u16, u32)>,
+    /// Replies still to pass and then to garble, once a commit armed
+    /// [`ParamTamper::LoseRepliesAfterCommit`].
+    losing: Option<(u8, u8)>,
+    /// Whether that tamper has been armed (it arms once).
+    losing_armed: bool,
     notes: Vec<String>,
 }
 
@@ -289,6 +313,8 @@ impl FaultyLink {
             hellos_refused: 0,
             params_tampered: 0,
             hidden_echoes: Vec::new(),
+            losing: None,
+            losing_armed: false,
             notes: Vec::new(),
         })
     }
@@ -301,6 +327,8 @@ impl FaultyLink {
     /// Change the parameter tampering from now on (`None` stops it).
     pub fn set_param_tamper(&mut self, tamper: Option<ParamTamper>) {
         self.faults.param_tamper = tamper;
+        self.losing = None;
+        self.losing_armed = false;
     }
 
     /// Bytes from the host, at wall time `now`.
@@ -416,6 +444,17 @@ impl FaultyLink {
                     self.hidden_echoes.push((request.seq, host_crc));
                 }
             }
+            (
+                RequestBody::CommitParams { .. },
+                _,
+                Some(ParamTamper::LoseRepliesAfterCommit { skip, lose }),
+            ) => {
+                if !self.losing_armed {
+                    self.losing_armed = true;
+                    self.losing = Some((skip, lose));
+                }
+                return Some(frame);
+            }
             _ => return Some(frame),
         }
         frame_of(&request).or(Some(frame))
@@ -454,6 +493,7 @@ impl FaultyLink {
             .protocol_major
             .filter(|&major| major != PROTOCOL_VERSION.major);
         let rewrites_replies = welcome_major.is_some()
+            || self.losing.is_some()
             || !self.hidden_echoes.is_empty()
             || matches!(
                 self.faults.param_tamper,
@@ -473,6 +513,16 @@ impl FaultyLink {
         else {
             return frame;
         };
+        match self.losing {
+            Some((skip, lose)) if skip > 0 => self.losing = Some((skip - 1, lose)),
+            Some((_, lose)) if lose > 0 => {
+                self.losing = Some((0, lose - 1));
+                self.params_tampered += 1;
+                return garbled(frame);
+            }
+            Some(_) => self.losing = None,
+            None => {}
+        }
         match (&mut response.body, welcome_major, self.faults.param_tamper) {
             (ResponseBody::Welcome(welcome), Some(major), _) => {
                 welcome.protocol_major = major;

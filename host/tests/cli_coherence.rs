@@ -863,3 +863,89 @@ fn a_unit_option_the_header_contradicts_exits_with_the_usage_status_naming_the_f
         );
     }
 }
+
+#[test]
+fn calibrate_option_values_it_cannot_run_with_exit_2_naming_the_cause_and_the_fix() {
+    let dir = scratch("sim-values");
+    for (args, words) in [
+        (
+            &[
+                "calibrate",
+                "--sim",
+                "--sim-effect",
+                "foo",
+                "--yes",
+                "-o",
+                "a",
+            ][..],
+            "use one of",
+        ),
+        (
+            &[
+                "calibrate",
+                "--sim-boards",
+                "2",
+                "--sim-faulty",
+                "3",
+                "--yes",
+                "-o",
+                "b",
+            ][..],
+            "give --sim-faulty 2 or less",
+        ),
+    ] {
+        let out = imucal_in(&dir, args);
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {text}");
+        assert!(text.contains(words), "{args:?}: {text}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_written_set_that_misses_its_target_at_rest_is_named_in_the_verdict_and_history_and_fails() {
+    let dir = scratch("missed-target");
+    let out = imucal_in(
+        &dir,
+        &[
+            "calibrate",
+            "--sim",
+            "--sim-seed",
+            "50",
+            "--sim-effect",
+            "bias_step",
+            "--yes",
+            "-o",
+            "s",
+        ],
+    );
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("written and verified on the board, but misses its targets at rest"),
+        "{text}"
+    );
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("s/summary.json")).expect("summary.json"),
+    )
+    .expect("JSON");
+    assert_eq!(summary["written"], true);
+    assert_ne!(summary["verdict"]["level"], "good");
+    let reasons = summary["verdict"]["reasons"].to_string();
+    assert!(reasons.contains("misses its target at rest"), "{reasons}");
+    let location = imucal::history::DbLocation::Sqlite(dir.join("history.sqlite"));
+    let mut store = imucal::history::HistoryStore::open(&location).expect("history");
+    let records = store.records(None).expect("records");
+    let verdict = records
+        .last()
+        .and_then(|r| r.record.verdict.clone())
+        .expect("a recorded verdict");
+    assert!(
+        verdict
+            .reasons
+            .iter()
+            .any(|r| r.contains("misses its target at rest")),
+        "{verdict:?}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -391,3 +391,70 @@ fn flash_recording_in(
         .output()
         .expect("the imucal binary runs")
 }
+
+#[test]
+fn a_set_past_every_common_parts_bounds_is_refused_as_calibrate_refuses_it_unless_accepted() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    // A damaged accelerometer's offset, and a hand-edited gain of 1.5 on the x axis.
+    for (name, edit) in [
+        (
+            "offset",
+            (|s: &mut CalibrationSet| s.accel.b[0] = 3.1547) as fn(&mut CalibrationSet),
+        ),
+        ("gain", |s: &mut CalibrationSet| s.accel.a[0][0] = 1.5),
+    ] {
+        let mut set = calibrated_set();
+        edit(&mut set);
+        let path = temp_file(&format!("past-{name}.json"));
+        std::fs::write(&path, ParamsFile::from(&set).to_json()).expect("temp dir writable");
+        let before = fake.state().active;
+        let out = flash(&path, &fake.path, &[]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {stderr}");
+        assert!(
+            stderr.contains("of every common part") && stderr.contains("--accept-outlier"),
+            "{name}: {stderr}"
+        );
+        assert_eq!(fake.state().active, before, "{name}: nothing written");
+        let out = flash(&path, &fake.path, &["--accept-outlier"]);
+        let stderr = text(&out.stderr);
+        let _ = std::fs::remove_file(&path);
+        assert!(out.status.success(), "{name}: {stderr}");
+        assert!(stderr.contains("(--accept-outlier)"), "{name}: {stderr}");
+        assert_eq!(
+            fake.state().active.accel,
+            set.accel,
+            "{name}: written when accepted"
+        );
+    }
+}
+
+#[test]
+fn a_file_with_nan_or_of_an_unread_format_or_a_huge_value_says_so_plainly() {
+    let fake = FakeDevice::start(FakeConfig::default());
+    let json = ParamsFile::from(&calibrated_set()).to_json();
+    let path = temp_file("plain.json");
+    let pretty: serde_json::Value = serde_json::from_str(&json).expect("JSON");
+    let pretty = serde_json::to_string_pretty(&pretty).expect("JSON");
+    let with_nan = pretty.replacen("0.25", "NaN", 1);
+    assert_ne!(with_nan, pretty);
+    let format_0 = pretty.replacen("\"format\": 2", "\"format\": 0", 1);
+    assert_ne!(format_0, pretty);
+    let huge = pretty.replacen("0.25", "1e300", 1);
+    for (text_of_file, words) in [
+        (
+            with_nan,
+            "NaN or Infinity are not allowed in JSON parameters",
+        ),
+        (format_0, "reads formats 1 to 2"),
+        (huge, "1e300"),
+    ] {
+        std::fs::write(&path, &text_of_file).expect("temp dir writable");
+        let out = flash(&path, &fake.path, &[]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(words), "{words}: {stderr}");
+        assert!(stderr.len() < 600, "{stderr}");
+    }
+    let _ = std::fs::remove_file(&path);
+}

@@ -599,3 +599,126 @@ fn residuals_too_few_boards_have_are_named_in_full_with_the_boards_their_own_spr
     );
     assert!(!stdout.contains("accel (on"), "{stdout}");
 }
+
+#[test]
+fn an_offset_moved_on_every_axis_is_flagged_by_its_length_though_no_axis_is() {
+    let records: Vec<CalibrationRecord> = (0..40).map(|b| board_record(3000 + b)).collect();
+    let refs: Vec<&CalibrationRecord> = records.iter().collect();
+    let model = FleetModel::fit(&refs, &FleetOptions::default()).expect("forty boards");
+    let mut board = board_record(3100);
+    let z_of = |record: &CalibrationRecord, name: &str| {
+        let found = model.distances(record);
+        let f = found.iter().find(|f| f.parameter == name).expect("tested");
+        (f.robust_z, f.threshold_z)
+    };
+    // Each axis moved to 80 % of its own threshold: a magnet by the magnetometer moves all three.
+    for (axis, name) in ["mag.b.x", "mag.b.y", "mag.b.z"].iter().enumerate() {
+        let (z0, _) = z_of(&board, name);
+        board.params.mag.b[axis] += 1.0;
+        let (z1, threshold) = z_of(&board, name);
+        let per_ut = z1 - z0;
+        board.params.mag.b[axis] += (0.8 * threshold - z1) / per_ut;
+    }
+    let findings = model.outlying(&board);
+    assert!(
+        findings
+            .iter()
+            .all(|f| !f.parameter.starts_with("mag.b.") || f.parameter == "mag.b.length"),
+        "no axis alone is beyond its threshold: {findings:?}"
+    );
+    let length = findings
+        .iter()
+        .find(|f| f.parameter == "mag.b.length")
+        .unwrap_or_else(|| panic!("the offset's length is flagged: {findings:?}"));
+    assert!(
+        length.likely_cause.contains("magnet"),
+        "{}",
+        length.likely_cause
+    );
+    // The healthy fleet is not flagged by the length test.
+    let flagged = records
+        .iter()
+        .filter(|r| {
+            model
+                .outlying(r)
+                .iter()
+                .any(|f| f.parameter.ends_with(".length"))
+        })
+        .count();
+    assert_eq!(flagged, 0, "healthy boards flagged by an offset's length");
+}
+
+#[test]
+fn a_flashed_sets_finding_names_a_hand_edited_or_foreign_file_among_its_causes() {
+    let records: Vec<CalibrationRecord> = (0..8).map(|b| board_record(4000 + b)).collect();
+    let refs: Vec<&CalibrationRecord> = records.iter().collect();
+    let model = FleetModel::fit(&refs, &FleetOptions::default()).expect("eight boards");
+    let mut flashed = board_record(4100);
+    flashed.source = imucal::history::RecordSource::Flash;
+    flashed.params.accel.a[0][0] = 1.5;
+    let findings = model.outlying(&flashed);
+    assert!(!findings.is_empty(), "A.xx = 1.5 is flagged");
+    assert!(
+        findings[0]
+            .likely_cause
+            .contains("hand-edited or foreign file"),
+        "{}",
+        findings[0].likely_cause
+    );
+    let mut guided = flashed.clone();
+    guided.source = imucal::history::RecordSource::Guided;
+    assert!(!model.outlying(&guided)[0]
+        .likely_cause
+        .contains("hand-edited"));
+}
+
+#[test]
+fn fleet_json_with_too_few_boards_prints_an_object_with_the_reason_and_fails() {
+    let dir = std::env::temp_dir().join(format!("imucal-fleet-json-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let db = format!("sqlite://{}", dir.join("h.sqlite").display());
+    {
+        let location = imucal::history::DbLocation::parse(&db).expect("url");
+        let mut store = HistoryStore::open(&location).expect("open");
+        for seed in 0..3 {
+            store.record(&board_record(seed)).expect("write");
+        }
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+        .args(["fleet", "--db", &db, "--json"])
+        .output()
+        .expect("imucal runs");
+    assert_eq!(out.status.code(), Some(1));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    assert_eq!(json["boards"], 3);
+    assert!(
+        json["error"]
+            .as_str()
+            .expect("a reason")
+            .contains("at least"),
+        "{json}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn fleet_option_values_out_of_range_exit_2_naming_the_cause_and_the_fix() {
+    for (args, words) in [
+        (&["--false-alarm", "1.5"][..], "would flag every board"),
+        (
+            &["--false-alarm", "1e-300"][..],
+            "no board could ever be flagged",
+        ),
+        (&["--min-spread-values", "0"][..], "give 3 or more"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_imucal"))
+            .args(["fleet", "--db", "sqlite:///nonexistent/never.sqlite"])
+            .args(args)
+            .output()
+            .expect("imucal runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(words), "{args:?}: {stderr}");
+    }
+}

@@ -460,3 +460,71 @@ fn a_capture_that_finds_another_running_waits_for_it_and_then_captures() {
     );
     assert!(client.stats().retries >= 2, "{:?}", client.stats());
 }
+
+/// A board holding `first` whose link garbles the `lose` replies after the first `skip` that
+/// follow the next commit.
+fn board_losing_replies_after_commit(
+    seed: u64,
+    first: &CalibrationSet,
+    skip: u8,
+    lose: u8,
+) -> (SimHandle, DeviceClient) {
+    let (sim, client) = board_holding(seed, first);
+    sim.set_param_tamper(Some(ParamTamper::LoseRepliesAfterCommit { skip, lose }))
+        .expect("tamper");
+    (sim, client)
+}
+
+#[test]
+fn a_commit_whose_answers_are_lost_is_settled_by_reading_the_board_again() {
+    let (first, second) = (calibration(1), calibration(2));
+    // The commit's answer and its two resends' answers are lost, then one more.
+    let (sim, mut client) = board_losing_replies_after_commit(34, &first, 0, 4);
+    let report = client
+        .write_params_settled(&second)
+        .expect("the board committed the set, so the write is settled as written");
+    assert_eq!(report.status.active_crc, second.crc32());
+    let note = report.recovered.expect("the lost answer is told");
+    assert!(note.contains("the new set is active"), "{note}");
+    assert!(note.contains("link is noisy"), "{note}");
+    assert!(note.contains("matched every value"), "{note}");
+    sim.set_param_tamper(None).expect("untamper");
+    assert_still_active(&mut client, &second);
+}
+
+#[test]
+fn a_read_back_lost_after_the_commit_is_retried_until_the_new_set_is_verified() {
+    let (first, second) = (calibration(1), calibration(2));
+    // The commit is answered; every try of the read-back that follows is lost.
+    let (sim, mut client) = board_losing_replies_after_commit(35, &first, 1, 3);
+    let report = client
+        .write_params_settled(&second)
+        .expect("the read-back is retried until it arrives");
+    assert_eq!(report.status.active_crc, second.crc32());
+    assert!(report.status.active_seq > 1, "{:?}", report.status);
+    let note = report.recovered.expect("the lost answer is told");
+    assert!(note.contains("GetParams"), "{note}");
+    sim.set_param_tamper(None).expect("untamper");
+    assert_still_active(&mut client, &second);
+}
+
+#[test]
+fn answers_lost_until_contact_cannot_be_had_say_which_sets_it_could_be_and_blame_the_link() {
+    let (first, second) = (calibration(1), calibration(2));
+    let (_sim, mut client) = board_losing_replies_after_commit(36, &first, 1, 200);
+    let error = client
+        .write_params_settled(&second)
+        .expect_err("nothing can be read back");
+    let text = error.to_string();
+    assert!(
+        matches!(error, DeviceError::WriteUnsettled { .. }),
+        "{error:?}"
+    );
+    assert!(text.contains("link is noisy"), "{text}");
+    assert!(!text.contains("right port"), "{text}");
+    assert!(
+        text.contains(&format!("{:#010x}", second.crc32()))
+            && text.contains(&format!("{:#010x}", first.crc32())),
+        "{text}"
+    );
+}

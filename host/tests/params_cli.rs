@@ -192,3 +192,36 @@ fn params_get_with_sim_reads_the_fresh_simulated_board() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_flash_whose_read_back_answers_are_lost_is_verified_after_all_and_recorded() {
+    use imucal_hil_sim::link_faults::ParamTamper;
+    let dir = scratch("lost-read-back");
+    let mut options = SimOptions::new(23);
+    options.schedule = PersonSchedule::Rest;
+    // Every try of the read-back after the commit is lost: the board committed the set.
+    options.faults.param_tamper = Some(ParamTamper::LoseRepliesAfterCommit { skip: 1, lose: 3 });
+    let sim = SimServer::start(options).expect("the simulator starts");
+    let port = sim.port_path();
+    succeeded(&imucal(
+        &["params", "get", "--port", port, "-o", "a.json"],
+        &dir,
+    ));
+    let text = std::fs::read_to_string(dir.join("a.json")).expect("saved");
+    let mut json: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    json["accel"]["b"][0] = serde_json::json!(0.05);
+    std::fs::write(dir.join("b.json"), json.to_string()).expect("writable");
+    let out = imucal(&["flash", "b.json", "--port", port], &dir);
+    let stdout = succeeded(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stdout.contains("verified by reading it back"), "{stdout}");
+    assert!(stderr.contains("the new set is active"), "{stderr}");
+    let (crc, _) = active(&sim);
+    let device_id = connect(port).welcome().device_id.to_string();
+    let history = succeeded(&imucal(&["history", &device_id], &dir));
+    assert!(
+        history.contains(&format!("{crc:08x}")),
+        "the history holds the flashed set {crc:#010x}:\n{history}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

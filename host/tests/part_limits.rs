@@ -57,3 +57,40 @@ fn a_sensor_the_record_does_not_calibrate_is_not_held_to_its_bounds() {
         .insert("gyro".into(), "never rested".into());
     assert_eq!(beyond_part_limits(&record), vec![]);
 }
+
+#[test]
+fn a_magnet_by_the_magnetometer_warns_without_refusing_and_one_past_the_range_refuses() {
+    use imucal::history::part_limits::{refusal_phrase, warning_phrases};
+    // Hard iron of a board with a magnet beside its magnetometer (≈ 220 µT).
+    let mut record = board_record(7);
+    record.params.mag.b = [144.3, -83.1, 138.6];
+    let found = beyond_part_limits(&record);
+    assert!(
+        !found.is_empty(),
+        "a magnet's offset is beyond the part and board allowance"
+    );
+    assert!(found.iter().all(|f| !f.refuses), "{found:?}");
+    assert!(refusal_phrase(&found).is_none());
+    let warnings = warning_phrases(&found);
+    assert!(
+        warnings[0].contains("magnet or magnetised steel near the magnetometer"),
+        "{warnings:?}"
+    );
+    // A healthy board's hard iron (tens of µT) passes.
+    record.params.mag.b = [45.8, -35.1, 40.0];
+    assert_eq!(beyond_part_limits(&record), vec![]);
+    // An offset that leaves the Earth's field no room in a ±400 µT range is refused.
+    record.params.mag.b = [360.0, 0.0, 0.0];
+    record.params.device = Some(imucal::device::params_json::DeviceJson {
+        id: record.device_id.clone(),
+        sensors: vec!["accel".into(), "gyro".into(), "mag".into()],
+        ranges: imucal::device::params_json::RangesJson {
+            accel_mps2: 39.2,
+            gyro_rads: 8.7,
+            mag_ut: 400.0,
+        },
+        firmware: "0.1.0".into(),
+    });
+    let found = beyond_part_limits(&record);
+    assert!(refusal_phrase(&found).is_some(), "{found:?}");
+}

@@ -59,7 +59,13 @@ pub enum Command {
     Device(super::device::DeviceCommand),
     /// Guided calibration of a board (or `--sim`): positions, magnetometer, fit, write, verify.
     #[command(
-        after_help = "Examples:\n  imucal calibrate --sim --yes\n  imucal calibrate --port /dev/ttyACM0 --field-ut 48.5"
+        after_help = "Examples:\n  imucal calibrate --sim --yes\n  imucal calibrate --port /dev/ttyACM0 --field-ut 48.5\n\n\
+        Exit status: 0 when the set is written, verified by reading it back, and meets its \
+        targets at rest (its verdict may still be marginal); 1 when it is not written (a poor \
+        verdict without --accept-poor, a set past a bound of every common part's datasheet \
+        without --accept-outlier, no --yes and no terminal to ask), when it is written but \
+        misses its targets at rest (the verdict, summary.json and the history name them), or \
+        on an error; 2 for an option value or combination the command cannot run with."
     )]
     Calibrate(CalibrateArgs),
     /// Write an HTML report (plots, parameters, verdict) of a session directory or a recording.
@@ -621,7 +627,8 @@ pub struct CalibrateArgs {
     /// offset or gain, a magnet next to the magnetometer, gyroscope noise), the last ones.
     #[arg(long, default_value_t = 0, requires = "sim_boards")]
     pub sim_faulty: u16,
-    /// Write a board's parameters even when it is an outlier against its fleet or batch.
+    /// Write a board's parameters even when it is an outlier against its fleet or batch, or past
+    /// a bound of every common part's datasheet (a damaged sensor).
     #[arg(long)]
     pub accept_outlier: bool,
     /// Simulator: seed of the board's errors, noise and the simulated person.

@@ -297,6 +297,7 @@ pub(super) fn session_options(
         mag_timeout: duration_arg("--mag-timeout", args.mag_timeout)?,
         rest_timeout: duration_arg("--rest-timeout", args.rest_timeout)?,
         rounds: usize::from(args.rounds),
+        accept_outlier: args.accept_outlier,
         ..SessionOptions::default()
     })
 }
@@ -434,7 +435,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let mut outcome = result.map_err(|error| {
         anyhow::anyhow!("{error}\nContinue with `{}`", resume_command(args, &dir))
     })?;
-    if !outcome.written {
+    if !outcome.written && outcome.not_written_because.is_none() {
         outcome.not_written_because = Some(
             match terminal.decision {
                 Some(WriteDecision::RefusedPoor) => "poor verdict",
@@ -515,6 +516,10 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         final_summary.missed_targets = on_board
             .map(|a| a.missed_targets(outcome.fit.budgets))
             .unwrap_or_default();
+        final_summary.verdict = imucal::session::verdict_with_missed_targets(
+            &final_summary.verdict,
+            &final_summary.missed_targets,
+        );
         final_summary.accel_rest_error_mg = on_board.map(|a| a.accel_error_mg);
         final_summary.mag_rest_error_pct = on_board.map(|a| a.mag_error_pct);
         final_summary.gyro_rest_error_dps = on_board.map(|a| a.gyro_rate_dps);
@@ -633,9 +638,31 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
              board with `imucal stream --calibrated`"
         );
     }
+    // A set on the board that misses its own target at rest fails the command, as a failed
+    // check at rest does: the board holds it, the summary and the history say what it missed.
+    if final_summary.written && !final_summary.missed_targets.is_empty() {
+        anyhow::bail!(
+            "the set is written and verified on the board, but misses its targets at rest: {}; \
+             the verdict and the history record it (the set stays on the board: calibrate \
+             again, or with --analyze to look for the effect the model lacks)",
+            final_summary.missed_targets.join("; ")
+        );
+    }
     // Nothing written because of the verdict is a failure for scripts, after all is saved.
     if terminal.decision == Some(WriteDecision::RefusedPoor) && !final_summary.written {
         return Err(refused_poor("The calibration", &dir.join("params.json")));
+    }
+    if let Some(why) = final_summary
+        .not_written_because
+        .as_deref()
+        .filter(|why| why.starts_with(imucal::history::part_limits::PART_LIMITS_REFUSAL))
+    {
+        anyhow::bail!(
+            "The calibration is not written: {why}. It is saved in {}; check the board, or write \
+             it anyway with `imucal flash {} --accept-outlier`",
+            dir.display(),
+            dir.join("params.json").display()
+        );
     }
     if terminal.decision == Some(WriteDecision::NoOneToAsk) {
         return Err(not_asked(

@@ -78,11 +78,14 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     check_outputs(&[Output::Dir(&out_dir)], &[], args.force)?;
     let simulated: Vec<Simulated> = match args.sim_boards {
         Some(boards) => {
-            anyhow::ensure!(
-                args.sim_faulty <= boards,
-                "--sim-faulty {} is more than --sim-boards {boards}",
-                args.sim_faulty
-            );
+            if args.sim_faulty > boards {
+                return Err(super::UsageError(format!(
+                    "--sim-faulty {} is more than --sim-boards {boards}: the faulty boards are \
+                     some of the batch; give --sim-faulty {boards} or less, or more --sim-boards",
+                    args.sim_faulty
+                ))
+                .into());
+            }
             let healthy = boards - args.sim_faulty;
             (0..boards)
                 .map(|i| {

@@ -55,11 +55,13 @@ impl Simulated {
         options.speed = args.speed;
         options.board.sensor = args.sim_chip;
         if let Some(error) = args.sim_odr_error {
-            anyhow::ensure!(
-                error.is_finite() && error.abs() < 0.5,
-                "--sim-odr-error {error} is not a plausible rate error; give a fraction such as \
-                 -0.005 (0.5 % slow)"
-            );
+            if !(error.is_finite() && error.abs() < 0.5) {
+                return Err(super::UsageError(format!(
+                    "--sim-odr-error {error} is not a plausible rate error; give a fraction such \
+                     as -0.005 (0.5 % slow)"
+                ))
+                .into());
+            }
             options.board.lsm9ds1_odr_error = Some(error);
         }
         options.board.temperature = temperature_profile(args.sim_temperature);
@@ -71,7 +73,7 @@ impl Simulated {
             .iter()
             .map(|text| text.parse())
             .collect::<Result<_, _>>()
-            .context("a --sim-effect is not understood")?;
+            .map_err(|e| super::UsageError(format!("a --sim-effect is not understood: {e}")))?;
         let handle = SimServer::start(options).context("the simulated board could not start")?;
         Ok(Self { handle, fault })
     }

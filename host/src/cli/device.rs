@@ -74,6 +74,10 @@ pub struct FlashArgs {
     /// calibration sketch.
     #[arg(long, value_enum, default_value = "imucal", requires = "sim")]
     pub sim_protocol: BoardProtocol,
+    /// Write the file even though a parameter is past a bound of every common part's datasheet
+    /// (a damaged sensor, or a hand-edited file), as `calibrate --accept-outlier` does.
+    #[arg(long)]
+    pub accept_outlier: bool,
     /// Where to record the flash.
     #[command(flatten)]
     pub history: super::history::RecordArgs,
@@ -244,17 +248,43 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
         );
     }
     let mut set = file.to_calibration_set(&shown)?;
+    hold_to_part_limits(&file, &shown, args.accept_outlier)?;
     super::history::check_before_writing(&args.history)?;
     let (mut client, _board) = connect(&args.port)?;
     let measured_on = check_binding(&file, client.welcome(), &shown, args.force_other_device)?;
     let kept = merge_with_active(&mut client, &file, &mut set, &args.reset, &shown)?;
-    let status = client.write_params_verified(&set)?;
-    println!(
-        "wrote {shown} to {} (CRC {:#010x}, store sequence {}), committed, and verified by reading it back",
-        client.port_name(),
-        status.active_crc,
-        status.active_seq
-    );
+    // A write that committed is recorded even when its read-back could not be completed
+    // (the board's status shows the new set's CRC); the command still fails then.
+    let (status, unsettled) = match client.write_params_settled(&set) {
+        Ok(report) => {
+            if let Some(recovered) = &report.recovered {
+                say!("imucal: note: {recovered}");
+            }
+            println!(
+                "wrote {shown} to {} (CRC {:#010x}, store sequence {}), committed, and verified \
+                 by reading it back",
+                client.port_name(),
+                report.status.active_crc,
+                report.status.active_seq
+            );
+            (report.status, None)
+        }
+        Err(imucal::device::DeviceError::WriteUnsettled {
+            committed: Some(status),
+            port,
+            state,
+            cause,
+        }) => {
+            let error = imucal::device::DeviceError::WriteUnsettled {
+                committed: Some(status),
+                port,
+                state,
+                cause,
+            };
+            (status, Some(error))
+        }
+        Err(error) => return Err(error.into()),
+    };
     let welcome = client.welcome();
     let mut record = imucal::history::CalibrationRecord::new(
         &welcome.device_id.to_string(),
@@ -266,7 +296,35 @@ fn flash(args: &FlashArgs) -> anyhow::Result<()> {
     if let Some(measured_on) = measured_on {
         record.board = imucal::history::BoardWrite::FromOtherBoard { measured_on };
     }
-    super::history::record(&args.history, record)
+    super::history::record(&args.history, record)?;
+    match unsettled {
+        Some(error) => {
+            say!("imucal: note: the write is recorded in the history, as the board's status shows the new set active");
+            Err(error.into())
+        }
+        None => Ok(()),
+    }
+}
+
+/// The bounds `calibrate` holds a set to ([`imucal::history::part_limits`]): a refusing one
+/// refuses the file unless `accept`, a warning one is said.
+fn hold_to_part_limits(file: &ParamsFile, shown: &str, accept: bool) -> anyhow::Result<()> {
+    use imucal::history::part_limits::{beyond_part_limits_of, refusal_phrase, warning_phrases};
+    let findings = beyond_part_limits_of(file);
+    for warning in warning_phrases(&findings) {
+        say!("imucal: warning: `{shown}`: {warning}");
+    }
+    match refusal_phrase(&findings) {
+        Some(why) if accept => {
+            say!("imucal: warning: writing `{shown}` although {why} (--accept-outlier)");
+            Ok(())
+        }
+        Some(why) => anyhow::bail!(
+            "`{shown}` is not written: {why}; check the board (or the file, if it was edited by \
+             hand), or pass --accept-outlier to write it anyway"
+        ),
+        None => Ok(()),
+    }
 }
 
 /// Longest wait for a sketch board's `Cal1:`/`Cal2:` echo (Adafruit's sketch prints it every

@@ -566,6 +566,19 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let recorded = match &args.params_out {
         Some(path) => {
             let file = params_file(&calibration);
+            // The bounds every path that writes a set applies: here they warn, as `flash` and
+            // `calibrate` refuse such a file without --accept-outlier.
+            for finding in imucal::history::part_limits::beyond_part_limits_of(&file) {
+                say!(
+                    "imucal: warning: {}{}",
+                    finding.phrase(),
+                    if finding.refuses {
+                        "; `imucal flash` refuses this file without --accept-outlier"
+                    } else {
+                        ""
+                    }
+                );
+            }
             // A fit that cannot go into the file fails the command when nothing else does (a
             // partial file says in its `not_fitted` what it leaves out).
             if file.holds_nothing().is_some() {

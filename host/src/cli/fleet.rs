@@ -3,7 +3,9 @@
 
 use clap::Args;
 use imucal::history::fleet::count_boards;
-use imucal::history::{fleet_report, FleetOptions, HistoryStore};
+use imucal::history::{fleet_report, FleetError, FleetOptions, HistoryStore};
+
+use super::UsageError;
 
 /// Arguments of `imucal fleet`.
 #[derive(Debug, Args)]
@@ -35,24 +37,59 @@ const MIN_FALSE_ALARM: f64 = 1e-12;
 
 /// Run `imucal fleet`.
 pub fn run(args: &FleetArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        (MIN_FALSE_ALARM..1.0).contains(&args.false_alarm),
-        "--false-alarm is {:e}, but it must be a probability from {MIN_FALSE_ALARM:e} to below 1 \
-         (e.g. 0.001): below that the threshold lies beyond any distance a calibration can \
-         measure, and no board could ever be flagged",
-        args.false_alarm
-    );
-    anyhow::ensure!(
-        args.min_spread_values >= 3,
-        "--min-spread-values is {}, but a median and MAD need at least 3 values",
-        args.min_spread_values
-    );
+    if !(MIN_FALSE_ALARM..1.0).contains(&args.false_alarm) {
+        let why = if args.false_alarm >= 1.0 {
+            "a probability of 1 or more would flag every board"
+        } else {
+            "below that the threshold lies beyond any distance a calibration can measure, and no \
+             board could ever be flagged"
+        };
+        return Err(UsageError(format!(
+            "--false-alarm is {}, but it must be a probability from {MIN_FALSE_ALARM:e} to below \
+             1: {why}; give e.g. --false-alarm 0.001 (the default)",
+            imucal::device::params_json::shown_value(args.false_alarm)
+        ))
+        .into());
+    }
+    if args.min_spread_values < 3 {
+        return Err(UsageError(format!(
+            "--min-spread-values is {}, but a median and MAD need at least 3 values; give 3 or \
+             more (the default is {})",
+            args.min_spread_values,
+            FleetOptions::default().min_spread_values
+        ))
+        .into());
+    }
     let options = FleetOptions {
         false_alarm_per_board: args.false_alarm,
         min_spread_values: args.min_spread_values,
     };
-    let mut store = HistoryStore::open_existing_url(args.db.as_deref())?;
-    let report = fleet_report(&mut store, &options)?;
+    let mut store = match HistoryStore::open_existing_url(args.db.as_deref()) {
+        Ok(store) => store,
+        Err(error) if args.json => {
+            let out = serde_json::json!({ "error": error.to_string(), "boards": null });
+            println!("{}", serde_json::to_string_pretty(&out)?);
+            return Err(error.into());
+        }
+        Err(error) => return Err(error.into()),
+    };
+    let report = match fleet_report(&mut store, &options) {
+        Ok(report) => report,
+        // A script reading --json gets an object with the reason, and the failing status.
+        Err(error) if args.json => {
+            let out = serde_json::json!({
+                "database": store.location().display().to_string(),
+                "error": error.to_string(),
+                "boards": match &error {
+                    FleetError::TooFewBoards { boards, .. } => Some(*boards),
+                    _ => None,
+                },
+            });
+            println!("{}", serde_json::to_string_pretty(&out)?);
+            return Err(error.into());
+        }
+        Err(error) => return Err(error.into()),
+    };
     if args.json {
         let mut out = serde_json::to_value(&report)?;
         out["database"] = store.location().display().into();

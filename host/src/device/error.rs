@@ -1,7 +1,7 @@
 //! Errors of talking to a board. Every message is a sentence that names the port, says what
 //! happened and what to try.
 
-use imucal_protocol::{ErrorCode, InvalidParamsReason, ProtocolVersion};
+use imucal_protocol::{ErrorCode, InvalidParamsReason, ParamStatus, ProtocolVersion};
 
 /// Why an operation on a board failed.
 #[derive(Debug, thiserror::Error)]
@@ -63,8 +63,9 @@ pub enum DeviceError {
         /// The operating system's error.
         cause: std::io::Error,
     },
-    /// The board did not answer a request within its timeout, on every try.
-    #[error("no answer from {port} to {request} after {tries} tries: is the board running imucal firmware, and is this the right port (`imucal ports`)?")]
+    /// The board did not answer a request within its timeout, on every try. When frames that
+    /// failed their check arrived meanwhile, the board is there and the link is noisy.
+    #[error("{}", no_answer_text(.port, .request, .tries, .bad_frames))]
     NoAnswer {
         /// The port.
         port: String,
@@ -72,6 +73,22 @@ pub enum DeviceError {
         request: &'static str,
         /// How many times it was sent.
         tries: u32,
+        /// Frames that arrived meanwhile and failed their check (CRC, framing).
+        bad_frames: u64,
+    },
+    /// Contact was lost in or after a commit and the board's active set could not be read
+    /// back with certainty: the new set may or may not be active.
+    #[error("{}; {state}", interrupted_by(.cause))]
+    WriteUnsettled {
+        /// The port.
+        port: String,
+        /// What the board's status showed, as a sentence with what to do.
+        state: String,
+        /// The failure that interrupted the write.
+        cause: Box<DeviceError>,
+        /// Whether the board's status shows the new set active (its CRC and sequence), though
+        /// its values could not be read back.
+        committed: Option<ParamStatus>,
     },
     /// The board did not answer imucal's requests, but printed the text lines of a sketch for
     /// MotionCal (`Raw:`, `Uni:`, `Cal1:`/`Cal2:`): it runs such a sketch, not imucal's firmware.
@@ -182,6 +199,36 @@ pub enum DeviceError {
         /// The encoder's error.
         cause: imucal_protocol::EncodeError,
     },
+}
+
+fn no_answer_text(port: &str, request: &str, tries: &u32, bad_frames: &u64) -> String {
+    if *bad_frames > 0 {
+        format!(
+            "no intact answer from {port} to {request} after {tries} tries: {bad_frames} \
+             frame(s) arrived that failed their check, so the board is there and the link is \
+             noisy; check the cable and connectors (a shorter or shielded cable, away from motors \
+             and power lines), then retry"
+        )
+    } else {
+        format!(
+            "no answer from {port} to {request} after {tries} tries: is the board running imucal \
+             firmware, and is this the right port (`imucal ports`)?"
+        )
+    }
+}
+
+/// What interrupted a write, for [`DeviceError::WriteUnsettled`]: a lost answer is stated
+/// plainly, since the board was reached again and its counters say whether the link is to blame.
+fn interrupted_by(cause: &DeviceError) -> String {
+    match cause {
+        DeviceError::NoAnswer {
+            port,
+            request,
+            tries,
+            ..
+        } => format!("no answer from {port} to {request} after {tries} tries"),
+        other => other.to_string(),
+    }
 }
 
 fn fmt_crc(crc: &Option<u32>) -> String {

@@ -17,7 +17,7 @@ mod ports;
 mod samples;
 
 pub use client::capture::{PoseProgress, PoseRequest};
-pub use client::{ClientOptions, DeviceClient, EventHandler, LinkStats};
+pub use client::{ClientOptions, DeviceClient, EventHandler, LinkStats, WriteReport};
 pub use error::DeviceError;
 pub use params_json::{ParamsFile, ParamsFileError, MOTIONCAL_SKETCH, PARAMS_FILE_FORMAT};
 pub use ports::{

@@ -116,8 +116,20 @@ pub enum ParamsFileError {
         /// The parser's error (with line and column).
         cause: serde_json::Error,
     },
+    /// A value is written `NaN` or `Infinity`, which JSON has no number for.
+    #[error("`{path}` line {line} column {column}: `{word}` is not a number in JSON, and NaN or Infinity are not allowed in JSON parameters (a fit that gives them failed); refit the calibration, or correct the value")]
+    NotANumber {
+        /// The file.
+        path: String,
+        /// `NaN`, `Infinity` or `-Infinity` as written.
+        word: String,
+        /// Line of the value.
+        line: usize,
+        /// Column of the value.
+        column: usize,
+    },
     /// The file's `format` is not one this tool reads.
-    #[error("`{path}` has parameter format {found}, this imucal reads format {PARAMS_FILE_FORMAT}; use the imucal version that wrote it or refit")]
+    #[error("`{path}` has parameter format {found}, this imucal reads formats {OLDEST_PARAMS_FILE_FORMAT} to {PARAMS_FILE_FORMAT}; use the imucal version that wrote it or refit")]
     UnsupportedFormat {
         /// The file.
         path: String,
@@ -143,7 +155,7 @@ pub enum ParamsFileError {
         key: String,
     },
     /// A reference or residual is outside what it can physically be.
-    #[error("`{path}`: {field} is {value}, but it must be {expected}; correct the file or refit")]
+    #[error("`{path}`: {field} is {}, but it must be {expected}; correct the file or refit", shown_ref(.value))]
     Implausible {
         /// The file.
         path: String,
@@ -156,7 +168,8 @@ pub enum ParamsFileError {
     },
     /// A value is not finite or does not fit an `f32`.
     #[error(
-        "`{path}`: {field} is {value}, which is not a finite 32-bit number; refit the calibration"
+        "`{path}`: {field} is {}, which is not a finite 32-bit number; refit the calibration",
+        shown_ref(.value)
     )]
     NonFinite {
         /// The file.
@@ -295,6 +308,36 @@ pub const KNOWN_KEYS: [&str; 11] = [
     "provenance",
     "device",
 ];
+
+/// A value for a message: plain when short, in scientific notation when plain notation would
+/// run to many digits (1e300 is not written out in 301).
+pub fn shown_value(value: f64) -> String {
+    let magnitude = value.abs();
+    if magnitude != 0.0 && !(1e-4..1e6).contains(&magnitude) {
+        format!("{value:e}")
+    } else {
+        format!("{value}")
+    }
+}
+
+fn shown_ref(value: &f64) -> String {
+    shown_value(*value)
+}
+
+/// `NaN`, `Infinity` or `-Infinity` where the JSON parser stopped, if that is why it stopped.
+fn not_a_json_number(text: &str, cause: &serde_json::Error) -> Option<String> {
+    let line = text.lines().nth(cause.line().checked_sub(1)?)?;
+    // The parser's column is at or just past the first character it could not take.
+    let start = cause.column().saturating_sub(1);
+    let around = line
+        .get(start.saturating_sub(1)..)
+        .or_else(|| line.get(start..))?;
+    let rest = around.trim_start_matches(|c: char| c == ',' || c == ':' || c.is_whitespace());
+    ["-Infinity", "Infinity", "NaN", "-NaN", "nan", "inf", "-inf"]
+        .into_iter()
+        .find(|word| rest.starts_with(word))
+        .map(str::to_string)
+}
 
 /// The sensors a parameter file calibrates, by key.
 pub const SENSOR_KEYS: [&str; 3] = ["accel", "gyro", "mag"];
@@ -476,7 +519,16 @@ impl ParamsFile {
             path: path.to_string(),
             cause,
         };
-        let value: serde_json::Value = serde_json::from_str(text).map_err(json_error)?;
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|cause| match not_a_json_number(text, &cause) {
+                Some(word) => ParamsFileError::NotANumber {
+                    path: path.to_string(),
+                    word,
+                    line: cause.line(),
+                    column: cause.column(),
+                },
+                None => json_error(cause),
+            })?;
         if let Some(what) = other_json(&value) {
             return Err(ParamsFileError::NotParameterFile {
                 path: path.to_string(),

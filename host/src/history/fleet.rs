@@ -31,6 +31,14 @@
 //! tolerance (e.g. the LSM9DS1's ±90 mg zero-g offset for all three axes), so they share a
 //! population spread. Seven boards then give 21 values per offset. Parameters without such
 //! axes (residuals) are tested only once the fleet is large enough for their own spread.
+//!
+//! Offset vectors: a magnet by the magnetometer moves all three offsets at once, each by less
+//! than its own threshold. So a sensor's offset whose three axes are all tested is also tested
+//! as a vector: `d² = Σ z²` over its axes. With the spreads estimated from `ν = 0.37·k` values,
+//! `d²/3` follows Snedecor's F with (3, ν) degrees of freedom (the normal theory's χ² with 3
+//! degrees of freedom as `ν` grows), and `d` is compared with `√(3·F*)`. The vectors join the
+//! Bonferroni count: with `v` of them, each of the `m + v` tests gets `α/(m + v)`. The finding
+//! is named `<sensor>.b.length`, its value the offset's length.
 
 use std::collections::BTreeMap;
 
@@ -40,6 +48,25 @@ use super::record::{BoardWrite, CalibrationRecord};
 use super::stats::{median, t_upper_quantile};
 use super::store::{HistoryStore, RecordId, StoredRecord};
 use super::HistoryError;
+use crate::stats::distributions::f_upper_tail;
+
+/// The `f` with `P(F ≥ f) = upper` for `(d1, d2)` degrees of freedom, by bisection on
+/// [`f_upper_tail`] (which falls as `f` grows).
+fn f_upper_quantile(upper: f64, d1: f64, d2: f64) -> f64 {
+    let (mut low, mut high) = (0.0_f64, 1.0_f64);
+    while f_upper_tail(high, d1, d2) > upper && high < 1e12 {
+        high *= 2.0;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (low + high);
+        if f_upper_tail(mid, d1, d2) > upper {
+            low = mid;
+        } else {
+            high = mid;
+        }
+    }
+    high
+}
 
 /// Consistency factor of the MAD for the normal distribution: `1/Φ⁻¹(3/4)`.
 const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
@@ -275,6 +302,9 @@ pub struct FleetModel {
     boards: usize,
     parameters: Vec<ParameterStats>,
     untested: Vec<Untested>,
+    /// Offset vectors tested as a whole: the sensor's `b` prefix (`mag.b`) and the threshold on
+    /// the length of its axes' `z` vector.
+    vectors: Vec<(String, f64)>,
 }
 
 /// A parameter some boards have but too few to give the fleet's spread.
@@ -366,15 +396,39 @@ impl FleetModel {
                 needed: min_pooled_boards,
             });
         }
-        let per_parameter = options.false_alarm_per_board / (2.0 * parameters.len() as f64);
+        // Offsets whose three axes are all tested are also tested as a vector.
+        let vector_dofs: Vec<(String, f64)> = ["accel.b", "gyro.b", "mag.b"]
+            .into_iter()
+            .filter_map(|prefix| {
+                let axes: Vec<&ParameterStats> = ["x", "y", "z"]
+                    .iter()
+                    .filter_map(|axis| {
+                        let name = format!("{prefix}.{axis}");
+                        parameters.iter().find(|p| p.parameter == name)
+                    })
+                    .collect();
+                let fewest = axes.iter().map(|p| p.spread_values).min()?;
+                (axes.len() == 3).then(|| (prefix.to_string(), MAD_EFFICIENCY * fewest as f64))
+            })
+            .collect();
+        let tests = (parameters.len() + vector_dofs.len()) as f64;
+        let per_parameter = options.false_alarm_per_board / (2.0 * tests);
         for stats in &mut parameters {
             let dof = MAD_EFFICIENCY * stats.spread_values as f64;
             stats.threshold_z = t_upper_quantile(per_parameter, dof.max(1.0));
         }
+        let vectors = vector_dofs
+            .into_iter()
+            .map(|(prefix, dof)| {
+                let f = f_upper_quantile(options.false_alarm_per_board / tests, 3.0, dof.max(1.0));
+                (prefix, (3.0 * f).sqrt())
+            })
+            .collect();
         Ok(Self {
             boards,
             parameters,
             untested,
+            vectors,
         })
     }
 
@@ -409,10 +463,39 @@ impl FleetModel {
                     fleet_median: stats.median,
                     robust_z: z,
                     threshold_z: stats.threshold_z,
-                    likely_cause: likely_cause(&stats.parameter),
+                    likely_cause: likely_cause_of(record, &stats.parameter),
                 })
             })
             .collect();
+        let vectors: Vec<Finding> = self
+            .vectors
+            .iter()
+            .filter_map(|(prefix, threshold)| {
+                let axes: Vec<&Finding> = ["x", "y", "z"]
+                    .iter()
+                    .filter_map(|axis| {
+                        let name = format!("{prefix}.{axis}");
+                        out.iter().find(|f| f.parameter == name)
+                    })
+                    .collect();
+                if axes.len() != 3 {
+                    return None;
+                }
+                let length = |v: &dyn Fn(&Finding) -> f64| {
+                    axes.iter().map(|&f| v(f).powi(2)).sum::<f64>().sqrt()
+                };
+                let parameter = format!("{prefix}.length");
+                Some(Finding {
+                    value: length(&|f: &Finding| f.value),
+                    fleet_median: length(&|f: &Finding| f.fleet_median),
+                    robust_z: length(&|f: &Finding| f.robust_z),
+                    threshold_z: *threshold,
+                    likely_cause: likely_cause_of(record, &parameter),
+                    parameter,
+                })
+            })
+            .collect();
+        out.extend(vectors);
         out.sort_by(|a, b| b.robust_z.abs().total_cmp(&a.robust_z.abs()));
         out
     }
@@ -421,7 +504,35 @@ impl FleetModel {
     pub fn outlying(&self, record: &CalibrationRecord) -> Vec<Finding> {
         let mut findings = self.distances(record);
         findings.retain(|f| f.robust_z.abs() > f.threshold_z);
+        // An offset's length adds nothing when one of its axes is beyond its own threshold:
+        // that axis names the fault more precisely.
+        let axes_beyond: Vec<String> = findings
+            .iter()
+            .filter(|f| !f.parameter.ends_with(".length"))
+            .filter_map(|f| {
+                f.parameter
+                    .rsplit_once('.')
+                    .map(|(prefix, _)| prefix.to_string())
+            })
+            .collect();
+        findings.retain(|f| {
+            f.parameter
+                .strip_suffix(".length")
+                .is_none_or(|prefix| !axes_beyond.iter().any(|p| p == prefix))
+        });
         findings
+    }
+}
+
+/// The likely cause of `record`'s `parameter` being far from the fleet: the hardware cause, and
+/// for a set written from a file (`flash`) the file itself, which may have been edited by hand
+/// or made for another board.
+pub fn likely_cause_of(record: &CalibrationRecord, parameter: &str) -> String {
+    let cause = likely_cause(parameter);
+    if record.source == super::record::RecordSource::Flash {
+        format!("{cause}; or a hand-edited or foreign file (this set was flashed from a file)")
+    } else {
+        cause
     }
 }
 
@@ -445,7 +556,7 @@ pub fn likely_cause(parameter: &str) -> String {
         ("gyro", "b") => format!("gyroscope zero-rate offset far out{on_axis}: damaged gyroscope or mechanical stress on the part"),
         ("gyro", "A") => format!("gyroscope gain or cross-axis far out{on_axis}: damaged gyroscope or the IMU soldered tilted"),
         ("gyro", "noise") => format!("excess gyroscope noise{on_axis}: damaged MEMS structure, vibration at the fixture or a noisy supply"),
-        ("mag", "b") => format!("magnetometer offset far out{on_axis}: a magnetised part (screw, shield, connector) or a magnet near the board"),
+        ("mag", "b") => format!("magnetometer offset far out{on_axis}: a magnet or magnetised steel near the magnetometer (a screw, shield or connector, or a magnet near the board)"),
         ("mag", "A") => "magnetometer scale or soft iron far out: steel or a magnetised part near the sensor".into(),
         ("mag", "noise") => format!("excess magnetometer noise{on_axis}: switching currents or a motor near the board"),
         (_, "residual") => format!("the {sensor} fit leaves a large residual: the board moved during capture or the sensor is damaged"),
@@ -515,15 +626,18 @@ pub const METHOD: &str = "per parameter: median and 1.4826·MAD of the fleet (50
     split over the parameters tested (Bonferroni); a parameter's own spread when ≥ 20 boards \
     have it, else the deviations of its sensor's axes of the same kind pooled (one datasheet \
     tolerance per part); matrix entries a record's model does not estimate (exactly 0 or 1) are \
-    not counted";
+    not counted; each sensor's offset is also tested as a vector, its length d = √Σz² against \
+    √(3·F) of Snedecor's F(3, ν) at its share of the false-alarm rate";
 
 fn board_result(model: &FleetModel, stored: &StoredRecord) -> BoardResult {
-    let distances = model.distances(&stored.record);
-    let max_abs_z = distances.first().map_or(0.0, |f| f.robust_z.abs());
-    let findings: Vec<Finding> = distances
-        .into_iter()
-        .filter(|f| f.robust_z.abs() > f.threshold_z)
-        .collect();
+    // The largest |z| of a parameter; an offset's length has its own, larger threshold.
+    let max_abs_z = model
+        .distances(&stored.record)
+        .iter()
+        .filter(|f| !f.parameter.ends_with(".length"))
+        .map(|f| f.robust_z.abs())
+        .fold(0.0, f64::max);
+    let findings = model.outlying(&stored.record);
     BoardResult {
         device_id: stored.record.device_id.clone(),
         record_id: stored.id,

@@ -19,6 +19,7 @@ use super::{
     SessionObserver, SessionOptions, SessionSummary, VerdictLevel,
 };
 use crate::device::{DeviceClient, ParamsFile};
+use crate::history::part_limits::beyond_part_limits;
 use crate::history::{record_calibration, CalibrationRecord, RecordId};
 
 /// Settings of a batch.
@@ -157,11 +158,12 @@ impl SessionObserver for BoardObserver<'_> {
     }
 
     fn confirm_write(&mut self, fit: &SessionFit) -> bool {
-        let check = self.gate.arrive(
-            self.index,
-            CalibrationRecord::from_fit(&self.device_id, fit),
-        );
-        let status = if check.check.outlier && !self.options.accept_outlier {
+        let record = CalibrationRecord::from_fit(&self.device_id, fit);
+        // The bounds every path that writes a set applies, whatever the comparison was with.
+        let past_part_limits =
+            crate::history::part_limits::refusal_phrase(&beyond_part_limits(&record)).is_some();
+        let check = self.gate.arrive(self.index, record);
+        let status = if (check.check.outlier || past_part_limits) && !self.options.accept_outlier {
             BoardStatus::RefusedOutlier
         } else if fit.verdict.level == VerdictLevel::Poor && !self.options.accept_poor {
             BoardStatus::RefusedPoorVerdict
@@ -317,7 +319,10 @@ fn board_session(
         }
     };
     let mut outcome = outcome;
-    outcome.not_written_because = refusal_reason(status, &check);
+    // The session's own reason (past the part limits) is the more precise one.
+    if outcome.not_written_because.is_none() || status != BoardStatus::RefusedOutlier {
+        outcome.not_written_because = refusal_reason(status, &check);
+    }
     let saved = save_session(&outcome, &dir)
         .map_err(|e| e.to_string())
         .and_then(|_| bind_saved_params(&dir.join("params.json"), client.welcome()));

@@ -202,8 +202,10 @@ impl WriteGate {
 /// A board with nothing to be compared with, held to the bounds of every common part's
 /// datasheet: a gross fault is not written on the first boards of a line.
 fn held_to_part_limits(record: &CalibrationRecord, why_not_compared: String) -> OutlierCheck {
+    // Findings that only warn (a magnet by the magnetometer) lower the verdict instead.
     let findings: Vec<Finding> = beyond_part_limits(record)
         .into_iter()
+        .filter(|f| f.refuses)
         .map(|f| Finding {
             likely_cause: f.phrase(),
             fleet_median: f.kind.nominal(),
@@ -224,8 +226,8 @@ fn held_to_part_limits(record: &CalibrationRecord, why_not_compared: String) -> 
             findings,
             note: Some(format!(
                 "{why_not_compared}; held to the bounds of every common part's datasheet \
-                 instead (accelerometer offset and gain, gyroscope offset), which catch gross \
-                 faults only"
+                 instead (accelerometer offset and gain, gyroscope offset, magnetometer offset \
+                 against its range), which catch gross faults only"
             )),
         },
     }

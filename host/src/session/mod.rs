@@ -87,7 +87,10 @@ pub use motion::{MotionMonitor, MotionState};
 pub use options::SessionOptions;
 pub use rest::{rest_errors, RestErrors};
 pub use rest_phase::stream_for;
-pub use save::{load_mag_samples, load_moves, load_poses, save_session, summary, SessionSummary};
+pub use save::{
+    load_mag_samples, load_moves, load_poses, save_session, summary, verdict_with_missed_targets,
+    SessionSummary,
+};
 pub use save::{MOVES_FILE, PROGRESS_FILE};
 pub use solve::{
     fit_session, Budgets, CapturedPose, FieldSource, SessionFit, Uncertainties, Verdict,
@@ -210,6 +213,45 @@ pub fn run_session_with<L: Read + Write>(
     }
 }
 
+/// Holds `fit`'s set to the bounds of every common part's datasheet
+/// ([`crate::history::part_limits`]), the check every path that writes a set applies: a bound
+/// that only warns (a magnet by the magnetometer) becomes a reason of the verdict, which is then
+/// at best marginal; one that refuses becomes a reason too and, without `accept_outlier`, is
+/// returned as why the set is not written.
+fn hold_to_part_limits(
+    fit: &mut SessionFit,
+    device_id: &str,
+    options: &SessionOptions,
+) -> Option<String> {
+    use crate::history::part_limits::{beyond_part_limits, refusal_phrase, warning_phrases};
+    let record = crate::history::CalibrationRecord::from_fit(device_id, fit);
+    let findings = beyond_part_limits(&record);
+    for warning in warning_phrases(&findings) {
+        fit.verdict.reasons.push(format!(
+            "{warning}; move the board away from magnets and steel, or remove them, and \
+             calibrate again"
+        ));
+        if fit.verdict.level == VerdictLevel::Good {
+            fit.verdict.level = VerdictLevel::Marginal;
+        }
+    }
+    let refusal = refusal_phrase(&findings)?;
+    fit.verdict.reasons.push(if options.accept_outlier {
+        format!("{refusal} (written anyway: --accept-outlier)")
+    } else {
+        format!("{refusal}; not written (--accept-outlier writes it anyway)")
+    });
+    if fit.verdict.level == VerdictLevel::Good {
+        fit.verdict.level = VerdictLevel::Marginal;
+    }
+    (!options.accept_outlier).then(|| {
+        format!(
+            "{}: {refusal}",
+            crate::history::part_limits::PART_LIMITS_REFUSAL
+        )
+    })
+}
+
 fn run_phases<L: Read + Write>(
     runner: &mut Runner<'_, L>,
     resumed: &[CapturedPose],
@@ -298,6 +340,8 @@ fn run_phases<L: Read + Write>(
     .ok();
     let fit_wall_seconds = fit_start.elapsed().as_secs_f64();
     runner.journal.fitted(&fit.set)?;
+    let device_id = runner.client.welcome().device_id.to_string();
+    let past_part_limits = hold_to_part_limits(&mut fit, &device_id, options);
     runner.observer.event(&SessionEvent::Fitted(&fit));
 
     let mut outcome = SessionOutcome {
@@ -327,7 +371,11 @@ fn run_phases<L: Read + Write>(
     };
     // An interrupt during the fit stops the session before the write is offered or started.
     runner.check_interrupt()?;
-    if runner.observer.confirm_write(&outcome.fit) {
+    let confirmed = runner.observer.confirm_write(&outcome.fit);
+    if let (true, Some(why)) = (confirmed, &past_part_limits) {
+        outcome.not_written_because = Some(why.clone());
+    }
+    if confirmed && past_part_limits.is_none() {
         runner.check_interrupt()?;
         runner.write_started = Some(outcome.fit.set.crc32());
         runner

@@ -69,6 +69,9 @@ pub struct SessionOptions {
     pub rest_timeout: Duration,
     /// Longest wait for the next sample batch of a running stream.
     pub read_timeout: Duration,
+    /// Write a set past a refusing bound of every common part's datasheet
+    /// ([`crate::history::part_limits`]) anyway (`--accept-outlier`).
+    pub accept_outlier: bool,
 }
 
 impl Default for SessionOptions {
@@ -115,6 +118,7 @@ impl Default for SessionOptions {
             rest_measure_s: 3.0,
             rest_timeout: Duration::from_secs(120),
             read_timeout: Duration::from_secs(3),
+            accept_outlier: false,
         }
     }
 }

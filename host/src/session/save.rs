@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use super::gyro_fit::GyroScale;
 use super::rest::RestErrors;
-use super::solve::{CapturedPose, FieldSource, Uncertainties, Verdict};
+use super::solve::{CapturedPose, FieldSource, Uncertainties, Verdict, VerdictLevel};
 use super::targets::Target;
 use super::{MagSample, Phase, SessionError, SessionOutcome};
 use crate::device::{ParamsFile, UnitSample};
@@ -108,8 +108,29 @@ pub struct SessionSummary {
     pub link_note: Option<String>,
 }
 
+/// `verdict` with the targets the set on the board missed at rest ([`RestErrors::missed_targets`],
+/// measured with the calibrated stream after the write) among its reasons: a set that misses
+/// its own target is at best marginal, whatever its expected errors promised.
+pub fn verdict_with_missed_targets(verdict: &Verdict, missed: &[String]) -> Verdict {
+    let mut verdict = verdict.clone();
+    for target in missed {
+        verdict.reasons.push(format!(
+            "the set on the board misses its target at rest: {target} (measured with the \
+             calibrated stream after the write)"
+        ));
+        if verdict.level == VerdictLevel::Good {
+            verdict.level = VerdictLevel::Marginal;
+        }
+    }
+    verdict
+}
+
 /// The summary of `outcome`.
 pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
+    let missed = outcome
+        .after
+        .map(|a| a.missed_targets(outcome.fit.budgets))
+        .unwrap_or_default();
     let tumble = outcome
         .mag_samples
         .iter()
@@ -134,10 +155,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         before: outcome.before,
         after: outcome.after,
         on_board_after: outcome.after,
-        missed_targets: outcome
-            .after
-            .map(|a| a.missed_targets(outcome.fit.budgets))
-            .unwrap_or_default(),
+        missed_targets: missed.clone(),
         port: outcome.port.clone(),
         device_id: outcome.device_id.clone(),
         poses: outcome.poses.len(),
@@ -150,7 +168,7 @@ pub fn summary(outcome: &SessionOutcome) -> SessionSummary {
         uncertainties: outcome.fit.uncertainties,
         base_uncertainties: None,
         gyro_scale: outcome.gyro_scale.clone(),
-        verdict: outcome.fit.verdict.clone(),
+        verdict: verdict_with_missed_targets(&outcome.fit.verdict, &missed),
         notes: outcome.fit.notes.clone(),
         stream_rate_hz: (outcome.stream_rate_hz > 0.0).then_some(outcome.stream_rate_hz),
         lost_samples: outcome.lost_samples,

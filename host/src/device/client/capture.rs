@@ -70,6 +70,7 @@ impl<L: Read + Write> DeviceClient<L> {
             timeout_ms: to_ms(pose.timeout),
         };
         let seq = self.take_seq();
+        let bad_before = self.stats.frame_errors;
         self.send_request(seq, &body)?;
         let start = Instant::now();
         let one_capture = pose.timeout.saturating_add(self.options.flash_timeout);
@@ -122,6 +123,7 @@ impl<L: Read + Write> DeviceClient<L> {
                     port: self.port.clone(),
                     request: "CapturePose",
                     tries: resend.sends,
+                    bad_frames: self.stats.frame_errors.saturating_sub(bad_before),
                 });
             }
             if let Some(restart) = self.capture_resend_due(&resend, now, pose.timeout) {

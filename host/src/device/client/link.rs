@@ -30,6 +30,7 @@ impl<L: Read + Write> DeviceClient<L> {
     ) -> Result<(ResponseBody, bool), DeviceError> {
         let seq = self.take_seq();
         let tries = tries.max(1);
+        let bad_before = self.stats.frame_errors;
         for attempt in 0..tries {
             if attempt > 0 {
                 self.stats.retries += 1;
@@ -39,7 +40,11 @@ impl<L: Read + Write> DeviceClient<L> {
                 return Ok((reply, attempt > 0));
             }
         }
-        Err(self.why_no_answer(request_name(body), tries))
+        Err(self.why_no_answer(
+            request_name(body),
+            tries,
+            self.stats.frame_errors.saturating_sub(bad_before),
+        ))
     }
 
     pub(super) fn send_request(&mut self, seq: u16, body: &RequestBody) -> Result<(), DeviceError> {

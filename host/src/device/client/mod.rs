@@ -31,6 +31,7 @@ use super::{open_port, DeviceError};
 pub(super) mod capture;
 mod link;
 mod params;
+pub use params::WriteReport;
 mod stream;
 
 /// Timeouts and retry counts of a [`DeviceClient`].
@@ -328,9 +329,9 @@ impl<L: Read + Write> DeviceClient<L> {
             Ok(_) => self.exchange(&hello, self.options.reply_timeout, self.options.tries)?,
             // Hello is the one request every protocol version keeps; try it once before
             // giving up, in case Ping is what the board does not understand.
-            Err(DeviceError::NoAnswer { .. }) => self
+            Err(DeviceError::NoAnswer { bad_frames, .. }) => self
                 .exchange(&hello, self.options.reply_timeout, 1)
-                .map_err(|_| self.why_no_answer("Ping", self.options.connect_tries))?,
+                .map_err(|_| self.why_no_answer("Ping", self.options.connect_tries, bad_frames))?,
             Err(e) => return Err(e),
         }
         .0;
@@ -366,7 +367,12 @@ impl<L: Read + Write> DeviceClient<L> {
 
     /// The error for `request` left unanswered after `tries`: a MotionCal sketch when the port
     /// printed its lines, a noisy link when the frames that arrived show one, else no answer.
-    pub(super) fn why_no_answer(&self, request: &'static str, tries: u32) -> DeviceError {
+    pub(super) fn why_no_answer(
+        &self,
+        request: &'static str,
+        tries: u32,
+        bad_frames: u64,
+    ) -> DeviceError {
         if !self.connected {
             if let Some(tag) = crate::compat::motioncal::sketch_tag_in(&self.heard) {
                 return DeviceError::MotionCalSketch {
@@ -390,6 +396,7 @@ impl<L: Read + Write> DeviceClient<L> {
             port: self.port.clone(),
             request,
             tries,
+            bad_frames,
         }
     }
 
