@@ -882,7 +882,7 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(
-            message.contains("format 3") && message.contains("format 2"),
+            message.contains("format 3") && message.contains("formats 1 to 2"),
             "{message}"
         );
     }
