@@ -141,9 +141,11 @@ fn verified_write_stages_commits_and_reads_back_the_same_set() {
     assert_eq!(status.active_seq, 1);
     let state = fake.state();
     assert_eq!(state.active, set);
+    // The active set is read first, so that a lost answer after the commit can be settled
+    // against it.
     assert_eq!(
         state.requests[2..],
-        ["WriteParams", "CommitParams", "GetParams"]
+        ["Status", "WriteParams", "CommitParams", "GetParams"]
     );
 }
 
@@ -192,6 +194,7 @@ fn a_lost_commit_reply_is_resolved_by_the_active_crc() {
     assert_eq!(
         state.requests[2..],
         [
+            "Status",
             "WriteParams",
             "CommitParams",
             "CommitParams",
