@@ -37,7 +37,6 @@
 
 use serde::Serialize;
 
-use super::record::CalibrationRecord;
 use crate::device::ParamsFile;
 
 /// Widest accelerometer zero-g offset of the common parts, in g (see the module comment).
@@ -230,10 +229,11 @@ impl PartLimitFinding {
     }
 }
 
-/// The parameters of `record` beyond the bounds of the module comment, farthest first; sensors
-/// the record does not calibrate are not looked at. The record's own gravity converts g.
-pub fn beyond_part_limits(record: &CalibrationRecord) -> Vec<PartLimitFinding> {
-    beyond_part_limits_of(&record.params)
+/// The parameters of `record` (a history record, or anything else that holds a parameter
+/// file) beyond the bounds of the module comment, farthest first; sensors the record does not
+/// calibrate are not looked at. The record's own gravity converts g.
+pub fn beyond_part_limits(record: &impl AsRef<ParamsFile>) -> Vec<PartLimitFinding> {
+    beyond_part_limits_of(record.as_ref())
 }
 
 /// The parameters of `params` beyond the bounds of the module comment, farthest first: the

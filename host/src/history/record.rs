@@ -31,6 +31,12 @@ pub enum RecordSource {
     Reset,
 }
 
+impl AsRef<ParamsFile> for CalibrationRecord {
+    fn as_ref(&self) -> &ParamsFile {
+        &self.params
+    }
+}
+
 impl CalibrationRecord {
     /// Whether the record is of a recording fitted offline without a board named
     /// ([`RECORDING_DEVICE_PREFIX`]).
